@@ -1,0 +1,76 @@
+// The Channel Access server: UDP name search, beacons, and TCP circuits over one PV database.
+// Runs on the IOC EventLoop thread (the thread that owns the Database). Configured from the
+// EPICS_CAS_* / EPICS_CA_* environment like RSRV (ca-protocol.md §8), or programmatically.
+#pragma once
+
+#include "ca/access_security.hpp"
+#include "ca/circuit.hpp"
+#include "core/event_loop.hpp"
+#include "pv/database.hpp"
+
+#include <cstdint>
+#include <memory>
+#include <netinet/in.h>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+namespace beamctl::ca {
+
+struct ServerConfig {
+    uint16_t port = kDefaultServerPort;             // UDP and TCP [EPICS_CAS_SERVER_PORT]
+    std::vector<in_addr> interfaces;                // bind addresses; empty = all [EPICS_CAS_INTF_ADDR_LIST]
+    std::vector<sockaddr_in> beacon_addrs;          // [EPICS_CAS_BEACON_ADDR_LIST]
+    bool auto_beacon_addrs = true;                  // + interface broadcasts [EPICS_CAS_AUTO_BEACON_ADDR_LIST]
+    double beacon_period_s = 15.0;                  // [EPICS_CAS_BEACON_PERIOD]
+    uint16_t beacon_port = kDefaultRepeaterPort;    // [EPICS_CAS_BEACON_PORT]
+    std::vector<in_addr> ignore_addrs;              // searches from these are dropped [EPICS_CAS_IGNORE_ADDR_LIST]
+    std::size_t max_array_bytes = 64u << 20;        // largest payload [EPICS_CA_MAX_ARRAY_BYTES]
+    // Reads the environment; throws Error naming the variable on a malformed value.
+    static ServerConfig from_env();
+};
+
+class Server {
+public:
+    Server(EventLoop& loop, pv::Database& db, ServerConfig cfg);
+    ~Server();
+    Server(const Server&) = delete;
+    Server& operator=(const Server&) = delete;
+
+    // Opens the sockets and starts beacons. Throws Error if a socket can't be bound.
+    void start();
+    uint16_t tcp_port() const { return ctx_.tcp_port; }
+    uint16_t udp_port() const { return cfg_.port; }
+    std::string listen_description() const; // "127.0.0.1:5064" etc.
+    // Replaces the access-security configuration; rights of open channels are re-sent.
+    void set_access_security(AccessSecurity acf);
+    const ServerStats& stats() const { return ctx_.stats; }
+    std::size_t client_count() const { return conns_.size(); }
+
+private:
+    struct Conn;
+    void on_accept(int lfd);
+    void on_conn_io(int fd, uint32_t events);
+    void on_udp(int fd);
+    void handle_datagram(int fd, const uint8_t* p, std::size_t n, const sockaddr_in& from);
+    void flush(Conn& c);
+    void close_conn(int fd);
+    void send_beacons();
+    void refresh_all_rights();
+
+    EventLoop& loop_;
+    ServerContext ctx_;
+    ServerConfig cfg_;
+    std::vector<int> tcp_fds_, udp_fds_;
+    int beacon_fd_ = -1;
+    std::vector<sockaddr_in> beacon_targets_;
+    uint32_t beacon_id_ = 0;
+    int beacons_sent_ = 0;
+    double beacon_delay_s_ = 0.02;
+    EventLoop::TimerId beacon_timer_ = 0;
+    std::unordered_map<int, std::unique_ptr<Conn>> conns_;
+    std::vector<int> dirty_;
+    std::vector<uint8_t> rxbuf_;
+};
+
+} // namespace beamctl::ca

@@ -1,0 +1,198 @@
+#include "pv/record.hpp"
+
+#include "core/error.hpp"
+#include "pv/database.hpp"
+
+#include <algorithm>
+#include <cfloat>
+
+namespace beamctl::pv {
+
+const Menu kMenuScan{"menuScan",
+                     {"Passive", "Event", "I/O Intr", "10 second", "5 second", "2 second",
+                      "1 second", ".5 second", ".2 second", ".1 second"}};
+const Menu kMenuPini{"menuPini", {"NO", "YES", "RUN", "RUNNING", "PAUSE", "PAUSED"}};
+const Menu kMenuAlarmSevr{"menuAlarmSevr", {"NO_ALARM", "MINOR", "MAJOR", "INVALID"}};
+const Menu kMenuAlarmStat{"menuAlarmStat",
+                          {kStatusNames[0], kStatusNames[1], kStatusNames[2], kStatusNames[3],
+                           kStatusNames[4], kStatusNames[5], kStatusNames[6], kStatusNames[7],
+                           kStatusNames[8], kStatusNames[9], kStatusNames[10], kStatusNames[11],
+                           kStatusNames[12], kStatusNames[13], kStatusNames[14], kStatusNames[15],
+                           kStatusNames[16], kStatusNames[17], kStatusNames[18], kStatusNames[19],
+                           kStatusNames[20], kStatusNames[21]}};
+const Menu kMenuYesNo{"menuYesNo", {"NO", "YES"}};
+const Menu kMenuFtype{"menuFtype", {"STRING", "CHAR", "UCHAR", "SHORT", "USHORT", "LONG", "ULONG",
+                                    "INT64", "UINT64", "FLOAT", "DOUBLE", "ENUM"}};
+const Menu kMenuPostOnChange{"stringinPOST", {"On Change", "Always"}};
+const Menu kMenuPostAlways{"waveformPOST", {"Always", "On Change"}};
+const Menu kMenuOmsl{"menuOmsl", {"supervisory", "closed_loop"}};
+const Menu kMenuIvoa{"menuIvoa",
+                     {"Continue normally", "Don't drive outputs", "Set output to IVOV"}};
+const Menu kMenuSoftDtyp{"DTYP", {"Soft Channel"}};
+
+void copy_string(char* dst, std::size_t size, std::string_view src) {
+    std::size_t n = std::min(src.size(), size - 1);
+    std::memcpy(dst, src.data(), n);
+    std::memset(dst + n, 0, size - n);
+}
+
+RecordType::RecordType(std::string name, std::vector<FieldDesc> fields,
+                       std::function<std::unique_ptr<Record>(const RecordType&)> factory)
+    : name_(std::move(name)), fields_(std::move(fields)), factory_(std::move(factory)) {
+    for (std::size_t i = 0; i < fields_.size(); ++i) {
+        fields_[i].index = int(i);
+        if (!by_name_.emplace(fields_[i].name, &fields_[i]).second)
+            throw Error(SB() << "record type " << name_ << ": field " << fields_[i].name
+                             << " defined twice");
+    }
+}
+
+const FieldDesc* RecordType::find(std::string_view field) const {
+    auto it = by_name_.find(field);
+    return it == by_name_.end() ? nullptr : it->second;
+}
+
+RecordTypes& RecordTypes::global() {
+    static RecordTypes* types = [] {
+        auto* t = new RecordTypes;
+        register_standard_records(*t);
+        return t;
+    }();
+    return *types;
+}
+
+void RecordTypes::add(std::unique_ptr<RecordType> t) {
+    std::string n = t->name();
+    if (!types_.emplace(n, std::move(t)).second)
+        throw Error(SB() << "record type " << n << " registered twice");
+}
+
+const RecordType* RecordTypes::find(std::string_view name) const {
+    auto it = types_.find(std::string(name));
+    return it == types_.end() ? nullptr : it->second.get();
+}
+
+std::vector<std::string> RecordTypes::names() const {
+    std::vector<std::string> v;
+    for (auto& [n, t] : types_) v.push_back(n);
+    std::sort(v.begin(), v.end());
+    return v;
+}
+
+Record::Record(const RecordType& type) : type_(type) {}
+Record::~Record() = default;
+
+std::vector<FieldDesc> Record::common_fields() {
+    using R = Record;
+    return {
+        BEAMCTL_FIELD(R, NAME, name_, String, kReadOnly),
+        BEAMCTL_FIELD(R, DESC, desc, String, 0),
+        BEAMCTL_FIELD(R, ASG, asg, String, 0),
+        BEAMCTL_MENU(R, SCAN, scan, kMenuScan, 0),
+        BEAMCTL_MENU(R, PINI, pini, kMenuPini, 0),
+        BEAMCTL_FIELD(R, PHAS, phas, Short, 0),
+        BEAMCTL_MENU(R, DTYP, dtyp, kMenuSoftDtyp, kInitOnly),
+        BEAMCTL_FIELD(R, DISV, disv, Short, 0),
+        BEAMCTL_FIELD(R, DISA, disa, Short, 0),
+        BEAMCTL_MENU(R, DISS, diss, kMenuAlarmSevr, 0),
+        BEAMCTL_FIELD(R, PROC, proc, UChar, kProcess | kAsl0),
+        BEAMCTL_MENU(R, STAT, stat, kMenuAlarmStat, kReadOnly),
+        BEAMCTL_MENU(R, SEVR, sevr, kMenuAlarmSevr, kReadOnly),
+        BEAMCTL_MENU(R, NSTA, nsta, kMenuAlarmStat, kReadOnly),
+        BEAMCTL_MENU(R, NSEV, nsev, kMenuAlarmSevr, kReadOnly),
+        BEAMCTL_MENU(R, ACKS, acks, kMenuAlarmSevr, kReadOnly),
+        BEAMCTL_MENU(R, ACKT, ackt, kMenuYesNo, 0),
+        BEAMCTL_FIELD(R, UDF, udf, UChar, kProcess),
+        BEAMCTL_MENU(R, UDFS, udfs, kMenuAlarmSevr, 0),
+        BEAMCTL_FIELD(R, PACT, pact, UChar, kReadOnly),
+        BEAMCTL_FIELD(R, TPRO, tpro, UChar, 0),
+    };
+}
+
+Elements Record::elements(const FieldDesc& f) {
+    uint16_t stride = f.size;
+    return Elements{f.dbf, f.addr(*this), 1, 1, stride};
+}
+
+int Record::enum_strings(const FieldDesc& f, const char* out[kEnumStates]) const {
+    if (!f.menu) return 0;
+    int n = int(std::min<std::size_t>(f.menu->choices.size(), kEnumStates));
+    for (int i = 0; i < n; ++i) out[i] = f.menu->choices[i];
+    return n;
+}
+
+namespace {
+void type_range(Dbf t, double& hi, double& lo) {
+    switch (t) { // recGbl getMaxRangeValues
+    case Dbf::Char: hi = 127; lo = -128; break;
+    case Dbf::UChar: hi = 255; lo = 0; break;
+    case Dbf::Short: hi = 32767; lo = -32768; break;
+    case Dbf::UShort:
+    case Dbf::Enum:
+    case Dbf::Menu: hi = 65535; lo = 0; break;
+    case Dbf::Long: hi = 2147483647.0; lo = -2147483648.0; break;
+    case Dbf::ULong: hi = 4294967295.0; lo = 0; break;
+    case Dbf::Int64: hi = 9223372036854775807.0; lo = -9223372036854775808.0; break;
+    case Dbf::Float: hi = 1e30; lo = -1e30; break;
+    case Dbf::Double: hi = 1e300; lo = -1e300; break;
+    default: hi = lo = 0;
+    }
+}
+} // namespace
+
+void Record::metadata(const FieldDesc& f, Metadata& md) const {
+    type_range(f.dbf, md.disp_hi, md.disp_lo);
+    md.ctrl_hi = md.disp_hi;
+    md.ctrl_lo = md.disp_lo;
+    md.precision = precision(f);
+}
+
+int16_t Record::precision(const FieldDesc& f) const {
+    return (f.dbf == Dbf::Float || f.dbf == Dbf::Double) ? 15 : 0; // recGblGetPrec default
+}
+
+bool Record::set_sevr(uint16_t new_stat, uint16_t new_sevr) {
+    if (nsev < new_sevr) {
+        nsta = new_stat;
+        nsev = new_sevr;
+        return true;
+    }
+    return false;
+}
+
+unsigned Record::reset_alarms() {
+    uint16_t prev_stat = stat, prev_sevr = sevr;
+    stat = nsta;
+    sevr = nsev;
+    nsta = 0;
+    nsev = 0;
+    unsigned stat_mask = 0;
+    if (prev_sevr != sevr) {
+        stat_mask = kDbeAlarm;
+        post("SEVR", kDbeValue);
+    }
+    if (prev_stat != stat) stat_mask |= kDbeValue;
+    if (!stat_mask) return 0;
+    post("STAT", stat_mask);
+    if (!ackt || sevr >= acks) {
+        acks = sevr;
+        post("ACKS", kDbeValue);
+    }
+    return kDbeAlarm;
+}
+
+void Record::post(const FieldDesc* f, unsigned mask) {
+    if (db_) db_->post(*this, f, mask);
+}
+
+void Record::post(const char* field, unsigned mask) {
+    if (!db_) return;
+    if (const FieldDesc* f = type_.find(field)) db_->post(*this, f, mask);
+}
+
+void Record::async_done(PutStatus st) {
+    pact = 0;
+    if (db_) db_->notify_complete(*this, st);
+}
+
+} // namespace beamctl::pv

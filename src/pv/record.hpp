@@ -1,0 +1,198 @@
+// Record model of the PV database: field descriptors, record types and the Record base class that
+// every record type implements (ai/ao/... here; motor, mca, epid, axis PVs in later subsystems).
+// Threading: records are owned by one Database and touched only on its thread (the IOC loop).
+#pragma once
+
+#include "pv/types.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <functional>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+#include <vector>
+
+namespace beamctl::pv {
+
+class Record;
+class Database;
+
+// A fixed set of choices for a DBF_MENU field (menuScan, menuAlarmSevr, ...).
+struct Menu {
+    const char* name;
+    std::vector<const char*> choices;
+};
+extern const Menu kMenuScan, kMenuPini, kMenuAlarmSevr, kMenuAlarmStat, kMenuYesNo, kMenuFtype,
+    kMenuPostOnChange, kMenuPostAlways, kMenuOmsl, kMenuIvoa, kMenuSoftDtyp;
+
+enum FieldFlag : uint16_t {
+    kReadOnly = 1 << 0, // SPC_NOMOD: never writable (not even from a .db file)
+    kProp = 1 << 1,     // metadata: a change posts DBE_PROPERTY to every monitor of the record
+    kProcess = 1 << 2,  // pp(TRUE): a put processes the record
+    kAsl0 = 1 << 3,     // access-security level 0 (VAL-like); all others are level 1
+    kArray = 1 << 4,    // element storage is provided by Record::elements() (waveform VAL)
+    kInitOnly = 1 << 5, // settable from a .db file but read-only over CA (NELM, FTVL)
+    kEgu = 1 << 6,      // reports the record's EGU as units
+    kDisplayHopr = 1 << 7, // display limits are HOPR/LOPR (VAL and the alarm limits)
+};
+
+// Describes one field of a record type. `addr` returns the storage of that field in a record.
+struct FieldDesc {
+    const char* name;
+    Dbf dbf;
+    uint16_t flags;
+    uint16_t size; // bytes of storage (the char array size for DBF_STRING)
+    const Menu* menu;
+    void* (*addr)(Record&);
+    int index = -1; // position in the record type's table
+};
+
+// Declares a field whose storage is member `m` of record class R.
+#define BEAMCTL_FIELD(R, NAME, m, dbf, flags)                                                      \
+    ::beamctl::pv::FieldDesc {                                                                     \
+        #NAME, ::beamctl::pv::Dbf::dbf, uint16_t(flags), uint16_t(sizeof(R::m)), nullptr,          \
+            [](::beamctl::pv::Record& r) -> void* { return &static_cast<R&>(r).m; }                \
+    }
+#define BEAMCTL_MENU(R, NAME, m, menu, flags)                                                      \
+    ::beamctl::pv::FieldDesc {                                                                     \
+        #NAME, ::beamctl::pv::Dbf::Menu, uint16_t(flags), uint16_t(sizeof(R::m)), &menu,           \
+            [](::beamctl::pv::Record& r) -> void* { return &static_cast<R&>(r).m; }                \
+    }
+
+// A record type: its name, fields and factory. Registered once in the RecordTypes registry.
+class RecordType {
+public:
+    RecordType(std::string name, std::vector<FieldDesc> fields,
+               std::function<std::unique_ptr<Record>(const RecordType&)> factory);
+    const std::string& name() const { return name_; }
+    const std::vector<FieldDesc>& fields() const { return fields_; }
+    const FieldDesc* find(std::string_view field) const;
+    std::unique_ptr<Record> create() const { return factory_(*this); }
+
+private:
+    std::string name_;
+    std::vector<FieldDesc> fields_;
+    std::unordered_map<std::string_view, const FieldDesc*> by_name_;
+    std::function<std::unique_ptr<Record>(const RecordType&)> factory_;
+};
+
+// Registry of record types by name ("ai", "motor", ...). Filled before databases are loaded.
+class RecordTypes {
+public:
+    static RecordTypes& global(); // holds the standard types (see register_standard_records)
+    void add(std::unique_ptr<RecordType> t);
+    const RecordType* find(std::string_view name) const;
+    std::vector<std::string> names() const;
+
+private:
+    std::unordered_map<std::string, std::unique_ptr<RecordType>> types_;
+};
+void register_standard_records(RecordTypes& types); // ai ao bi bo longin ... waveform
+
+// A view of a field's elements: scalars have count == capacity == 1.
+struct Elements {
+    Dbf type;
+    void* data;
+    uint32_t count;    // valid elements now (NORD for arrays)
+    uint32_t capacity; // maximum elements (NELM)
+    uint16_t stride;   // bytes per element
+};
+
+// Metadata of a field as Channel Access GR/CTRL types report it.
+struct Metadata {
+    const char* units = "";
+    int16_t precision = 0;
+    double disp_hi = 0, disp_lo = 0;
+    double alarm_hihi = NAN, alarm_high = NAN, alarm_low = NAN, alarm_lolo = NAN;
+    double ctrl_hi = 0, ctrl_lo = 0;
+};
+
+// Outcome of processing: synchronous, or completion reported later via Record::async_done().
+enum class ProcessResult : uint8_t { Done, Async };
+
+// Base of every record. Common fields (dbCommon) live here; subclasses add their own and
+// implement process(). All calls happen on the owning database's thread.
+class Record {
+public:
+    explicit Record(const RecordType& type);
+    virtual ~Record();
+    Record(const Record&) = delete;
+    Record& operator=(const Record&) = delete;
+
+    const RecordType& type() const { return type_; }
+    std::string_view name() const { return name_; }
+    Database* database() const { return db_; }
+
+    // --- behaviour, implemented by record types ---
+    // Called once after the .db fields are applied; throws Error for inconsistent settings.
+    virtual void init() {}
+    // Record processing: alarms, outputs, timestamp, monitors.
+    virtual ProcessResult process() = 0;
+    // Called after a field was written over CA (before processing, if the field processes).
+    // May refuse the value by returning a status other than Ok (the old value is restored).
+    virtual PutStatus special(const FieldDesc& f) {
+        (void)f;
+        return PutStatus::Ok;
+    }
+    // Elements of a field; the default is the scalar at f.addr.
+    virtual Elements elements(const FieldDesc& f);
+    // Sets the number of valid elements of an array field after a put (NORD).
+    virtual void set_count(const FieldDesc& f, uint32_t n) {
+        (void)f;
+        (void)n;
+    }
+    // State strings of a DBF_ENUM field; returns the number of states (no_str).
+    virtual int enum_strings(const FieldDesc& f, const char* out[kEnumStates]) const;
+    // CA metadata of field f. The default: no units, type range, NaN alarm limits.
+    virtual void metadata(const FieldDesc& f, Metadata& md) const;
+    // Precision used to format a float/double field as a string (PREC).
+    virtual int16_t precision(const FieldDesc& f) const;
+
+    // --- alarm helpers (recGbl) ---
+    // Raises the new alarm if `sevr` is above the pending one (recGblSetSevr).
+    bool set_sevr(uint16_t stat, uint16_t sevr);
+    // Moves the pending alarm into STAT/SEVR, posts them; returns DBE_ALARM if they changed.
+    unsigned reset_alarms();
+    void stamp_time() { time = EpicsTime::now(); }
+    // Posts a monitor event on field `f` (nullptr: every field, for DBE_PROPERTY).
+    void post(const FieldDesc* f, unsigned mask);
+    void post(const char* field, unsigned mask);
+    // An Async process() ends: completes put-callbacks waiting on this record.
+    void async_done(PutStatus st = PutStatus::Ok);
+    bool busy() const { return pact; }
+
+    // --- dbCommon fields ---
+    char name_[61] = {};
+    char desc[41] = {};
+    char asg[29] = {};
+    uint16_t scan = 0, pini = 0, dtyp = 0;
+    int16_t phas = 0, disv = 1, disa = 0;
+    uint16_t diss = 0;
+    uint8_t proc = 0, pact = 0, udf = 1, tpro = 0;
+    uint16_t stat = kStatUdf, sevr = kInvalid, nsta = 0, nsev = 0, acks = 0, ackt = 1;
+    uint16_t udfs = kInvalid;
+    EpicsTime time;
+
+    static std::vector<FieldDesc> common_fields(); // dbCommon part of every type's table
+
+private:
+    friend class Database;
+    const RecordType& type_;
+    Database* db_ = nullptr;
+    std::vector<class Subscription*> subs_;        // monitors on any field of this record
+    std::vector<class RecordObserver*> observers_; // channels, told when the record is removed
+    std::unique_ptr<struct NotifyState> notify_;   // put-callback in progress and queued ones
+    std::vector<std::pair<std::string, std::string>> info_; // info(name, "value") items
+    std::vector<std::string> aliases_;
+};
+
+// Helpers for record implementations.
+template <typename T> T& field_ref(Record& r, const FieldDesc& f) {
+    return *static_cast<T*>(f.addr(r));
+}
+void copy_string(char* dst, std::size_t size, std::string_view src); // truncating, NUL-terminated
+
+} // namespace beamctl::pv

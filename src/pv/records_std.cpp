@@ -1,0 +1,665 @@
+// The standard soft record types of EPICS base: ai ao bi bo longin longout mbbi mbbo stringin
+// stringout waveform, with "Soft Channel" device support (no links). Semantics follow base's
+// record support (checkAlarms, monitor, convert) so clients see what a softIoc would show.
+#include "core/error.hpp"
+#include "pv/record.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+namespace beamctl::pv {
+namespace {
+
+// recGblCheckDeadband: adds `bit` to mask and updates *last when |new - last| > deadband.
+void check_deadband(double& last, double v, double deadband, unsigned& mask, unsigned bit) {
+    double delta = 0;
+    if (std::isfinite(v) && std::isfinite(last)) {
+        delta = std::fabs(last - v);
+    } else if (std::isnan(v) != std::isnan(last) || std::isinf(v) != std::isinf(last)) {
+        delta = INFINITY;
+    } else if (std::isinf(v) && v != last) {
+        delta = INFINITY;
+    }
+    if (delta > deadband) {
+        mask |= bit;
+        last = v;
+    }
+}
+
+void check_deadband_int(int32_t& last, int32_t v, int32_t deadband, unsigned& mask, unsigned bit) {
+    int64_t delta = int64_t(last) - int64_t(v);
+    if (delta < 0) delta = -delta;
+    if (deadband < 0 || delta > int64_t(deadband)) {
+        mask |= bit;
+        last = v;
+    }
+}
+
+// aiRecord-style limit alarms with hysteresis; T is double or int32.
+template <typename T>
+void limit_alarms(Record& r, T val, T hihi, T high, T low, T lolo, uint16_t hhsv, uint16_t hsv,
+                  uint16_t lsv, uint16_t llsv, T hyst, T& lalm) {
+    if (r.udf) {
+        r.set_sevr(kStatUdf, r.udfs);
+        return;
+    }
+    T alev;
+    uint16_t asev, astat;
+    if ((asev = hhsv) && (val >= (alev = hihi) || (lalm == alev && val >= alev - hyst)))
+        astat = kStatHihi;
+    else if ((asev = llsv) && (val <= (alev = lolo) || (lalm == alev && val <= alev + hyst)))
+        astat = kStatLolo;
+    else if ((asev = hsv) && (val >= (alev = high) || (lalm == alev && val >= alev - hyst)))
+        astat = kStatHigh;
+    else if ((asev = lsv) && (val <= (alev = low) || (lalm == alev && val <= alev + hyst)))
+        astat = kStatLow;
+    else {
+        alev = val;
+        asev = kNoAlarm;
+        astat = kStatNone;
+    }
+    if (asev) {
+        if (r.set_sevr(astat, asev)) lalm = alev;
+    } else {
+        lalm = val;
+    }
+}
+
+// Binary/multi-bit state alarms with change-of-state (biRecord/mbbiRecord checkAlarms).
+void state_alarms(Record& r, uint16_t val, uint16_t nstates, const uint16_t* state_sevr,
+                  uint16_t unsv, uint16_t cosv, uint16_t& lalm) {
+    if (r.udf) {
+        r.set_sevr(kStatUdf, r.udfs);
+        return;
+    }
+    if (val >= nstates)
+        r.set_sevr(kStatState, unsv);
+    else
+        r.set_sevr(kStatState, state_sevr[val]);
+    if (val == lalm) return;
+    r.set_sevr(kStatCos, cosv);
+    lalm = val;
+}
+
+void fill_limits(Metadata& md, double hopr, double lopr, double chi, double clo) {
+    md.disp_hi = hopr;
+    md.disp_lo = lopr;
+    md.ctrl_hi = chi;
+    md.ctrl_lo = clo;
+}
+
+bool is(const FieldDesc& f, const char* n) { return std::strcmp(f.name, n) == 0; }
+
+constexpr uint16_t kVal = kProcess | kAsl0;
+constexpr uint16_t kLim = kProcess | kProp | kEgu | kDisplayHopr; // alarm limits (pp, metadata)
+constexpr uint16_t kMeta = kProp;                                  // metadata, no processing
+
+// ---------------------------------------------------------------- analog (ai, ao)
+template <typename Self> struct AnalogBase : Record {
+    using Record::Record;
+    double val = 0;
+    int16_t prec = 0;
+    char egu[16] = {};
+    double hopr = 0, lopr = 0;
+    double hihi = 0, high = 0, low = 0, lolo = 0;
+    uint16_t hhsv = 0, hsv = 0, lsv = 0, llsv = 0;
+    double hyst = 0, mdel = 0, adel = 0;
+    double lalm = 0, alst = 0, mlst = 0;
+
+    static std::vector<FieldDesc> analog_fields(std::vector<FieldDesc> v) {
+        using R = Self;
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val, Double, kVal | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, PREC, prec, Short, kMeta),
+            BEAMCTL_FIELD(R, EGU, egu, String, kMeta),
+            BEAMCTL_FIELD(R, HOPR, hopr, Double, kMeta | kEgu),
+            BEAMCTL_FIELD(R, LOPR, lopr, Double, kMeta | kEgu),
+            BEAMCTL_FIELD(R, HIHI, hihi, Double, kLim),
+            BEAMCTL_FIELD(R, HIGH, high, Double, kLim),
+            BEAMCTL_FIELD(R, LOW, low, Double, kLim),
+            BEAMCTL_FIELD(R, LOLO, lolo, Double, kLim),
+            BEAMCTL_MENU(R, HHSV, hhsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, HSV, hsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LSV, lsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LLSV, llsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_FIELD(R, HYST, hyst, Double, kEgu),
+            BEAMCTL_FIELD(R, MDEL, mdel, Double, kEgu),
+            BEAMCTL_FIELD(R, ADEL, adel, Double, kEgu),
+            BEAMCTL_FIELD(R, LALM, lalm, Double, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, ALST, alst, Double, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, MLST, mlst, Double, kReadOnly | kEgu | kDisplayHopr),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+
+    void analog_alarms() {
+        limit_alarms<double>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm);
+    }
+    unsigned analog_monitor_mask() {
+        unsigned mask = reset_alarms();
+        check_deadband(mlst, val, mdel, mask, kDbeValue);
+        check_deadband(alst, val, adel, mask, kDbeLog);
+        return mask;
+    }
+    int16_t precision(const FieldDesc& f) const override {
+        if (is(f, "VAL")) return prec;
+        if (f.dbf == Dbf::Float || f.dbf == Dbf::Double) return (prec < 0 || prec > 15) ? 15 : prec;
+        return 0;
+    }
+    void analog_metadata(const FieldDesc& f, Metadata& md, double chi, double clo) const {
+        Record::metadata(f, md);
+        if (f.flags & kEgu) md.units = egu;
+        if (f.flags & kDisplayHopr) fill_limits(md, hopr, lopr, chi, clo);
+        if (is(f, "VAL")) {
+            md.alarm_hihi = hhsv ? hihi : NAN;
+            md.alarm_high = hsv ? high : NAN;
+            md.alarm_low = lsv ? low : NAN;
+            md.alarm_lolo = llsv ? lolo : NAN;
+        }
+    }
+};
+
+struct AiRecord : AnalogBase<AiRecord> {
+    using AnalogBase::AnalogBase;
+    const FieldDesc* val_fd = type().find("VAL");
+    static std::vector<FieldDesc> fields() { return analog_fields(common_fields()); }
+    ProcessResult process() override {
+        pact = 1;
+        stamp_time();
+        if (std::isnan(val)) udf = 1;
+        analog_alarms();
+        if (unsigned m = analog_monitor_mask()) post(val_fd, m);
+        pact = 0;
+        return ProcessResult::Done;
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        analog_metadata(f, md, hopr, lopr);
+    }
+};
+
+struct AoRecord : AnalogBase<AoRecord> {
+    using AnalogBase::AnalogBase;
+    double oval = 0, drvh = 0, drvl = 0, oroc = 0, pval = 0;
+    const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* oval_fd = type().find("OVAL");
+    static std::vector<FieldDesc> fields() {
+        using R = AoRecord;
+        auto v = analog_fields(common_fields());
+        auto add = {
+            BEAMCTL_FIELD(R, OVAL, oval, Double, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, PVAL, pval, Double, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, DRVH, drvh, Double, kProcess | kProp | kEgu),
+            BEAMCTL_FIELD(R, DRVL, drvl, Double, kProcess | kProp | kEgu),
+            BEAMCTL_FIELD(R, OROC, oroc, Double, kEgu),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    ProcessResult process() override {
+        pact = 1;
+        double value = val;
+        if (drvh > drvl) value = std::clamp(value, drvl, drvh);
+        val = value;
+        pval = value;
+        double prev = oval;
+        if (oroc != 0 && std::isfinite(prev)) {
+            double diff = value - prev;
+            if (diff < -oroc) value = prev - oroc;
+            else if (diff > oroc) value = prev + oroc;
+        }
+        oval = value;
+        stamp_time();
+        analog_alarms();
+        if (unsigned m = analog_monitor_mask()) post(val_fd, m);
+        if (oval != prev) post(oval_fd, kDbeValue | kDbeLog);
+        pact = 0;
+        return ProcessResult::Done;
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        analog_metadata(f, md, drvh, drvl);
+    }
+};
+
+// ---------------------------------------------------------------- long (longin, longout)
+template <typename Self> struct LongBase : Record {
+    using Record::Record;
+    int32_t val = 0;
+    char egu[16] = {};
+    int32_t hopr = 0, lopr = 0;
+    int32_t hihi = 0, high = 0, low = 0, lolo = 0;
+    uint16_t hhsv = 0, hsv = 0, lsv = 0, llsv = 0;
+    int32_t hyst = 0, mdel = 0, adel = 0;
+    int32_t lalm = 0, alst = 0, mlst = 0;
+    const FieldDesc* val_fd = type().find("VAL");
+
+    static std::vector<FieldDesc> long_fields(std::vector<FieldDesc> v) {
+        using R = Self;
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val, Long, kVal | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, EGU, egu, String, kMeta),
+            BEAMCTL_FIELD(R, HOPR, hopr, Long, kMeta | kEgu),
+            BEAMCTL_FIELD(R, LOPR, lopr, Long, kMeta | kEgu),
+            BEAMCTL_FIELD(R, HIHI, hihi, Long, kLim),
+            BEAMCTL_FIELD(R, HIGH, high, Long, kLim),
+            BEAMCTL_FIELD(R, LOW, low, Long, kLim),
+            BEAMCTL_FIELD(R, LOLO, lolo, Long, kLim),
+            BEAMCTL_MENU(R, HHSV, hhsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, HSV, hsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LSV, lsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LLSV, llsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_FIELD(R, HYST, hyst, Long, kEgu),
+            BEAMCTL_FIELD(R, MDEL, mdel, Long, kEgu),
+            BEAMCTL_FIELD(R, ADEL, adel, Long, kEgu),
+            BEAMCTL_FIELD(R, LALM, lalm, Long, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, ALST, alst, Long, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, MLST, mlst, Long, kReadOnly | kEgu | kDisplayHopr),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void long_process() {
+        stamp_time();
+        limit_alarms<int32_t>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm);
+        unsigned mask = reset_alarms();
+        check_deadband_int(mlst, val, mdel, mask, kDbeValue);
+        check_deadband_int(alst, val, adel, mask, kDbeLog);
+        if (mask) post(val_fd, mask);
+    }
+    void long_metadata(const FieldDesc& f, Metadata& md, double chi, double clo) const {
+        Record::metadata(f, md);
+        if (f.flags & kEgu) md.units = egu;
+        if (f.flags & kDisplayHopr) fill_limits(md, hopr, lopr, chi, clo);
+        if (is(f, "VAL")) {
+            md.alarm_hihi = hhsv ? hihi : NAN;
+            md.alarm_high = hsv ? high : NAN;
+            md.alarm_low = lsv ? low : NAN;
+            md.alarm_lolo = llsv ? lolo : NAN;
+        }
+    }
+};
+
+struct LonginRecord : LongBase<LonginRecord> {
+    using LongBase::LongBase;
+    static std::vector<FieldDesc> fields() { return long_fields(common_fields()); }
+    ProcessResult process() override {
+        pact = 1;
+        long_process();
+        pact = 0;
+        return ProcessResult::Done;
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        long_metadata(f, md, hopr, lopr);
+    }
+};
+
+struct LongoutRecord : LongBase<LongoutRecord> {
+    using LongBase::LongBase;
+    int32_t drvh = 0, drvl = 0;
+    static std::vector<FieldDesc> fields() {
+        using R = LongoutRecord;
+        auto v = long_fields(common_fields());
+        auto add = {
+            BEAMCTL_FIELD(R, DRVH, drvh, Long, kProcess | kProp | kEgu),
+            BEAMCTL_FIELD(R, DRVL, drvl, Long, kProcess | kProp | kEgu),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    ProcessResult process() override {
+        pact = 1;
+        if (drvh > drvl) val = std::clamp(val, drvl, drvh);
+        long_process();
+        pact = 0;
+        return ProcessResult::Done;
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        long_metadata(f, md, drvh, drvl);
+    }
+};
+
+// ---------------------------------------------------------------- binary (bi, bo)
+template <typename Self> struct BinaryBase : Record {
+    using Record::Record;
+    uint16_t val = 0;
+    char znam[26] = {}, onam[26] = {};
+    uint16_t zsv = 0, osv = 0, cosv = 0;
+    uint32_t rval = 0, mask = 0;
+    uint16_t lalm = 0, mlst = 0;
+    const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* rval_fd = type().find("RVAL");
+
+    static std::vector<FieldDesc> binary_fields(std::vector<FieldDesc> v) {
+        using R = Self;
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val, Enum, kVal),
+            BEAMCTL_FIELD(R, ZNAM, znam, String, kMeta | kProcess),
+            BEAMCTL_FIELD(R, ONAM, onam, String, kMeta | kProcess),
+            BEAMCTL_MENU(R, ZSV, zsv, kMenuAlarmSevr, kProcess),
+            BEAMCTL_MENU(R, OSV, osv, kMenuAlarmSevr, kProcess),
+            BEAMCTL_MENU(R, COSV, cosv, kMenuAlarmSevr, kProcess),
+            BEAMCTL_FIELD(R, RVAL, rval, ULong, kProcess),
+            BEAMCTL_FIELD(R, MASK, mask, ULong, 0),
+            BEAMCTL_FIELD(R, LALM, lalm, UShort, kReadOnly),
+            BEAMCTL_FIELD(R, MLST, mlst, UShort, kReadOnly),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    PutStatus special(const FieldDesc& f) override {
+        if (&f == val_fd && val > 1) return PutStatus::BadValue; // two states only
+        return PutStatus::Ok;
+    }
+    int enum_strings(const FieldDesc& f, const char* out[kEnumStates]) const override {
+        if (&f != val_fd) return Record::enum_strings(f, out);
+        out[0] = znam;
+        out[1] = onam;
+        return 2;
+    }
+    void binary_process(bool output) {
+        stamp_time();
+        uint32_t old_rval = rval;
+        if (output) rval = mask ? (val ? mask : 0) : val;
+        else if (rval != old_rval) val = rval ? 1 : 0;
+        const uint16_t sevr_of[2] = {zsv, osv};
+        state_alarms(*this, val, 2, sevr_of, kNoAlarm, cosv, lalm);
+        unsigned m = reset_alarms();
+        if (mlst != val) {
+            m |= kDbeValue | kDbeLog;
+            mlst = val;
+        }
+        if (m) post(val_fd, m);
+        if (rval != old_rval) post(rval_fd, kDbeValue | kDbeLog);
+    }
+};
+
+struct BiRecord : BinaryBase<BiRecord> {
+    using BinaryBase::BinaryBase;
+    static std::vector<FieldDesc> fields() { return binary_fields(common_fields()); }
+    ProcessResult process() override {
+        pact = 1;
+        binary_process(false);
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+
+struct BoRecord : BinaryBase<BoRecord> {
+    using BinaryBase::BinaryBase;
+    static std::vector<FieldDesc> fields() { return binary_fields(common_fields()); }
+    ProcessResult process() override {
+        pact = 1;
+        binary_process(true);
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+
+// ---------------------------------------------------------------- multi-bit (mbbi, mbbo)
+#define MBB_STATE_FIELDS(R, P, V, S)                                                                \
+    BEAMCTL_FIELD(R, P##ST, strs[V], String, kMeta | kProcess),                                    \
+        BEAMCTL_FIELD(R, P##VL, vals[V], ULong, kProcess),                                          \
+        BEAMCTL_MENU(R, P##SV, sevs[V], kMenuAlarmSevr, kProcess)
+
+template <typename Self> struct MbbBase : Record {
+    using Record::Record;
+    uint16_t val = 0;
+    char strs[16][26] = {};
+    uint32_t vals[16] = {};
+    uint16_t sevs[16] = {};
+    uint16_t unsv = 0, cosv = 0;
+    uint32_t rval = 0, mask = 0;
+    int16_t nobt = 0, shft = 0;
+    uint16_t lalm = 0, mlst = 0;
+    uint8_t sdef = 0;
+    const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* rval_fd = type().find("RVAL");
+
+    static std::vector<FieldDesc> mbb_fields(std::vector<FieldDesc> v) {
+        using R = Self;
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val, Enum, kVal),
+            MBB_STATE_FIELDS(R, ZR, 0, zr),  MBB_STATE_FIELDS(R, ON, 1, on),
+            MBB_STATE_FIELDS(R, TW, 2, tw),  MBB_STATE_FIELDS(R, TH, 3, th),
+            MBB_STATE_FIELDS(R, FR, 4, fr),  MBB_STATE_FIELDS(R, FV, 5, fv),
+            MBB_STATE_FIELDS(R, SX, 6, sx),  MBB_STATE_FIELDS(R, SV, 7, sv),
+            MBB_STATE_FIELDS(R, EI, 8, ei),  MBB_STATE_FIELDS(R, NI, 9, ni),
+            MBB_STATE_FIELDS(R, TE, 10, te), MBB_STATE_FIELDS(R, EL, 11, el),
+            MBB_STATE_FIELDS(R, TV, 12, tv), MBB_STATE_FIELDS(R, TT, 13, tt),
+            MBB_STATE_FIELDS(R, FT, 14, ft), MBB_STATE_FIELDS(R, FF, 15, ff),
+            BEAMCTL_MENU(R, UNSV, unsv, kMenuAlarmSevr, kProcess),
+            BEAMCTL_MENU(R, COSV, cosv, kMenuAlarmSevr, kProcess),
+            BEAMCTL_FIELD(R, RVAL, rval, ULong, kProcess),
+            BEAMCTL_FIELD(R, MASK, mask, ULong, 0),
+            BEAMCTL_FIELD(R, NOBT, nobt, Short, 0),
+            BEAMCTL_FIELD(R, SHFT, shft, Short, 0),
+            BEAMCTL_FIELD(R, LALM, lalm, UShort, kReadOnly),
+            BEAMCTL_FIELD(R, MLST, mlst, UShort, kReadOnly),
+            BEAMCTL_FIELD(R, SDEF, sdef, UChar, kReadOnly),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void init() override { update_sdef(); }
+    void update_sdef() {
+        sdef = 0;
+        for (int i = 0; i < 16; ++i)
+            if (vals[i]) sdef = 1;
+    }
+    PutStatus special(const FieldDesc& f) override {
+        if (&f == val_fd && val > 15) return PutStatus::BadValue; // sixteen states only
+        if (f.name[2] == 'V' && f.name[3] == 'L' && !f.name[4]) update_sdef();
+        return PutStatus::Ok;
+    }
+    int enum_strings(const FieldDesc& f, const char* out[kEnumStates]) const override {
+        if (&f != val_fd) return Record::enum_strings(f, out);
+        int n = 0;
+        for (int i = 0; i < 16; ++i) {
+            out[i] = strs[i];
+            if (strs[i][0]) n = i + 1;
+        }
+        return n;
+    }
+    void mbb_process(bool output) {
+        stamp_time();
+        uint32_t old_rval = rval;
+        if (output) rval = sdef ? (val < 16 ? vals[val] : 0) : val;
+        state_alarms(*this, val, 16, sevs, unsv, cosv, lalm);
+        unsigned m = reset_alarms();
+        if (mlst != val) {
+            m |= kDbeValue | kDbeLog;
+            mlst = val;
+        }
+        if (m) post(val_fd, m);
+        if (rval != old_rval) post(rval_fd, kDbeValue | kDbeLog);
+    }
+};
+
+struct MbbiRecord : MbbBase<MbbiRecord> {
+    using MbbBase::MbbBase;
+    static std::vector<FieldDesc> fields() { return mbb_fields(common_fields()); }
+    ProcessResult process() override {
+        pact = 1;
+        mbb_process(false);
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+
+struct MbboRecord : MbbBase<MbboRecord> {
+    using MbbBase::MbbBase;
+    static std::vector<FieldDesc> fields() { return mbb_fields(common_fields()); }
+    ProcessResult process() override {
+        pact = 1;
+        mbb_process(true);
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+
+// ---------------------------------------------------------------- strings (stringin, stringout)
+template <typename Self> struct StringBase : Record {
+    using Record::Record;
+    char val[40] = {}, oval[40] = {};
+    uint16_t mpst = 0, apst = 0; // On Change by default
+    const FieldDesc* val_fd = type().find("VAL");
+    static std::vector<FieldDesc> string_fields(std::vector<FieldDesc> v) {
+        using R = Self;
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val, String, kVal),
+            BEAMCTL_FIELD(R, OVAL, oval, String, kReadOnly),
+            BEAMCTL_MENU(R, MPST, mpst, kMenuPostOnChange, 0),
+            BEAMCTL_MENU(R, APST, apst, kMenuPostOnChange, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    ProcessResult process() override {
+        pact = 1;
+        stamp_time();
+        if (udf) set_sevr(kStatUdf, udfs);
+        unsigned m = reset_alarms();
+        bool changed = std::strncmp(oval, val, sizeof val) != 0;
+        if (mpst == 1 || changed) m |= kDbeValue;
+        if (apst == 1 || changed) m |= kDbeLog;
+        std::memcpy(oval, val, sizeof val);
+        if (m) post(val_fd, m);
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+struct StringinRecord : StringBase<StringinRecord> {
+    using StringBase::StringBase;
+    static std::vector<FieldDesc> fields() { return string_fields(common_fields()); }
+};
+struct StringoutRecord : StringBase<StringoutRecord> {
+    using StringBase::StringBase;
+    static std::vector<FieldDesc> fields() { return string_fields(common_fields()); }
+};
+
+// ---------------------------------------------------------------- waveform
+struct WaveformRecord : Record {
+    using Record::Record;
+    uint16_t ftvl = 10; // DOUBLE
+    uint32_t nelm = 1, nord = 0;
+    char egu[16] = {};
+    int16_t prec = 0;
+    double hopr = 0, lopr = 0;
+    uint16_t mpst = 0, apst = 0; // Always by default
+    std::vector<char> storage;   // NELM elements of FTVL
+    char val_placeholder = 0;
+    const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* nord_fd = type().find("NORD");
+
+    static std::vector<FieldDesc> fields() {
+        using R = WaveformRecord;
+        auto v = common_fields();
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val_placeholder, Double, kVal | kArray | kEgu | kDisplayHopr),
+            BEAMCTL_MENU(R, FTVL, ftvl, kMenuFtype, kInitOnly),
+            BEAMCTL_FIELD(R, NELM, nelm, ULong, kInitOnly),
+            BEAMCTL_FIELD(R, NORD, nord, ULong, kReadOnly),
+            BEAMCTL_FIELD(R, EGU, egu, String, kMeta),
+            BEAMCTL_FIELD(R, PREC, prec, Short, kMeta),
+            BEAMCTL_FIELD(R, HOPR, hopr, Double, kMeta | kEgu),
+            BEAMCTL_FIELD(R, LOPR, lopr, Double, kMeta | kEgu),
+            BEAMCTL_MENU(R, MPST, mpst, kMenuPostAlways, 0),
+            BEAMCTL_MENU(R, APST, apst, kMenuPostAlways, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    static bool elem_type(uint16_t ftvl, Dbf& t, uint16_t& size) {
+        switch (ftvl) {
+        case 0: t = Dbf::String; size = 40; return true;
+        case 1: t = Dbf::Char; size = 1; return true;
+        case 2: t = Dbf::UChar; size = 1; return true;
+        case 3: t = Dbf::Short; size = 2; return true;
+        case 4: t = Dbf::UShort; size = 2; return true;
+        case 5: t = Dbf::Long; size = 4; return true;
+        case 6: t = Dbf::ULong; size = 4; return true;
+        case 7: t = Dbf::Int64; size = 8; return true;
+        case 9: t = Dbf::Float; size = 4; return true;
+        case 10: t = Dbf::Double; size = 8; return true;
+        default: return false;
+        }
+    }
+    void init() override {
+        Dbf t;
+        uint16_t size;
+        if (!elem_type(ftvl, t, size))
+            throw Error(SB() << "FTVL " << kMenuFtype.choices[ftvl] << " is not supported for waveform");
+        if (nelm == 0) nelm = 1;
+        if (nelm > 64u * 1024 * 1024)
+            throw Error(SB() << "NELM " << nelm << " is too large (at most 67108864)");
+        storage.assign(std::size_t(nelm) * size, 0);
+    }
+    Elements elements(const FieldDesc& f) override {
+        if (&f != val_fd) return Record::elements(f);
+        Dbf t = Dbf::Double;
+        uint16_t size = 8;
+        elem_type(ftvl, t, size);
+        return Elements{t, storage.data(), std::min<uint32_t>(nord, nelm),
+                        uint32_t(storage.size() / size), size};
+    }
+    void set_count(const FieldDesc& f, uint32_t n) override {
+        if (&f == val_fd) nord = n;
+    }
+    int16_t precision(const FieldDesc& f) const override {
+        if (&f == val_fd) return prec;
+        return Record::precision(f);
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        Record::metadata(f, md);
+        if (&f == val_fd) {
+            Dbf t = Dbf::Double;
+            uint16_t size;
+            elem_type(ftvl, t, size);
+            if (t == Dbf::Float || t == Dbf::Double) md.precision = prec;
+            else md.precision = 0;
+        }
+        if (f.flags & kEgu) md.units = egu;
+        if (f.flags & kDisplayHopr) fill_limits(md, hopr, lopr, hopr, lopr);
+    }
+    uint32_t last_nord = 0;
+    ProcessResult process() override {
+        pact = 1;
+        stamp_time();
+        if (udf) set_sevr(kStatUdf, udfs);
+        unsigned m = reset_alarms();
+        if (mpst == 0) m |= kDbeValue;
+        if (apst == 0) m |= kDbeLog;
+        if (m) post(val_fd, m);
+        if (nord != last_nord) {
+            post(nord_fd, kDbeValue | kDbeLog);
+            last_nord = nord;
+        }
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+
+template <typename R> void add_type(RecordTypes& types, const char* name) {
+    types.add(std::make_unique<RecordType>(name, R::fields(), [](const RecordType& t) {
+        return std::unique_ptr<Record>(new R(t));
+    }));
+}
+
+} // namespace
+
+void register_standard_records(RecordTypes& types) {
+    add_type<AiRecord>(types, "ai");
+    add_type<AoRecord>(types, "ao");
+    add_type<BiRecord>(types, "bi");
+    add_type<BoRecord>(types, "bo");
+    add_type<LonginRecord>(types, "longin");
+    add_type<LongoutRecord>(types, "longout");
+    add_type<MbbiRecord>(types, "mbbi");
+    add_type<MbboRecord>(types, "mbbo");
+    add_type<StringinRecord>(types, "stringin");
+    add_type<StringoutRecord>(types, "stringout");
+    add_type<WaveformRecord>(types, "waveform");
+}
+
+} // namespace beamctl::pv
