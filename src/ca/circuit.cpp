@@ -43,7 +43,7 @@ struct Circuit::Monitor : pv::Subscription {
 };
 
 Circuit::Circuit(ServerContext& ctx, uint32_t peer_ip, uint16_t peer_port)
-    : ctx_(ctx), peer_ip_(peer_ip), peer_port_(peer_port), life_(std::make_shared<Life>(Life{this})) {
+    : ctx_(ctx), peer_port_(peer_port), life_(std::make_shared<Life>(Life{this})) {
     in_addr a{};
     a.s_addr = htonl(peer_ip);
     char buf[INET_ADDRSTRLEN];

@@ -105,7 +105,6 @@ private:
     uint32_t client_limit_count(uint16_t dtype) const;
 
     ServerContext& ctx_;
-    uint32_t peer_ip_;
     uint16_t peer_port_;
     std::string peer_ip_str_;
     uint16_t minor_ = 0;

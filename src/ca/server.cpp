@@ -1,5 +1,7 @@
 #include "ca/server.hpp"
 
+#include "ca/search.hpp"
+
 #include "core/error.hpp"
 #include "core/log.hpp"
 
@@ -455,50 +457,10 @@ void Server::on_udp(int fd) {
 }
 
 void Server::handle_datagram(int fd, const uint8_t* p, std::size_t n, const sockaddr_in& from) {
-    std::string reply;
-    uint32_t seq = 0;
-    auto start_reply = [&] {
-        reply.clear();
-        append_message(reply, kVersion, 1, kMinorVersion, seq, 0);
-    };
-    auto send_reply = [&] {
-        if (reply.size() > 16)
-            sendto(fd, reply.data(), reply.size(), 0, reinterpret_cast<const sockaddr*>(&from), sizeof from);
-        start_reply();
-    };
-    start_reply();
-    std::size_t off = 0;
-    while (n - off >= 16) {
-        Header h;
-        decode_header(p + off, n - off, false, h);
-        if (h.payload_size > n - off - 16) {
-            ctx_.stats.udp_malformed++;
-            break;
-        }
-        const uint8_t* payload = p + off + 16;
-        off += 16 + h.payload_size;
-        if (h.cmd == kVersion) {
-            seq = h.p1;
-            if (reply.size() == 16) start_reply();
-            continue;
-        }
-        if (h.cmd != kSearch) continue; // repeater confirms, beacons from other servers, ...
-        ctx_.stats.searches_udp++;
-        std::size_t len = strnlen(reinterpret_cast<const char*>(payload), h.payload_size);
-        if (len == 0 || len == h.payload_size) { // empty or unterminated name
-            ctx_.stats.udp_malformed++;
-            continue;
-        }
-        if (h.count < 4) continue; // clients before minor 4 are not served
-        std::string_view name(reinterpret_cast<const char*>(payload), len);
-        if (!ctx_.db.has_record_for(name)) continue; // never NOT_FOUND over UDP
-        ctx_.stats.search_hits++;
-        if (reply.size() + 24 > kMaxUdpReply) send_reply();
-        uint8_t minor[8] = {0, uint8_t(kMinorVersion), 0, 0, 0, 0, 0, 0};
-        append_message(reply, kSearch, ctx_.tcp_port, 0, 0xFFFFFFFF, h.p2, minor, 8);
-    }
-    if (off != n) ctx_.stats.udp_malformed += off < n ? 1 : 0;
-    send_reply();
+    std::vector<std::string> replies;
+    answer_search(ctx_.db, ctx_.tcp_port, p, n, replies, ctx_.stats);
+    for (auto& r : replies)
+        sendto(fd, r.data(), r.size(), 0, reinterpret_cast<const sockaddr*>(&from), sizeof from);
 }
 
 } // namespace beamctl::ca

@@ -32,6 +32,8 @@ template <typename T> T saturate_int(int64_t v) {
     return T(v);
 }
 
+template <typename T> void store(void* dest, T v) { std::memcpy(dest, &v, sizeof v); }
+
 bool is_integer_dbf(Dbf t) {
     return t != Dbf::Float && t != Dbf::Double && t != Dbf::String;
 }
@@ -244,12 +246,13 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
         }
         break;
     }
-    case Prim::Short: *static_cast<int16_t*>(dest) = saturate_int<int16_t>(read_int(e, i)); break;
-    case Prim::Enum: *static_cast<uint16_t*>(dest) = saturate_int<uint16_t>(read_int(e, i)); break;
-    case Prim::Char: *static_cast<uint8_t*>(dest) = uint8_t(read_int(e, i)); break;
-    case Prim::Long: *static_cast<int32_t*>(dest) = saturate_int<int32_t>(read_int(e, i)); break;
-    case Prim::Float: *static_cast<float*>(dest) = float(read_double(e, i)); break;
-    case Prim::Double: *static_cast<double*>(dest) = read_double(e, i); break;
+    // dest may be unaligned (inside a message buffer): store through memcpy.
+    case Prim::Short: store(dest, saturate_int<int16_t>(read_int(e, i))); break;
+    case Prim::Enum: store(dest, saturate_int<uint16_t>(read_int(e, i))); break;
+    case Prim::Char: store(dest, uint8_t(read_int(e, i))); break;
+    case Prim::Long: store(dest, saturate_int<int32_t>(read_int(e, i))); break;
+    case Prim::Float: store(dest, float(read_double(e, i))); break;
+    case Prim::Double: store(dest, read_double(e, i)); break;
     }
 }
 

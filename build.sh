@@ -1,0 +1,90 @@
+#!/usr/bin/env bash
+# beamctl quick start. On a fresh Debian bookworm machine (as root):
+#   bash build.sh demo    install what is missing, build, run the demo IOC
+#   bash build.sh test    install what is missing, build, run every test
+# Other verbs: deps, build, unit, system, fuzz, bench.
+set -euo pipefail
+cd "$(dirname "$0")"
+ROOT=$(pwd)
+JOBS=${JOBS:-$(nproc)}
+
+# Debian packages the build, the tests and the demo need.
+BUILD_PKGS="g++ cmake ninja-build pkgconf libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev"
+TEST_PKGS="python3 python3-pytest python3-pyepics python3-numpy iproute2 procps clang-14 libclang-rt-14-dev"
+
+deps() {
+    local want="$BUILD_PKGS"
+    [ "${1:-}" = test ] && want="$want $TEST_PKGS"
+    local missing=""
+    for p in $want; do
+        dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+    done
+    if [ -n "$missing" ]; then
+        echo "== installing Debian packages:$missing"
+        local SUDO=""
+        [ "$(id -u)" = 0 ] || SUDO=sudo
+        $SUDO apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing >/dev/null
+    fi
+}
+
+build() {
+    local preset=${1:-release}
+    echo "== building ($preset)"
+    [ -f "build/$preset/build.ninja" ] || cmake --preset "$preset" >/dev/null
+    cmake --build --preset "$preset" -j "$JOBS"
+}
+
+unit() {
+    echo "== unit tests (release)"
+    (cd build/release && ctest --output-on-failure -j "$JOBS")
+    if [ "${BEAMCTL_SKIP_SANITIZE:-0}" != 1 ]; then
+        build dev
+        echo "== unit tests (ASan + UBSan)"
+        (cd build/dev && ctest --output-on-failure -j "$JOBS")
+    fi
+}
+
+fuzz() {
+    # Builds the libFuzzer targets with clang and runs each for a short time (a smoke run;
+    # longer campaigns: FUZZ_SECONDS=600 bash build.sh fuzz).
+    build fuzz
+    local secs=${FUZZ_SECONDS:-20}
+    for t in build/fuzz/tests/fuzz/fuzz_*; do
+        [ -x "$t" ] || continue
+        local corpus="tests/fuzz/corpus/$(basename "$t")"
+        mkdir -p "build/fuzz/corpus/$(basename "$t")"
+        echo "== $(basename "$t") for ${secs}s"
+        "$t" -max_total_time="$secs" -print_final_stats=1 "build/fuzz/corpus/$(basename "$t")" \
+            $( [ -d "$corpus" ] && echo "$corpus" ) 2>&1 | grep -E "stat::number_of_executed_units|Done|ERROR|SUMMARY" || true
+        [ "${PIPESTATUS[0]}" = 0 ] || { echo "fuzz target $(basename "$t") failed"; exit 1; }
+    done
+}
+
+system() {
+    echo "== system tests (pytest + pyepics on the real libca)"
+    # pyepics is Debian's and imports only under /usr/bin/python3.
+    BEAMCTL_BIN="$ROOT/build/release/beamctl" /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/system "$@"
+}
+
+case "${1:-}" in
+deps) deps test ;;
+build) deps; build release ;;
+demo)
+    deps; build release
+    export EPICS_CAS_SERVER_PORT=${EPICS_CAS_SERVER_PORT:-5064}
+    echo "== demo soft IOC (Ctrl-C to stop); from another shell, with pyepics:"
+    echo "   /usr/bin/python3 -c \"import epics; print(epics.caget('DEMO:temperature'))\""
+    exec build/release/beamctl softioc -m "P=DEMO:" examples/softioc/demo.db ;;
+unit) deps test; build release; unit ;;
+system) deps test; build release; shift; system "$@" ;;
+fuzz) deps test; fuzz ;;
+test)
+    deps test
+    build release
+    unit
+    fuzz
+    system ;;
+bench) deps test; build release; shift; bash bench/run.sh "$@" ;;
+*) echo "usage: bash build.sh {demo|test|deps|build|unit|system|fuzz|bench}"; exit 2 ;;
+esac
