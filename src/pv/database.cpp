@@ -257,8 +257,14 @@ bool Database::resolve(std::string_view channel, Address& out, std::string* why)
         out.count = fd->size;
         return true;
     }
-    out.native = native_prim(fd->dbf);
-    out.count = (fd->flags & kArray) ? r->elements(*fd).capacity : 1;
+    if (fd->flags & kArray) {
+        Elements e = r->elements(*fd);
+        out.native = native_prim(e.type);
+        out.count = e.capacity;
+    } else {
+        out.native = native_prim(fd->dbf);
+        out.count = 1;
+    }
     return true;
 }
 
