@@ -104,15 +104,23 @@ int main(int argc, char** argv) {
     DbOptions soft;
     std::string acf;
     auto* softioc = app.add_subcommand("softioc", "Serve EPICS database files over Channel Access");
-    softioc->add_option("-m,--macros", soft.macros, "Macro definitions, e.g. \"P=DEMO:,R=x\"");
-    softioc->add_option("-I,--include", soft.include_path, "Search path for include \"file\"");
+    softioc->add_option("-m,--macros", soft.macros, "Macro definitions, e.g. \"P=DEMO:,R=x\"")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    softioc->add_option("-I,--include", soft.include_path, "Search path for include \"file\"")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
     softioc->add_option("--acf", acf, "EPICS access-security file (reloaded on SIGHUP)");
     softioc->add_option("files", soft.files, "Database files (.db)")->required();
 
     DbOptions dbo;
     auto* dbcmd = app.add_subcommand("db", "Print the loaded database as .db text");
-    dbcmd->add_option("-m,--macros", dbo.macros, "Macro definitions, e.g. \"P=DEMO:,R=x\"");
-    dbcmd->add_option("-I,--include", dbo.include_path, "Search path for include \"file\"");
+    dbcmd->add_option("-m,--macros", dbo.macros, "Macro definitions, e.g. \"P=DEMO:,R=x\"")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    dbcmd->add_option("-I,--include", dbo.include_path, "Search path for include \"file\"")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
     dbcmd->add_option("files", dbo.files, "Database files (.db)")->required();
 
     CLI11_PARSE(app, argc, argv);

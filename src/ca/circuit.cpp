@@ -359,7 +359,8 @@ void Circuit::on_write(const Header& h, const uint8_t* payload, bool notify) {
     }
     if (t > 6) return reply(kEcaBadType, "bad DBR type for a put");
     std::size_t esz = pv::prim_size(pv::Prim(t));
-    if (h.count == 0 || std::size_t(h.count) * esz > h.payload_size)
+    bool short_string = t == 0 && h.count == 1 && h.payload_size > 0; // strlen+1, padded
+    if (h.count == 0 || (!short_string && std::size_t(h.count) * esz > h.payload_size))
         return reply(kEcaBadCount, "put count does not match the payload");
     std::vector<char> host;
     if (!decode_put(t, payload, h.payload_size, h.count, host))
@@ -438,10 +439,12 @@ void Circuit::on_event_add(const Header& h, const uint8_t* payload) {
 }
 
 void Circuit::on_event_cancel(const Header& h) {
+    Channel* ch = channel(h.p1, h, current_raw_);
+    if (!ch) return;
     auto it = monitors_.find(h.p2);
-    if (it == monitors_.end() || it->second->chan->sid != h.p1) {
+    if (it == monitors_.end() || it->second->chan != ch) {
         ctx_.stats.bad_ids++;
-        send_error(h, current_raw_, 0xFFFFFFFF, kEcaBadMonId, "Bad Monitor ID");
+        send_error(h, current_raw_, ch->cid, kEcaBadMonId, "Bad Monitor ID");
         return;
     }
     Monitor* m = it->second.get();

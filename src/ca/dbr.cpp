@@ -166,9 +166,16 @@ bool decode_put(uint16_t t, const uint8_t* payload, std::size_t len, uint32_t co
                 std::vector<char>& host) {
     const DbrInfo& d = kTable[t];
     std::size_t esz = pv::prim_size(d.prim);
-    if (len < std::size_t(count) * esz) return false;
     host.resize(std::size_t(count) * esz);
     char* h = host.data();
+    if (d.prim == Prim::String && count == 1 && len > 0 && len < esz) {
+        // libca sends one DBR_STRING as strlen+1 bytes padded to 8, not 40.
+        std::memset(h, 0, esz);
+        std::memcpy(h, payload, len);
+        h[esz - 1] = 0;
+        return true;
+    }
+    if (len < std::size_t(count) * esz) return false;
     switch (d.prim) {
     case Prim::String:
         std::memcpy(h, payload, host.size());

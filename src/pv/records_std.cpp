@@ -168,7 +168,7 @@ struct AiRecord : AnalogBase<AiRecord> {
     ProcessResult process() override {
         pact = 1;
         stamp_time();
-        if (std::isnan(val)) udf = 1;
+        udf = std::isnan(val); // aiRecord: soft channel with a constant input defines VAL
         analog_alarms();
         if (unsigned m = analog_monitor_mask()) post(val_fd, m);
         pact = 0;

@@ -315,7 +315,7 @@ TEST_F(Fixture, PeriodicScanProcesses) {
     load(R"(record(ai, "a") { field(SCAN, ".1 second") })");
     EXPECT_EQ(gets("a.SEVR"), "INVALID");
     db.scan_periodic(100.0);
-    EXPECT_EQ(gets("a.STAT"), "UDF"); // processed, still undefined
+    EXPECT_EQ(gets("a.SEVR"), "NO_ALARM"); // processed: a soft ai defines its VAL (aiRecord)
     Record* r = db.find("a");
     EXPECT_NE(r->time.sec, 0u);
 }

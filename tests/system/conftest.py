@@ -1,0 +1,436 @@
+"""System-test infrastructure: start real `beamctl softioc` servers on isolated loopback ports
+and talk to them with pyepics (libca), raw sockets, or client subprocesses.
+
+Run with Debian's interpreter (pyepics only imports there):
+    /usr/bin/python3 -m pytest tests/system
+
+libca reads EPICS_CA_* when its context is created, so the client environment is fixed here,
+before anything imports `epics`.
+"""
+
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+HERE = Path(__file__).resolve().parent
+REPO_ROOT = HERE.parents[1]
+BEAMCTL = Path(os.environ.get("BEAMCTL_BIN", str(REPO_ROOT / "build" / "release" / "beamctl")))
+PYTHON = "/usr/bin/python3"
+READY_TIMEOUT = 10.0  # [s]
+POOL_SIZE = 8
+
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+
+# ---------------------------------------------------------------------------------------------
+# Port pool (chosen once per session, before libca starts)
+# ---------------------------------------------------------------------------------------------
+def _port_is_free(port):
+    """True if `port` can be bound on 127.0.0.1 for both TCP and UDP right now."""
+    tcp = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        tcp.bind(("127.0.0.1", port))
+        udp.bind(("127.0.0.1", port))
+        return True
+    except OSError:
+        return False
+    finally:
+        tcp.close()
+        udp.close()
+
+
+def _pick_ports(n, rng):
+    """n distinct free ports below the usual ephemeral range, so client sockets never take them."""
+    ports = []
+    while len(ports) < n:
+        p = rng.randrange(20000, 32000)
+        if p in ports or p + 1 in ports or p - 1 in ports:
+            continue
+        if _port_is_free(p):
+            ports.append(p)
+    return ports
+
+
+_rng = random.Random()
+SERVER_PORTS = _pick_ports(POOL_SIZE, _rng)
+# One extra port nobody listens on: beacon destination and client repeater port.
+REPEATER_PORT = _pick_ports(1, random.Random(_rng.random()))[0]
+while REPEATER_PORT in SERVER_PORTS:
+    REPEATER_PORT = _pick_ports(1, _rng)[0]
+
+CLIENT_ENV = {
+    "EPICS_CA_ADDR_LIST": " ".join(f"127.0.0.1:{p}" for p in SERVER_PORTS),
+    "EPICS_CA_AUTO_ADDR_LIST": "NO",
+    "EPICS_CA_MAX_ARRAY_BYTES": "20000000",
+    "EPICS_CA_REPEATER_PORT": str(REPEATER_PORT),
+    "EPICS_CA_SERVER_PORT": str(SERVER_PORTS[0]),
+}
+os.environ.update(CLIENT_ENV)
+
+import epics  # noqa: E402  (must come after the environment is set)
+import epics.ca  # noqa: E402
+import epics.pv  # noqa: E402
+
+_free_ports = list(SERVER_PORTS)
+_free_lock = threading.Lock()
+
+
+def acquire_port():
+    with _free_lock:
+        if not _free_ports:
+            raise RuntimeError("port pool exhausted: a test started more than %d servers" % POOL_SIZE)
+        return _free_ports.pop(0)
+
+
+def release_port(port):
+    with _free_lock:
+        if port not in _free_ports:
+            _free_ports.append(port)
+
+
+# ---------------------------------------------------------------------------------------------
+# Unique PV prefixes
+# ---------------------------------------------------------------------------------------------
+_prefix_counter = [0]
+_session_tag = "%04x" % random.randrange(0x10000)
+
+
+def new_prefix():
+    """A PV prefix no other test (or earlier run against a stale server) uses."""
+    _prefix_counter[0] += 1
+    return "BCT%s%03d:" % (_session_tag, _prefix_counter[0])
+
+
+def forget_pvs(prefix):
+    """Drop every pyepics PV/channel whose name starts with prefix, so libca stops searching."""
+    for key, pv in list(epics.pv._PVcache_.items()):
+        if key[0].startswith(prefix):
+            try:
+                pv.disconnect()
+            except Exception:
+                pass
+            epics.pv._PVcache_.pop(key, None)
+    ctx = epics.ca.current_context()
+    cache = epics.ca._cache.get(ctx, {})
+    for name in [n for n in list(cache) if n.startswith(prefix)]:
+        entry = cache.get(name)
+        chid = getattr(entry, "chid", None)
+        if chid is not None:
+            try:
+                epics.ca.clear_channel(chid)
+            except Exception:
+                pass
+        cache.pop(name, None)
+    try:
+        epics.ca.flush_io()
+        epics.ca.poll()
+    except Exception:
+        pass
+
+
+# ---------------------------------------------------------------------------------------------
+# Server process
+# ---------------------------------------------------------------------------------------------
+def require_binary():
+    if not BEAMCTL.is_file() or not os.access(BEAMCTL, os.X_OK):
+        pytest.fail(
+            f"beamctl binary not found at {BEAMCTL} (set BEAMCTL_BIN or build the release tree first)",
+            pytrace=False,
+        )
+
+
+class IocServer:
+    """One `beamctl softioc` process on a pool port. Always stop()/kill() it (fixtures do)."""
+
+    def __init__(self, workdir, db_files, port, macros=None, acf=None, extra_env=None,
+                 intf="127.0.0.1", beacon_addr=None, netns=None, name="ioc"):
+        self.workdir = Path(workdir)
+        self.db_files = [str(f) for f in db_files]
+        self.port = port
+        self.macros = macros
+        self.acf = str(acf) if acf else None
+        self.extra_env = dict(extra_env or {})
+        self.intf = intf
+        self.beacon_addr = beacon_addr or f"127.0.0.1:{REPEATER_PORT}"
+        self.netns = netns
+        self.name = name
+        self.proc = None
+        self.ready_line = None
+        self.stdout_lines = []
+        self.stderr_path = None
+        self._ready = threading.Event()
+        self._runs = 0
+
+    def argv(self):
+        argv = [str(BEAMCTL), "softioc"]
+        if self.macros:
+            argv += ["-m", self.macros]
+        if self.acf:
+            argv += ["--acf", self.acf]
+        argv += self.db_files
+        if self.netns:
+            argv = ["ip", "netns", "exec", self.netns] + argv
+        return argv
+
+    def env(self):
+        env = dict(os.environ)
+        env.update({
+            "EPICS_CAS_SERVER_PORT": str(self.port),
+            "EPICS_CAS_INTF_ADDR_LIST": self.intf or "",
+            "EPICS_CAS_BEACON_ADDR_LIST": self.beacon_addr,
+            "EPICS_CAS_AUTO_BEACON_ADDR_LIST": "NO",
+            "EPICS_CAS_BEACON_PERIOD": "2.0",
+        })
+        env.update(self.extra_env)
+        # a value of None in extra_env (or intf=None) means "leave the variable unset"
+        for k in [k for k, v in env.items() if v is None or (k == "EPICS_CAS_INTF_ADDR_LIST" and not v)]:
+            del env[k]
+        return env
+
+    def start(self, timeout=READY_TIMEOUT):
+        require_binary()
+        self._runs += 1
+        self._ready.clear()
+        self.ready_line = None
+        self.stdout_lines = []
+        self.stderr_path = self.workdir / f"{self.name}.{self._runs}.stderr"
+        errf = open(self.stderr_path, "wb")
+        self.proc = subprocess.Popen(
+            self.argv(), stdout=subprocess.PIPE, stderr=errf, stdin=subprocess.DEVNULL,
+            env=self.env(), cwd=str(self.workdir))
+        errf.close()
+        threading.Thread(target=self._reader, args=(self.proc,), daemon=True).start()
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self._ready.wait(0.05):
+                return self
+            if self.proc.poll() is not None:
+                time.sleep(0.1)
+                break
+        rc = self.proc.poll()
+        self.kill()
+        pytest.fail(
+            f"{self.name}: no 'ready:' line within {timeout:.0f} s (exit code {rc})\n"
+            f"argv: {self.argv()}\nstdout: {self.stdout_lines!r}\nstderr: {self.stderr()[-3000:]}",
+            pytrace=False)
+
+    def _reader(self, proc):
+        for raw in proc.stdout:
+            line = raw.decode("utf-8", "replace").rstrip("\n")
+            self.stdout_lines.append(line)
+            if line.startswith("ready:") and not self._ready.is_set():
+                self.ready_line = line
+                self._ready.set()
+
+    def stderr(self):
+        try:
+            return self.stderr_path.read_text(errors="replace")
+        except Exception:
+            return ""
+
+    def alive(self):
+        return self.proc is not None and self.proc.poll() is None
+
+    def signal(self, sig):
+        self.proc.send_signal(sig)
+
+    def stop(self, timeout=10.0):
+        """SIGTERM and wait; returns the exit code (kills and returns None on timeout)."""
+        if self.proc is None:
+            return None
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.kill()
+                return None
+        return self.proc.returncode
+
+    def kill(self):
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                pass
+
+    def fd_count(self):
+        return len(os.listdir(f"/proc/{self.proc.pid}/fd"))
+
+    def rss_kb(self):
+        with open(f"/proc/{self.proc.pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1])
+        return 0
+
+
+class IocFactory:
+    def __init__(self, tmp_path, prefix):
+        self.tmp_path = Path(tmp_path)
+        self.prefix = prefix
+        self.servers = []
+        self._n = 0
+
+    def write(self, name, text):
+        path = self.tmp_path / name
+        path.write_text(text)
+        return path
+
+    def start(self, db_text=None, db_files=(), macros=None, acf_text=None, acf=None,
+              extra_env=None, port=None, start=True):
+        """Write db_text (with $(P) = this test's prefix unless macros say otherwise) and start."""
+        self._n += 1
+        files = list(db_files)
+        if db_text is not None:
+            files.insert(0, self.write(f"s{self._n}.db", db_text))
+        if macros is None:
+            macros = f"P={self.prefix}"
+        if acf_text is not None:
+            acf = self.write(f"s{self._n}.acf", acf_text)
+        own_port = port is None
+        port = port if port is not None else acquire_port()
+        srv = IocServer(self.tmp_path, files, port, macros=macros, acf=acf,
+                        extra_env=extra_env, name=f"ioc{self._n}")
+        srv.own_port = own_port
+        self.servers.append(srv)
+        if start:
+            srv.start()
+        return srv
+
+    def cleanup(self):
+        forget_pvs(self.prefix)
+        for srv in self.servers:
+            srv.kill()
+            if getattr(srv, "own_port", False):
+                release_port(srv.port)
+
+
+@pytest.fixture
+def prefix():
+    return new_prefix()
+
+
+@pytest.fixture
+def ioc(tmp_path, prefix):
+    """Factory: ioc.start(db_text) -> IocServer. Every server is killed at teardown."""
+    fac = IocFactory(tmp_path, prefix)
+    try:
+        yield fac
+    finally:
+        fac.cleanup()
+
+
+# ---------------------------------------------------------------------------------------------
+# Client helpers
+# ---------------------------------------------------------------------------------------------
+def wait_for(predicate, timeout=10.0, interval=0.01):
+    """Poll predicate (pumping libca) until true or timeout; returns the last result."""
+    deadline = time.monotonic() + timeout
+    while True:
+        res = predicate()
+        if res or time.monotonic() > deadline:
+            return res
+        epics.ca.poll(evt=interval)
+
+
+def connect(name, timeout=5.0):
+    """A connected chid (fails the test if the channel does not connect)."""
+    chid = epics.ca.create_channel(name, connect=False, auto_cb=False)
+    ok = epics.ca.connect_channel(chid, timeout=timeout)
+    assert ok, f"channel {name} did not connect within {timeout} s"
+    return chid
+
+
+def not_connecting(name, timeout=2.0):
+    """True if the channel stays unconnected for `timeout` seconds."""
+    chid = epics.ca.create_channel(name, connect=False, auto_cb=False)
+    ok = epics.ca.connect_channel(chid, timeout=timeout)
+    return not ok
+
+
+def client_env(port):
+    """Environment for a client subprocess that sees only the server on `port`."""
+    env = dict(os.environ)
+    env.update(CLIENT_ENV)
+    env["EPICS_CA_ADDR_LIST"] = f"127.0.0.1:{port}"
+    return env
+
+
+def run_client(code, port, timeout=60, args=()):
+    """Run python code in a separate /usr/bin/python3 (own CA context); returns CompletedProcess."""
+    return subprocess.run([PYTHON, "-c", code, *args], env=client_env(port), capture_output=True,
+                          text=True, timeout=timeout)
+
+
+class Collector:
+    """Thread-safe sink for monitor callbacks."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.events = []
+
+    def __call__(self, **kw):
+        with self.lock:
+            self.events.append(kw)
+
+    def values(self):
+        with self.lock:
+            return [e["value"] for e in self.events]
+
+    def count(self):
+        with self.lock:
+            return len(self.events)
+
+    def wait_count(self, n, timeout=10.0):
+        return wait_for(lambda: self.count() >= n, timeout)
+
+    def wait_value(self, pred, timeout=10.0):
+        def check():
+            with self.lock:
+                return any(pred(e["value"]) for e in self.events)
+        return wait_for(check, timeout)
+
+
+def subscribe(chid, mask=None, use_time=False, use_ctrl=False, ftype=None, count=0):
+    """create_subscription with a Collector; returns (collector, handle). Keep the handle."""
+    col = Collector()
+    handle = epics.ca.create_subscription(chid, use_time=use_time, use_ctrl=use_ctrl, ftype=ftype,
+                                          mask=mask, callback=col, count=count)
+    return col, handle
+
+
+class ModuleServer:
+    """One server shared by the tests of a module (each test uses its own records)."""
+
+    def __init__(self, tmp_path_factory, db_text, name="mod", acf_text=None, extra_env=None):
+        self.prefix = new_prefix()
+        self.fac = IocFactory(tmp_path_factory.mktemp(name), self.prefix)
+        self.server = self.fac.start(db_text, acf_text=acf_text, extra_env=extra_env)
+        self.port = self.server.port
+
+    def pv(self, suffix):
+        return self.prefix + suffix
+
+    def close(self):
+        self.fac.cleanup()
+
+
+def module_server(tmp_path_factory, db_text, **kw):
+    """Generator body for module-scoped fixtures: `yield from module_server(...)`."""
+    ms = ModuleServer(tmp_path_factory, db_text, **kw)
+    try:
+        yield ms
+    finally:
+        ms.close()
