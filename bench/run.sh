@@ -33,8 +33,27 @@ run_one() { # name, command...
     kill "$pid"; wait "$pid" 2>/dev/null || true
 }
 
+# Resident memory with one PV (the program's own footprint), to derive memory per PV.
+DB1=$OUT/bench1.db
+echo 'record(ao, "bench:00000") { field(PREC, "3") }' > "$DB1"
+rss_one() { # name, command...
+    local name=$1; shift
+    local port; port=$(free_port)
+    EPICS_CAS_SERVER_PORT=$port EPICS_CA_SERVER_PORT=$port "$@" >"$OUT/$name-1.log" 2>&1 </dev/null &
+    local pid=$!
+    for _ in $(seq 100); do
+        grep -qE "ready:|iocRun: All initialization complete" "$OUT/$name-1.log" && break
+        sleep 0.1
+    done
+    sleep 0.5
+    echo "######## $name with 1 PV: $(awk '/VmRSS/{print $2 " kB"}' /proc/$pid/status)"
+    kill "$pid"; wait "$pid" 2>/dev/null || true
+}
+
 BIN=${BEAMCTL_BIN:-build/release/beamctl}
+rss_one beamctl "$BIN" softioc "$DB1" | tee "$OUT/beamctl-1.txt"
 run_one beamctl "$BIN" softioc "$DB" | tee "$OUT/beamctl.txt"
 if [ -n "${SOFTIOC:-}" ]; then
+    rss_one softIoc "$SOFTIOC" -S -d "$DB1" | tee "$OUT/softioc-1.txt"
     run_one softIoc "$SOFTIOC" -S -d "$DB" | tee "$OUT/softioc.txt"
 fi
