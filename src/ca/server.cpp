@@ -302,25 +302,31 @@ void Server::start() {
             flush(*it->second);
         }
     });
-    beacon_delay_s_ = 0.02;
+    beacons_ = BeaconSchedule(cfg_.beacon_period_s);
     send_beacons();
     LOG_INFO(lg, "CA server on " << listen_description() << " (UDP port " << cfg_.port << ", "
                                  << beacon_targets_.size() << " beacon address(es))");
 }
 
+BeaconSchedule::Next BeaconSchedule::next() {
+    Next n;
+    n.id = sent_ < 2 ? 0 : uint32_t(sent_ - 1); // wraps like RSRV's counter
+    if (sent_ > 0) interval_s_ = std::min(interval_s_ * 2, period_s_);
+    n.delay_s = std::min(interval_s_, period_s_);
+    ++sent_;
+    return n;
+}
+
 void Server::send_beacons() {
-    // Schedule: +0, 20 ms, then doubling up to the beacon period (ca-protocol.md §8).
+    BeaconSchedule::Next n = beacons_.next();
     uint8_t msg[16];
     for (const sockaddr_in& t : beacon_targets_) {
         in_addr src{};
         if (cfg_.interfaces.size() == 1) src = cfg_.interfaces[0];
-        encode_header(msg, kRsrvIsUp, 0, kMinorVersion, ctx_.tcp_port, beacon_id_, ntohl(src.s_addr));
+        encode_header(msg, kRsrvIsUp, 0, kMinorVersion, ctx_.tcp_port, n.id, ntohl(src.s_addr));
         sendto(beacon_fd_, msg, sizeof msg, 0, reinterpret_cast<const sockaddr*>(&t), sizeof t);
     }
-    if (beacons_sent_++ > 0) beacon_id_++;
-    double delay = beacon_delay_s_;
-    if (beacons_sent_ > 1) beacon_delay_s_ = std::min(beacon_delay_s_ * 2, cfg_.beacon_period_s);
-    beacon_timer_ = loop_.call_after(delay, [this] { send_beacons(); });
+    beacon_timer_ = loop_.call_after(n.delay_s, [this] { send_beacons(); });
 }
 
 void Server::set_access_security(AccessSecurity acf) {

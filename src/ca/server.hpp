@@ -30,6 +30,24 @@ struct ServerConfig {
     static ServerConfig from_env();
 };
 
+// Beacon timing (ca-protocol.md §8): beacons at +0, 20, 60, 140, 300 ms, ... (the interval starts
+// at 20 ms and doubles up to the period) with ids 0, 0, 1, 2, 3, ... as RSRV sends them.
+class BeaconSchedule {
+public:
+    explicit BeaconSchedule(double period_s) : period_s_(period_s) {}
+    // The id of the beacon to send now and the delay to the next one [s].
+    struct Next {
+        uint32_t id;
+        double delay_s;
+    };
+    Next next();
+
+private:
+    double period_s_;
+    uint64_t sent_ = 0;
+    double interval_s_ = 0.02;
+};
+
 class Server {
 public:
     Server(EventLoop& loop, pv::Database& db, ServerConfig cfg);
@@ -64,9 +82,7 @@ private:
     std::vector<int> tcp_fds_, udp_fds_;
     int beacon_fd_ = -1;
     std::vector<sockaddr_in> beacon_targets_;
-    uint32_t beacon_id_ = 0;
-    int beacons_sent_ = 0;
-    double beacon_delay_s_ = 0.02;
+    BeaconSchedule beacons_{15.0};
     EventLoop::TimerId beacon_timer_ = 0;
     std::unordered_map<int, std::unique_ptr<Conn>> conns_;
     std::vector<int> dirty_;
