@@ -1,6 +1,7 @@
 // beamctl: the command-line program. Subcommands:
 //   softioc  serve EPICS database files over Channel Access (like EPICS softIoc)
 //   db       print the loaded database as .db text
+//   sim      run a simulated EtherCAT segment behind a UDP socket
 #include "ca/access_security.hpp"
 #include "ca/server.hpp"
 #include "core/error.hpp"
@@ -9,6 +10,8 @@
 #include "core/macros.hpp"
 #include "pv/database.hpp"
 #include "pv/db_file.hpp"
+#include "ethercat/catalog.hpp"
+#include "ethercat/sim/sim_config.hpp"
 
 #include <CLI/CLI.hpp>
 
@@ -94,6 +97,27 @@ int run_softioc(const DbOptions& o, const std::string& acf_path) {
     return 0;
 }
 
+volatile bool g_sim_stop = false;
+
+int run_sim(const std::string& file, const std::string& bind, int port) {
+    const ethercat::Catalog& cat = ethercat::Catalog::builtin();
+    ethercat::sim::SimConfig cfg = ethercat::sim::SimConfig::load(file, cat);
+    if (cfg.slaves.empty()) throw Error(SB() << file << ": slaves: is required for beamctl sim");
+    ethercat::sim::Segment seg;
+    cfg.build(seg, cat);
+    ethercat::sim::UdpServer server(seg, bind, uint16_t(port));
+    struct sigaction sa {};
+    sa.sa_handler = [](int) { g_sim_stop = true; };
+    sigaction(SIGINT, &sa, nullptr);
+    sigaction(SIGTERM, &sa, nullptr);
+    std::printf("ready: simulated segment of %zu slaves on udp %s:%u\n", seg.size(), bind.c_str(),
+                unsigned(server.port()));
+    std::fflush(stdout);
+    server.run(g_sim_stop);
+    LOG_INFO(lg, "sim: served " << server.frames << " frames");
+    return 0;
+}
+
 } // namespace
 
 int main(int argc, char** argv) {
@@ -123,9 +147,18 @@ int main(int argc, char** argv) {
         ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
     dbcmd->add_option("files", dbo.files, "Database files (.db)")->required();
 
+    std::string sim_file, sim_bind = "127.0.0.1";
+    int sim_port = 0x88A4;
+    auto* simcmd = app.add_subcommand("sim", "Run a simulated EtherCAT segment (SIM.yaml) behind UDP");
+    simcmd->add_option("file", sim_file, "Simulator configuration (slaves:, wiring:)")->required();
+    simcmd->add_option("--udp", sim_port, "UDP port for EtherCAT frames (0: any free port)")
+        ->check(CLI::Range(0, 65535));
+    simcmd->add_option("--bind", sim_bind, "Address to bind (default 127.0.0.1)");
+
     CLI11_PARSE(app, argc, argv);
     try {
         if (*softioc) return run_softioc(soft, acf);
+        if (*simcmd) return run_sim(sim_file, sim_bind, sim_port);
         if (*dbcmd) {
             pv::Database db;
             load_databases(db, dbo);

@@ -1,0 +1,65 @@
+// How the master reaches a segment: one interface, several transports (ethercat.md §5).
+//   InProcessLink: straight into a simulated segment in this process (the default, and tests).
+//   (UDP to `beamctl sim` and AF_PACKET raw sockets follow the same interface.)
+// send/receive are called from the master's thread only; they never allocate.
+#pragma once
+
+#include "ethercat/frame.hpp"
+
+#include <array>
+#include <string>
+#include <cstddef>
+#include <cstdint>
+
+namespace beamctl::ethercat {
+
+namespace sim {
+class Segment;
+}
+
+class Link {
+public:
+    virtual ~Link() = default;
+    // Sends one EtherCAT frame (header + datagrams). False if the transport refused it.
+    virtual bool send(const uint8_t* frame, std::size_t len) noexcept = 0;
+    // Receives the next returning frame into buf (capacity kMaxFrame). Returns its length, or
+    // 0 when nothing arrived within timeout_us.
+    virtual std::size_t receive(uint8_t* buf, std::size_t cap, int timeout_us) noexcept = 0;
+    virtual const char* kind() const noexcept = 0;
+};
+
+// Frames go through a simulated segment synchronously; a lost frame never comes back.
+class InProcessLink : public Link {
+public:
+    explicit InProcessLink(sim::Segment& seg) : seg_(seg) {}
+    bool send(const uint8_t* frame, std::size_t len) noexcept override;
+    std::size_t receive(uint8_t* buf, std::size_t cap, int timeout_us) noexcept override;
+    const char* kind() const noexcept override { return "inproc"; }
+
+private:
+    sim::Segment& seg_;
+    static constexpr int kSlots = 8;
+    std::array<std::array<uint8_t, kMaxFrame>, kSlots> ring_{};
+    std::array<std::size_t, kSlots> len_{};
+    int head_ = 0, tail_ = 0; // frames in flight: [tail, head)
+};
+
+} // namespace beamctl::ethercat
+
+namespace beamctl::ethercat {
+
+// EtherCAT frames as UDP payloads (ESC-I §2, port 0x88A4) to a `beamctl sim --udp` process.
+class UdpLink : public Link {
+public:
+    // Throws Error if the host is not an IPv4 address or the socket can't be made.
+    UdpLink(const std::string& host, uint16_t port);
+    ~UdpLink() override;
+    bool send(const uint8_t* frame, std::size_t len) noexcept override;
+    std::size_t receive(uint8_t* buf, std::size_t cap, int timeout_us) noexcept override;
+    const char* kind() const noexcept override { return "udp"; }
+
+private:
+    int fd_ = -1;
+};
+
+} // namespace beamctl::ethercat

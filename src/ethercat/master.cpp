@@ -1,0 +1,473 @@
+#include "ethercat/master.hpp"
+
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "ethercat/catalog.hpp"
+
+#include <algorithm>
+#include <cstring>
+#include <iomanip>
+#include <map>
+#include <sstream>
+
+namespace beamctl::ethercat {
+namespace {
+log::Logger lg("ethercat.master");
+
+constexpr uint16_t kAlControl = 0x0120, kAlStatus = 0x0130, kSiiControl = 0x0502,
+                   kSiiAddress = 0x0504, kSiiData = 0x0508, kFmmu = 0x0600, kSm = 0x0800;
+constexpr uint16_t kStationBase = 0x1001;
+
+std::string hex(uint32_t v, int w = 8) {
+    std::ostringstream os;
+    os << "0x" << std::hex << std::setw(w) << std::setfill('0') << v;
+    return os.str();
+}
+
+const char* state_name(uint8_t s) {
+    switch (s & 0x0F) {
+    case 1: return "INIT";
+    case 2: return "PREOP";
+    case 3: return "BOOT";
+    case 4: return "SAFEOP";
+    case 8: return "OP";
+    default: return "UNKNOWN";
+    }
+}
+
+std::string al_code_text(uint16_t c) {
+    switch (c) {
+    case 0x0011: return "0x0011 invalid requested state change";
+    case 0x0012: return "0x0012 unknown requested state";
+    case 0x0016: return "0x0016 invalid mailbox configuration";
+    case 0x001B: return "0x001B sync manager watchdog";
+    case 0x001D: return "0x001D invalid output configuration";
+    case 0x001E: return "0x001E invalid input configuration";
+    case 0x0030: return "0x0030 invalid DC synchronization configuration";
+    default: return hex(c, 4);
+    }
+}
+
+} // namespace
+
+Master::Master(Link& link, int bus_id, std::vector<SlaveConfig> cfg, const Catalog& catalog)
+    : link_(link), bus_(bus_id), cfg_(std::move(cfg)), catalog_(catalog) {
+    std::sort(cfg_.begin(), cfg_.end(),
+              [](const SlaveConfig& a, const SlaveConfig& b) { return a.position < b.position; });
+    for (std::size_t i = 1; i < cfg_.size(); ++i)
+        if (cfg_[i].position == cfg_[i - 1].position)
+            throw Error(SB() << "ec" << bus_ << ": two slaves configured at position " << cfg_[i].position);
+    for (auto& c : cfg_) {
+        if (c.position < 0) throw Error(SB() << "ec" << bus_ << ": negative slave position " << c.position);
+        if (!catalog_.find(c.type))
+            throw Error(SB() << "ec" << bus_ << " position " << c.position << ": unknown device type '"
+                             << c.type << "' (not in the catalog)");
+    }
+}
+
+std::string Master::slave_name(const SlaveInfo& s) const {
+    return SB() << "ec" << bus_ << " slave " << s.position << " (" << s.type << ")";
+}
+
+int Master::transact(uint8_t cmd, uint32_t addr, void* data, uint16_t len, int retries) {
+    FrameBuilder f;
+    for (int attempt = 0; attempt <= retries; ++attempt) {
+        uint8_t idx = next_idx_;
+        next_idx_ = uint8_t(next_idx_ == 0xFF ? 0x80 : next_idx_ + 1);
+        f.reset();
+        int off = f.add(cmd, idx, addr, len, data);
+        if (off < 0) return -1;
+        if (!link_.send(f.data(), f.size())) continue;
+        for (int tries = 0; tries < 4; ++tries) {
+            std::size_t n = link_.receive(rx_.data(), rx_.size(), 2000);
+            if (n == 0) break;
+            int wkc = -1;
+            for_each_datagram(rx_.data(), n, [&](Datagram& d) {
+                if (d.idx() == idx && d.cmd() == cmd && d.len() == len) {
+                    std::memcpy(data, d.data, len);
+                    wkc = d.wkc();
+                }
+            });
+            if (wkc >= 0) return wkc;
+        }
+    }
+    return -1;
+}
+
+int Master::count_slaves() {
+    uint16_t v = 0;
+    return transact(kBrd, 0, kAlStatus, &v, 2);
+}
+
+void Master::read_sii(SlaveInfo& s) {
+    // Reads 4 words at a time (8-byte reads), following the category list to its end.
+    std::vector<uint16_t> words;
+    auto read4 = [&](uint32_t addr) {
+        uint8_t cmd[6] = {0, 1, 0, 0, 0, 0}; // control: read; address
+        put_le32(cmd + 2, addr);
+        if (transact(kFpwr, s.station, kSiiAddress, cmd + 2, 4) != 1 ||
+            transact(kFpwr, s.station, uint16_t(kSiiControl + 1), cmd + 1, 1) != 1)
+            throw Error(SB() << slave_name(s) << ": no answer while reading the SII EEPROM");
+        uint8_t st[2] = {};
+        for (int i = 0; i < 100; ++i) { // wait while busy
+            if (transact(kFprd, s.station, kSiiControl, st, 2) != 1)
+                throw Error(SB() << slave_name(s) << ": no answer while reading the SII EEPROM");
+            if (!(st[1] & 0x80)) break;
+        }
+        if (st[1] & 0x78)
+            throw Error(SB() << slave_name(s) << ": SII read error at word " << hex(addr, 4)
+                             << " (status " << hex(le16(st), 4) << ")");
+        uint8_t d[8] = {};
+        if (transact(kFprd, s.station, kSiiData, d, 8) != 1)
+            throw Error(SB() << slave_name(s) << ": no answer while reading the SII EEPROM");
+        for (int w = 0; w < 4; ++w) {
+            if (addr + w >= words.size()) words.resize(addr + w + 1, 0xFFFF);
+            words[addr + w] = le16(d + 2 * w);
+        }
+    };
+    for (uint32_t a = 0; a < 0x40; a += 4) read4(a);
+    uint32_t at = 0x40;
+    for (int guard = 0; guard < 256; ++guard) { // categories: {type, length in words, data}
+        if (at + 1 >= words.size()) read4(at);
+        uint16_t type = words[at];
+        if (type == 0xFFFF) break;
+        uint32_t len = words[at + 1];
+        uint32_t end = at + 2 + len;
+        if (end > 0x8000) throw Error(SB() << slave_name(s) << ": SII category at word " << hex(at, 4) << " runs past the EEPROM");
+        for (uint32_t a = uint32_t(words.size()) & ~3u; a < end + 2; a += 4) read4(a);
+        at = end;
+    }
+    s.sii = parse_sii(words);
+}
+
+bool Master::read_al_state(std::size_t i, uint8_t& state, uint16_t& code) {
+    uint8_t st[6] = {};
+    if (transact(kFprd, slaves_.at(i).station, kAlStatus, st, 6) != 1) return false;
+    state = st[0];
+    code = le16(st + 4);
+    slaves_[i].al_state = st[0];
+    slaves_[i].al_status_code = code;
+    return true;
+}
+
+void Master::request_state(uint8_t state, const char* name) {
+    for (auto& s : slaves_) {
+        uint16_t v = state;
+        if (transact(kFpwr, s.station, kAlControl, &v, 2) != 1)
+            throw Error(SB() << slave_name(s) << ": no answer to the " << name << " request");
+    }
+    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+        uint8_t st = 0;
+        uint16_t code = 0;
+        bool reached = false;
+        for (int poll = 0; poll < 50; ++poll) {
+            if (!read_al_state(i, st, code))
+                throw Error(SB() << slave_name(slaves_[i]) << ": no answer while waiting for " << name);
+            if (st & 0x10) break;
+            if ((st & 0x0F) == state) {
+                reached = true;
+                break;
+            }
+        }
+        if (!reached) {
+            auto& s = slaves_[i];
+            if (st & 0x10) {
+                uint16_t ack = uint16_t((st & 0x0F) | 0x10); // acknowledge, stay where it is
+                transact(kFpwr, s.station, kAlControl, &ack, 2);
+                throw Error(SB() << slave_name(s) << ": refused " << name << ": AL status code "
+                                 << al_code_text(code) << " (state " << state_name(st) << ")");
+            }
+            throw Error(SB() << slave_name(s) << ": did not reach " << name << " (state "
+                             << state_name(st) << ")");
+        }
+    }
+}
+
+void Master::bring_up() {
+    slaves_.clear();
+    signals_.clear();
+    // 1. Everything to INIT, FMMUs and SMs cleared (broadcast).
+    uint16_t init = 0x0011;
+    transact(kBwr, 0, kAlControl, &init, 2);
+    std::vector<uint8_t> zeros(256, 0);
+    transact(kBwr, 0, kFmmu, zeros.data(), 256);
+    transact(kBwr, 0, kSm, zeros.data(), 128);
+    // 2. Count.
+    int found = count_slaves();
+    if (found < 0) throw Error(SB() << "ec" << bus_ << ": the " << link_.kind() << " link does not answer");
+    int wanted = cfg_.empty() ? 0 : cfg_.back().position + 1;
+    if (found < wanted)
+        throw Error(SB() << "ec" << bus_ << ": " << found << " slave(s) on the bus, but the configuration has a slave at position "
+                         << cfg_.back().position << " (needs at least " << wanted << ")");
+    LOG_INFO(lg, "ec" << bus_ << ": " << found << " slave(s) on the " << link_.kind() << " link");
+    // 3. Station addresses for every slave present.
+    for (int p = 0; p < found; ++p) {
+        uint16_t addr = uint16_t(kStationBase + p);
+        if (transact(kApwr, uint16_t(-p), 0x0010, &addr, 2) != 1)
+            throw Error(SB() << "ec" << bus_ << ": slave " << p << " did not take its station address");
+    }
+    // 4. SII and identity of the configured slaves.
+    for (auto& c : cfg_) {
+        SlaveInfo s;
+        s.position = c.position;
+        s.station = uint16_t(kStationBase + c.position);
+        s.type = c.type;
+        read_sii(s);
+        const DeviceDesc* want = catalog_.find(c.type);
+        if (s.sii.vendor != want->vendor || s.sii.product != want->product || s.sii.revision != want->revision) {
+            const DeviceDesc* got = catalog_.find(s.sii.vendor, s.sii.product, s.sii.revision);
+            throw Error(SB() << "ec" << bus_ << " position " << c.position << ": expected " << c.type
+                             << " (vendor " << hex(want->vendor) << ", product " << hex(want->product)
+                             << ", revision " << hex(want->revision) << "), found "
+                             << (got ? got->type : (s.sii.name.empty() ? std::string("an unknown device") : s.sii.name))
+                             << " (vendor " << hex(s.sii.vendor) << ", product " << hex(s.sii.product)
+                             << ", revision " << hex(s.sii.revision) << ")");
+        }
+        slaves_.push_back(std::move(s));
+    }
+    // 5. Mailbox SMs from SII, then PREOP.
+    for (auto& s : slaves_) {
+        for (auto& sm : s.sii.sms) {
+            if (sm.type != SmType::MailboxOut && sm.type != SmType::MailboxIn) continue;
+            uint8_t r[8] = {};
+            bool out = sm.type == SmType::MailboxOut;
+            put_le16(r, out ? s.sii.rx_mbx_offset : s.sii.tx_mbx_offset);
+            put_le16(r + 2, out ? s.sii.rx_mbx_size : s.sii.tx_mbx_size);
+            r[4] = sm.control;
+            r[6] = 1;
+            if (transact(kFpwr, s.station, uint16_t(kSm + 8 * sm.index), r, 8) != 1)
+                throw Error(SB() << slave_name(s) << ": no answer while configuring mailbox SM" << int(sm.index));
+        }
+    }
+    request_state(2, "PREOP");
+    // 6. Process data: layout, SMs and FMMUs, SAFEOP; valid outputs, then OP.
+    layout_process_image();
+    configure_sms_and_fmmus();
+    build_cyclic_frames();
+    request_state(4, "SAFEOP");
+    for (int i = 0; i < 3; ++i) {
+        send_process_data();
+        receive_process_data();
+    }
+    request_state(8, "OP");
+    send_process_data();
+    receive_process_data();
+    LOG_INFO(lg, "ec" << bus_ << ": " << slaves_.size() << " slave(s) in OP, image " << image_.size()
+                      << " bytes (" << outputs_bytes_ << " out), expected WKC " << expected_wkc_);
+}
+
+void Master::layout_process_image() {
+    // Outputs of every slave first, then inputs (SOEM's default layout), byte-aligned per slave.
+    uint32_t off = 0;
+    auto sm_bytes = [](const SiiInfo& sii, SmType type, std::vector<std::pair<uint8_t, uint32_t>>& out) {
+        for (auto& sm : sii.sms) {
+            if (sm.type != type) continue;
+            uint32_t bits = 0;
+            for (auto& [smi, pdo] : sii.pdo_assign) {
+                if (smi != sm.index) continue;
+                const auto& list = type == SmType::Outputs ? sii.rx_pdos : sii.tx_pdos;
+                for (auto& p : list)
+                    if (p.index == pdo) bits += p.bit_size();
+            }
+            out.emplace_back(sm.index, (bits + 7) / 8);
+        }
+    };
+    for (auto& s : slaves_) {
+        std::vector<std::pair<uint8_t, uint32_t>> v;
+        sm_bytes(s.sii, SmType::Outputs, v);
+        s.out_offset = off;
+        for (auto& [i, b] : v) off += b;
+        s.out_bytes = off - s.out_offset;
+    }
+    outputs_bytes_ = off;
+    for (auto& s : slaves_) {
+        std::vector<std::pair<uint8_t, uint32_t>> v;
+        sm_bytes(s.sii, SmType::Inputs, v);
+        s.in_offset = off;
+        for (auto& [i, b] : v) off += b;
+        s.in_bytes = off - s.in_offset;
+    }
+    image_.assign(off, 0);
+    // Signals: every named entry of the assigned PDOs, in PDO order.
+    for (auto& s : slaves_) {
+        for (int dir = 0; dir < 2; ++dir) {
+            bool out = dir == 0;
+            uint32_t bit = (out ? s.out_offset : s.in_offset) * 8;
+            for (auto& sm : s.sii.sms) {
+                if (sm.type != (out ? SmType::Outputs : SmType::Inputs)) continue;
+                for (auto& [smi, pdo] : s.sii.pdo_assign) {
+                    if (smi != sm.index) continue;
+                    for (auto& p : out ? s.sii.rx_pdos : s.sii.tx_pdos) {
+                        if (p.index != pdo) continue;
+                        for (auto& e : p.entries) {
+                            if (!e.name.empty() && e.index != 0)
+                                signals_.push_back(SignalInfo{SB() << "ec" << bus_ << ".s" << s.position << "." << e.name,
+                                                              s.position, bit, e.bits, out, e.datatype});
+                            bit += e.bits;
+                        }
+                    }
+                }
+                bit = (bit + 7) / 8 * 8; // each SM starts on a byte
+            }
+        }
+    }
+}
+
+void Master::configure_sms_and_fmmus() {
+    for (auto& s : slaves_) {
+        int fmmu = 0;
+        uint32_t out_off = s.out_offset, in_off = s.in_offset;
+        for (auto& sm : s.sii.sms) {
+            if (sm.type != SmType::Outputs && sm.type != SmType::Inputs) continue;
+            bool out = sm.type == SmType::Outputs;
+            uint32_t bits = 0;
+            for (auto& [smi, pdo] : s.sii.pdo_assign)
+                if (smi == sm.index)
+                    for (auto& p : out ? s.sii.rx_pdos : s.sii.tx_pdos)
+                        if (p.index == pdo) bits += p.bit_size();
+            uint32_t bytes = (bits + 7) / 8;
+            if (bytes == 0) continue;
+            if (sm.enable) { // a disabled ("virtual") SM only names registers for the FMMU
+                uint8_t r[8] = {};
+                put_le16(r, sm.start);
+                put_le16(r + 2, uint16_t(bytes));
+                r[4] = sm.control;
+                r[6] = 1;
+                if (transact(kFpwr, s.station, uint16_t(kSm + 8 * sm.index), r, 8) != 1)
+                    throw Error(SB() << slave_name(s) << ": no answer while configuring SM" << int(sm.index));
+            }
+            uint8_t f[16] = {};
+            uint32_t& log = out ? out_off : in_off;
+            put_le32(f, log);
+            put_le16(f + 4, uint16_t(bytes));
+            f[6] = 0;
+            f[7] = 7;
+            put_le16(f + 8, sm.start);
+            f[10] = 0;
+            f[11] = out ? 2 : 1;
+            f[12] = 1;
+            if (transact(kFpwr, s.station, uint16_t(kFmmu + 16 * fmmu), f, 16) != 1)
+                throw Error(SB() << slave_name(s) << ": no answer while configuring FMMU" << fmmu);
+            log += bytes;
+            ++fmmu;
+        }
+    }
+}
+
+void Master::build_cyclic_frames() {
+    // One LRW per chunk of the image; chunks packed into as few frames as fit.
+    cyclic_.clear();
+    expected_wkc_ = 0;
+    uint32_t off = 0, total = uint32_t(image_.size());
+    uint8_t idx = 0;
+    cyclic_.emplace_back();
+    while (off < total || (total == 0 && cyclic_.back().parts.empty() && false)) {
+        CyclicFrame* cf = &cyclic_.back();
+        std::size_t room = cf->frame.room();
+        if (room < 16) {
+            cyclic_.emplace_back();
+            cf = &cyclic_.back();
+            room = cf->frame.room();
+        }
+        uint32_t len = uint32_t(std::min<std::size_t>(room, total - off));
+        int at = cf->frame.add(kLrw, idx, off, uint16_t(len));
+        // Expected WKC of this datagram: +2 per slave whose outputs overlap, +1 per inputs.
+        uint16_t exp = 0;
+        for (auto& s : slaves_) {
+            if (s.out_bytes && s.out_offset < off + len && s.out_offset + s.out_bytes > off) exp += 2;
+            if (s.in_bytes && s.in_offset < off + len && s.in_offset + s.in_bytes > off) exp += 1;
+        }
+        cf->parts.push_back({uint32_t(at), off, len, exp});
+        cf->idx = idx;
+        expected_wkc_ = uint16_t(expected_wkc_ + exp);
+        off += len;
+    }
+    if (cyclic_.back().parts.empty()) cyclic_.pop_back();
+    for (std::size_t i = 0; i < cyclic_.size(); ++i) { // tag each frame by its index
+        cyclic_[i].idx = uint8_t(i);
+        for_each_datagram(cyclic_[i].frame.data(), cyclic_[i].frame.size(), [&](Datagram& d) {
+            d.hdr[1] = uint8_t(i);
+        });
+    }
+    (void)idx;
+}
+
+CycleStatus Master::send_process_data() noexcept {
+    CycleStatus st = CycleStatus::Ok;
+    for (auto& cf : cyclic_) {
+        uint8_t* f = cf.frame.data();
+        for (auto& p : cf.parts) {
+            // Outputs from the image; the input part of the datagram is sent as zeros.
+            uint32_t out_end = std::min(p.image_offset + p.len, outputs_bytes_);
+            uint32_t n_out = out_end > p.image_offset ? out_end - p.image_offset : 0;
+            std::memcpy(f + p.data_offset, image_.data() + p.image_offset, n_out);
+            std::memset(f + p.data_offset + n_out, 0, p.len - n_out);
+            put_le16(f + p.data_offset + p.len, 0); // WKC
+        }
+        if (!link_.send(f, cf.frame.size())) st = CycleStatus::LinkError;
+    }
+    return st;
+}
+
+CycleStatus Master::receive_process_data(int timeout_us) noexcept {
+    CycleStatus st = CycleStatus::Ok;
+    uint32_t wkc = 0;
+    std::size_t got = 0;
+    for (std::size_t k = 0; k < cyclic_.size(); ++k) {
+        std::size_t n = link_.receive(rx_.data(), rx_.size(), timeout_us);
+        if (n == 0) {
+            frames_lost_ += cyclic_.size() - got;
+            st = CycleStatus::FrameLost;
+            break;
+        }
+        bool ok = for_each_datagram(rx_.data(), n, [&](Datagram& d) {
+            if (d.cmd() != kLrw || d.idx() >= cyclic_.size()) return;
+            const CyclicFrame& cf = cyclic_[d.idx()];
+            for (auto& p : cf.parts) {
+                if (d.logical() != p.image_offset || d.len() != p.len) continue;
+                wkc += d.wkc();
+                // Inputs into the image (never overwrite outputs).
+                uint32_t from = std::max(p.image_offset, outputs_bytes_);
+                if (from < p.image_offset + p.len)
+                    std::memcpy(image_.data() + from, d.data + (from - p.image_offset),
+                                p.image_offset + p.len - from);
+            }
+        });
+        if (!ok) {
+            frames_lost_++;
+            st = CycleStatus::FrameLost;
+        }
+        ++got;
+    }
+    wkc_ = uint16_t(wkc);
+    if (st == CycleStatus::Ok && wkc_ != expected_wkc_) {
+        wkc_errors_++;
+        st = CycleStatus::WkcMismatch;
+    }
+    return st;
+}
+
+const SignalInfo* Master::find_signal(std::string_view name) const {
+    for (auto& s : signals_)
+        if (s.name == name) return &s;
+    return nullptr;
+}
+
+uint64_t Master::get(const SignalInfo& s) const {
+    uint64_t v = 0;
+    for (uint32_t i = 0; i < s.bits; ++i) {
+        uint32_t b = s.bit_offset + i;
+        if (image_[b >> 3] >> (b & 7) & 1) v |= uint64_t(1) << i;
+    }
+    return v;
+}
+
+void Master::set(const SignalInfo& s, uint64_t v) {
+    for (uint32_t i = 0; i < s.bits; ++i) {
+        uint32_t b = s.bit_offset + i;
+        if (v >> i & 1) image_[b >> 3] |= uint8_t(1u << (b & 7));
+        else image_[b >> 3] &= uint8_t(~(1u << (b & 7)));
+    }
+}
+
+} // namespace beamctl::ethercat

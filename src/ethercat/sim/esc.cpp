@@ -1,0 +1,312 @@
+#include "ethercat/sim/esc.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+namespace beamctl::ethercat::sim {
+namespace {
+
+bool writable(uint32_t a) {
+    if (a >= 0x1000) return true;
+    if (a < 0x0010) return false;                  // type, revision, build, features
+    if (a >= 0x0110 && a < 0x0120) return false;   // DL status
+    if (a >= 0x0130 && a < 0x0140) return false;   // AL status and code
+    if (a >= 0x0440 && a < 0x0444) return false;   // watchdog status
+    if (a >= 0x0800 && a < 0x0880 && (a & 7) == 5) return false; // SM status
+    if (a >= 0x0508 && a < 0x0510) return false;   // SII data (read by the master)
+    return true;
+}
+
+// Copies `bits` bits from src (starting at bit sb) to dst (starting at bit db).
+void copy_bits(const uint8_t* src, uint32_t sb, uint8_t* dst, uint32_t db, uint32_t bits) {
+    if ((sb & 7) == 0 && (db & 7) == 0 && (bits & 7) == 0) {
+        std::memcpy(dst + db / 8, src + sb / 8, bits / 8);
+        return;
+    }
+    for (uint32_t i = 0; i < bits; ++i) {
+        uint32_t s = sb + i, d = db + i;
+        bool v = src[s >> 3] >> (s & 7) & 1;
+        if (v) dst[d >> 3] |= uint8_t(1u << (d & 7));
+        else dst[d >> 3] &= uint8_t(~(1u << (d & 7)));
+    }
+}
+
+} // namespace
+
+Esc::Esc(const DeviceDesc& desc, std::vector<uint16_t> sii) : desc_(desc), sii_(std::move(sii)) {
+    mem_[reg::kType] = 0x11; // ET1100-like
+    mem_[reg::kFmmuCount] = 8;
+    mem_[reg::kSmCount] = 8;
+    mem_[reg::kRamSize] = 60;
+    put_le16(&mem_[reg::kFeatures], desc_.dc_assign_activate ? 0x000C : 0x0000);
+    if (sii_.size() > 4) put_le16(&mem_[reg::kAlias], sii_[4]);
+    put_le16(&mem_[reg::kDlStatus], 0x0230); // link and loop on port 0 (topology: a line)
+    mem_[reg::kAlStatus] = kInit;
+    put_le16(&mem_[reg::kWdDivider], 2498);
+    put_le16(&mem_[reg::kWdProcessData], 1000);
+    put_le16(&mem_[reg::kSiiControl], 0x0040); // 8-byte reads
+}
+
+uint8_t* Esc::sm_buffer(uint8_t sm) {
+    uint16_t start = le16(&mem_[reg::kSm + 8 * sm]);
+    if (!start)
+        for (auto& s : desc_.sms)
+            if (s.index == sm) start = s.start;
+    return &mem_[start];
+}
+
+uint16_t Esc::sm_length(uint8_t sm) const {
+    uint16_t len = le16(&mem_[reg::kSm + 8 * sm + 2]);
+    return len ? len : uint16_t(desc_.sm_bytes(sm));
+}
+
+void Esc::read_phys(uint16_t ado, uint8_t* data, uint16_t len) noexcept {
+    uint32_t end = uint32_t(ado) + len;
+    if (ado <= reg::kDcSystemTime + 7 && end > reg::kDcSystemTime) {
+        uint64_t offset = le64(&mem_[reg::kDcOffset]);
+        put_le64(&mem_[reg::kDcSystemTime], local_time_ns_ + offset);
+    }
+    for (uint32_t i = 0; i < len; ++i) data[i] = mem_[(ado + i) & 0xFFFF];
+}
+
+void Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
+    bool al = false, sii = false, latch = false;
+    for (uint32_t i = 0; i < len; ++i) {
+        uint32_t a = (ado + i) & 0xFFFF;
+        if (!writable(a)) continue;
+        mem_[a] = data[i];
+        if (a == reg::kAlControl) al = true;
+        if (a == reg::kSiiControl + 1) sii = true;
+        if (a >= reg::kDcRecvTime && a < reg::kDcRecvTime + 4) latch = true;
+    }
+    if (latch) { // a write to 0x0900 latches the receive time of every port (ideal: no delay)
+        uint64_t t = local_time_ns_;
+        for (int p = 0; p < 4; ++p) put_le32(&mem_[reg::kDcRecvTime + 4 * p], uint32_t(t));
+        put_le64(&mem_[reg::kDcRecvTimeEpu], t);
+    }
+    if (sii) sii_command();
+    if (al) al_control_written();
+}
+
+bool Esc::logical(Datagram& d, bool read, bool write, uint16_t& wkc) noexcept {
+    uint32_t da = d.logical();
+    uint32_t dlen = d.len();
+    bool did_read = false, did_write = false;
+    for (int n = 0; n < 8; ++n) {
+        const uint8_t* f = &mem_[reg::kFmmu + 16 * n];
+        if (!(f[12] & 1)) continue;
+        uint8_t type = f[11];
+        bool fr = type & 1, fw = type & 2;
+        if (!((fr && read) || (fw && write))) continue;
+        uint32_t ls = le32(f), flen = le16(f + 4);
+        if (!flen) continue;
+        uint32_t start_bit = f[6] & 7, stop_bit = f[7] & 7;
+        uint32_t log_first = ls * 8 + start_bit;             // first logical bit
+        uint32_t log_last = (ls + flen - 1) * 8 + stop_bit;  // last logical bit
+        uint32_t dg_first = da * 8, dg_last = (da + dlen) * 8 - 1;
+        uint32_t lo = std::max(log_first, dg_first), hi = std::min(log_last, dg_last);
+        if (lo > hi || dlen == 0) continue;
+        uint32_t phys_bit = uint32_t(le16(f + 8)) * 8 + (f[10] & 7) + (lo - log_first);
+        uint32_t bits = hi - lo + 1;
+        uint32_t frame_bit = lo - dg_first;
+        if (fr && read) {
+            copy_bits(mem_.data(), phys_bit, d.data, frame_bit, bits);
+            did_read = true;
+        }
+        if (fw && write) {
+            copy_bits(d.data, frame_bit, mem_.data(), phys_bit, bits);
+            did_write = true;
+        }
+    }
+    if (did_read) wkc += 1;
+    if (did_write) {
+        wkc += 2;
+        output_writes++;
+    }
+    return did_read || did_write;
+}
+
+void Esc::process(Datagram& d) noexcept {
+    uint16_t wkc = 0;
+    uint16_t len = d.len();
+    uint8_t tmp[kMaxDatagramData];
+    switch (d.cmd()) {
+    case kAprd:
+    case kApwr:
+    case kAprw:
+    case kArmw: {
+        bool me = d.adp() == 0;
+        if (d.cmd() == kArmw) {
+            if (me) {
+                read_phys(d.ado(), d.data, len);
+            } else {
+                write_phys(d.ado(), d.data, len);
+            }
+            wkc = 1;
+        } else if (me) {
+            if (d.cmd() == kAprd) {
+                read_phys(d.ado(), d.data, len);
+                wkc = 1;
+            } else if (d.cmd() == kApwr) {
+                write_phys(d.ado(), d.data, len);
+                wkc = 1;
+            } else {
+                read_phys(d.ado(), tmp, len);
+                write_phys(d.ado(), d.data, len);
+                std::memcpy(d.data, tmp, len);
+                wkc = 3;
+            }
+        }
+        d.set_adp(uint16_t(d.adp() + 1));
+        break;
+    }
+    case kFprd:
+    case kFpwr:
+    case kFprw:
+    case kFrmw: {
+        uint16_t adp = d.adp();
+        bool me = adp == station_address() && adp != 0;
+        if (d.cmd() == kFrmw) {
+            if (me) read_phys(d.ado(), d.data, len);
+            else write_phys(d.ado(), d.data, len);
+            wkc = 1;
+        } else if (me) {
+            if (d.cmd() == kFprd) {
+                read_phys(d.ado(), d.data, len);
+                wkc = 1;
+            } else if (d.cmd() == kFpwr) {
+                write_phys(d.ado(), d.data, len);
+                wkc = 1;
+            } else {
+                read_phys(d.ado(), tmp, len);
+                write_phys(d.ado(), d.data, len);
+                std::memcpy(d.data, tmp, len);
+                wkc = 3;
+            }
+        }
+        break;
+    }
+    case kBrd:
+        read_phys(d.ado(), tmp, len);
+        for (uint16_t i = 0; i < len; ++i) d.data[i] |= tmp[i];
+        wkc = 1;
+        d.set_adp(uint16_t(d.adp() + 1));
+        break;
+    case kBwr:
+        write_phys(d.ado(), d.data, len);
+        wkc = 1;
+        d.set_adp(uint16_t(d.adp() + 1));
+        break;
+    case kBrw:
+        read_phys(d.ado(), tmp, len);
+        write_phys(d.ado(), d.data, len);
+        for (uint16_t i = 0; i < len; ++i) d.data[i] |= tmp[i];
+        wkc = 3;
+        d.set_adp(uint16_t(d.adp() + 1));
+        break;
+    case kLrd: logical(d, true, false, wkc); break;
+    case kLwr: logical(d, false, true, wkc); break;
+    case kLrw: logical(d, true, true, wkc); break;
+    default: break; // NOP and unknown commands pass untouched
+    }
+    if (wkc) d.add_wkc(wkc);
+}
+
+void Esc::sii_command() noexcept {
+    uint16_t ctl = le16(&mem_[reg::kSiiControl]);
+    uint16_t cmd = (ctl >> 8) & 7;
+    ctl &= 0x00FF | 0x0040;
+    ctl &= uint16_t(~0x7800); // clear error bits
+    if (cmd == 1) { // read: 4 words (8-byte reads supported)
+        uint32_t addr = le32(&mem_[reg::kSiiAddress]);
+        bool ok = addr < sii_.size();
+        for (int w = 0; w < 4; ++w) {
+            uint32_t a = addr + w;
+            put_le16(&mem_[reg::kSiiData + 2 * w], a < sii_.size() ? sii_[a] : 0xFFFF);
+        }
+        if (!ok) ctl |= 0x2000; // missing acknowledge / address error
+    } else if (cmd != 0) {
+        ctl |= 0x2000; // writes and reloads are not supported by the simulated EEPROM
+    }
+    put_le16(&mem_[reg::kSiiControl], ctl | 0x0040); // never busy: the command completed
+}
+
+void Esc::set_al(uint8_t state, uint16_t code) noexcept {
+    mem_[reg::kAlStatus] = uint8_t(state | (code ? 0x10 : 0));
+    mem_[reg::kAlStatus + 1] = 0;
+    put_le16(&mem_[reg::kAlStatusCode], code);
+}
+
+bool Esc::check_mailbox_sms() const noexcept {
+    for (const auto& s : desc_.sms) {
+        if (s.type != SmType::MailboxOut && s.type != SmType::MailboxIn) continue;
+        const uint8_t* r = &mem_[reg::kSm + 8 * s.index];
+        if (!(r[6] & 1)) return false;
+        if (le16(r) != s.start || le16(r + 2) != s.default_size) return false;
+    }
+    return true;
+}
+
+uint16_t Esc::check_process_sms() const noexcept {
+    for (const auto& s : desc_.sms) {
+        if (s.type != SmType::Outputs && s.type != SmType::Inputs) continue;
+        if (s.is_virtual) continue;
+        uint32_t want = desc_.sm_bytes(s.index);
+        const uint8_t* r = &mem_[reg::kSm + 8 * s.index];
+        bool active = r[6] & 1;
+        uint16_t code = s.type == SmType::Outputs ? kAlInvalidOutputs : kAlInvalidInputs;
+        if (want == 0) {
+            if (active && le16(r + 2) != 0) return code;
+            continue;
+        }
+        if (!active || le16(r + 2) != want) return code;
+        bool writes = (r[4] & 0x0C) == 0x04; // ECAT writes
+        if (writes != (s.type == SmType::Outputs)) return code;
+    }
+    return 0;
+}
+
+void Esc::al_control_written() noexcept {
+    uint8_t ctl = mem_[reg::kAlControl];
+    uint8_t req = ctl & 0x0F;
+    bool ack = ctl & 0x10;
+    uint8_t cur = al_state();
+    if (al_error()) {
+        if (!ack) return; // an error must be acknowledged first
+        set_al(cur, 0);
+    }
+    if (req != kInit && req != kPreop && req != kBoot && req != kSafeop && req != kOp) {
+        set_al(cur, kAlUnknownState);
+        return;
+    }
+    if (req == cur) return;
+    if (req < cur || req == kInit) { // going down is always allowed
+        if (req == kBoot && cur != kInit) {
+            set_al(cur, kAlInvalidTransition);
+            return;
+        }
+        set_al(req, 0);
+        return;
+    }
+    switch (cur) {
+    case kInit:
+        if (req == kPreop || req == kBoot) {
+            if (!check_mailbox_sms()) return set_al(kInit, kAlInvalidMailbox);
+            return set_al(req, 0);
+        }
+        break;
+    case kPreop:
+        if (req == kSafeop) {
+            if (uint16_t code = check_process_sms()) return set_al(kPreop, code);
+            return set_al(kSafeop, 0);
+        }
+        break;
+    case kSafeop:
+        if (req == kOp) return set_al(kOp, 0);
+        break;
+    default: break;
+    }
+    set_al(cur, kAlInvalidTransition);
+}
+
+} // namespace beamctl::ethercat::sim

@@ -1,0 +1,81 @@
+// Simulated EtherCAT slave controller (ESC): 64 KiB of register and process RAM, the EtherCAT
+// datagram semantics of one slave (addressing, working counter, FMMU logical mapping with bit
+// granularity), the SII EEPROM interface, sync managers and the AL state machine with its checks.
+// The simulator's segment calls process() for every datagram that passes this slave, in order.
+// Threading: a segment and its ESCs belong to one thread (the master's, for in-process links).
+#pragma once
+
+#include "ethercat/device.hpp"
+#include "ethercat/frame.hpp"
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace beamctl::ethercat::sim {
+
+// Register addresses (ethercat.md §2).
+namespace reg {
+constexpr uint16_t kType = 0x0000, kFmmuCount = 0x0004, kSmCount = 0x0005, kRamSize = 0x0006,
+                   kFeatures = 0x0008, kStationAddress = 0x0010, kAlias = 0x0012,
+                   kDlControl = 0x0100, kDlStatus = 0x0110, kAlControl = 0x0120,
+                   kAlStatus = 0x0130, kAlStatusCode = 0x0134, kWdDivider = 0x0400,
+                   kWdProcessData = 0x0420, kSiiConfig = 0x0500, kSiiControl = 0x0502,
+                   kSiiAddress = 0x0504, kSiiData = 0x0508, kFmmu = 0x0600, kSm = 0x0800,
+                   kDcRecvTime = 0x0900, kDcSystemTime = 0x0910, kDcRecvTimeEpu = 0x0918,
+                   kDcOffset = 0x0920, kDcDelay = 0x0928, kDcDiff = 0x092C,
+                   kDcActivation = 0x0981, kDcSync0Start = 0x0990, kDcSync0Cycle = 0x09A0;
+} // namespace reg
+
+enum AlState : uint8_t { kInit = 1, kPreop = 2, kBoot = 3, kSafeop = 4, kOp = 8 };
+enum AlStatusCode : uint16_t {
+    kAlNoError = 0x0000, kAlInvalidTransition = 0x0011, kAlUnknownState = 0x0012,
+    kAlInvalidMailbox = 0x0016, kAlSmWatchdog = 0x001B, kAlInvalidOutputs = 0x001D,
+    kAlInvalidInputs = 0x001E,
+};
+
+class Esc {
+public:
+    Esc(const DeviceDesc& desc, std::vector<uint16_t> sii);
+
+    // Applies datagram d as this slave would and updates its working counter. `position` is
+    // this slave's index in the segment (for logging only).
+    void process(Datagram& d) noexcept;
+
+    // The slave's view of time (ns since 2000-01-01), advanced by the segment each frame.
+    void set_local_time(uint64_t ns) noexcept { local_time_ns_ = ns; }
+
+    uint8_t al_state() const { return mem_[reg::kAlStatus] & 0x0F; }
+    bool al_error() const { return mem_[reg::kAlStatus] & 0x10; }
+    uint16_t al_status_code() const { return le16(&mem_[reg::kAlStatusCode]); }
+    uint16_t station_address() const { return le16(&mem_[reg::kStationAddress]); }
+    const DeviceDesc& desc() const { return desc_; }
+
+    // Process RAM seen by the terminal behaviour: the buffer of sync manager `sm` (its
+    // configured start address, or the device default when not configured).
+    uint8_t* sm_buffer(uint8_t sm);
+    uint16_t sm_length(uint8_t sm) const;
+    bool outputs_valid() const { return al_state() == kOp; }
+    uint8_t* memory() { return mem_.data(); }
+
+    // Counters of what the slave saw (for tests and diagnostics).
+    uint64_t frames_seen = 0;
+    uint64_t output_writes = 0; // logical writes that reached an output FMMU
+
+private:
+    void read_phys(uint16_t ado, uint8_t* data, uint16_t len) noexcept;
+    void write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept;
+    bool logical(Datagram& d, bool read, bool write, uint16_t& wkc) noexcept;
+    void al_control_written() noexcept;
+    void sii_command() noexcept;
+    bool check_mailbox_sms() const noexcept;
+    uint16_t check_process_sms() const noexcept; // 0 or the AL status code
+    void set_al(uint8_t state, uint16_t code) noexcept;
+
+    DeviceDesc desc_;
+    std::vector<uint16_t> sii_;
+    std::array<uint8_t, 65536> mem_{};
+    uint64_t local_time_ns_ = 0;
+};
+
+} // namespace beamctl::ethercat::sim

@@ -1,0 +1,60 @@
+// A simulated EtherCAT segment: ESCs in a line, each frame passing every reachable slave in
+// order (as on the wire), with fault injection (unplugged slaves, lost and corrupted frames).
+// Terminal behaviour and plant models hook in through on_frame (called after each frame).
+#pragma once
+
+#include "ethercat/device.hpp"
+#include "ethercat/sim/esc.hpp"
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <random>
+#include <vector>
+
+namespace beamctl::ethercat::sim {
+
+class Segment {
+public:
+    Segment() = default;
+    // Appends a slave of this device type at the next position; its SII comes from build_sii.
+    Esc& add(const DeviceDesc& desc);
+    std::size_t size() const { return slaves_.size(); }
+    Esc& slave(std::size_t position) { return *slaves_.at(position).esc; }
+
+    // Passes a frame (EtherCAT PDU, in place) through the segment. Returns false if the frame
+    // is lost (loss injection); malformed frames come back untouched.
+    bool process(uint8_t* frame, std::size_t len) noexcept;
+
+    // Simulated time [ns since 2000-01-01] that slaves see; advanced by the link or tests.
+    void set_time(uint64_t ns) noexcept;
+    uint64_t time() const { return time_ns_; }
+
+    // Fault injection. An unplugged slave is bypassed (frames pass it untouched); on replug it
+    // comes back powered up again: INIT, no station address, SMs/FMMUs cleared.
+    void unplug(std::size_t position);
+    void replug(std::size_t position);
+    bool plugged(std::size_t position) const { return slaves_.at(position).plugged; }
+    // Drops (or corrupts: wrong header) that fraction of frames, reproducibly from `seed`.
+    void set_frame_loss(double fraction, uint64_t seed = 1);
+    void set_frame_corruption(double fraction, uint64_t seed = 2);
+
+    // Called after every frame that passed the segment (terminal models, plants).
+    std::function<void(Segment&)> on_frame;
+
+    uint64_t frames = 0, frames_lost = 0, frames_corrupted = 0;
+
+private:
+    struct Slot {
+        std::unique_ptr<Esc> esc;
+        const DeviceDesc* desc;
+        bool plugged = true;
+    };
+    std::vector<Slot> slaves_;
+    std::vector<std::unique_ptr<DeviceDesc>> descs_;
+    uint64_t time_ns_ = 0;
+    double loss_ = 0, corrupt_ = 0;
+    std::mt19937_64 loss_rng_{1}, corrupt_rng_{2};
+};
+
+} // namespace beamctl::ethercat::sim

@@ -1,0 +1,219 @@
+// The master against the simulator over the in-process link: bring-up to OP, identity and count
+// errors, signals with ecmccfg names, a DO->DI wiring loop, frame loss, an unplugged slave, and
+// a cyclic path that allocates nothing.
+#include "../alloc_counter.hpp"
+#include "core/error.hpp"
+#include "ethercat/catalog.hpp"
+#include "ethercat/master.hpp"
+#include "ethercat/sim/segment.hpp"
+
+#include <gtest/gtest.h>
+
+
+using namespace beamctl;
+using namespace beamctl::ethercat;
+
+namespace {
+
+const char* kDemo[] = {"EK1100", "EL1008", "EL1008", "EL2008", "EL2808", "EL3104", "EL4134",
+                       "EL5101", "EL7041", "EL7211", "EL5042", "EL3102", "EL4102", "EL1252"};
+
+struct Bus {
+    sim::Segment seg;
+    InProcessLink link{seg};
+    std::vector<SlaveConfig> cfg;
+    explicit Bus(std::vector<std::string> types) {
+        for (std::size_t i = 0; i < types.size(); ++i) {
+            seg.add(*Catalog::builtin().find(types[i]));
+            cfg.push_back({int(i), types[i]});
+        }
+    }
+};
+
+std::vector<std::string> demo() { return std::vector<std::string>(std::begin(kDemo), std::end(kDemo)); }
+
+} // namespace
+
+TEST(Master, BringsFourteenTerminalsToOp) {
+    Bus b(demo());
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    for (std::size_t i = 0; i < b.seg.size(); ++i) EXPECT_EQ(b.seg.slave(i).al_state(), 8) << kDemo[i];
+    EXPECT_EQ(m.send_process_data(), CycleStatus::Ok);
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::Ok);
+    EXPECT_EQ(m.wkc(), m.expected_wkc());
+    EXPECT_GT(m.expected_wkc(), 10);
+    EXPECT_NE(m.find_signal("ec0.s1.binaryInput01"), nullptr);
+    EXPECT_NE(m.find_signal("ec0.s3.binaryOutput08"), nullptr);
+    EXPECT_EQ(m.find_signal("ec0.s0.binaryInput01"), nullptr); // EK1100 has no process data
+}
+
+TEST(Master, DigitalOutputWiredToInputIsSeenNextCycle) {
+    Bus b({"EK1100", "EL2008", "EL1008"});
+    // Wiring: EL2008 output n drives EL1008 input n (copied after every frame, like a cable).
+    b.seg.on_frame = [](sim::Segment& s) {
+        uint8_t out = s.slave(1).outputs_valid() ? *s.slave(1).sm_buffer(0) : 0;
+        *s.slave(2).sm_buffer(0) = out;
+    };
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    const SignalInfo* o3 = m.find_signal("ec0.s1.binaryOutput03");
+    const SignalInfo* i3 = m.find_signal("ec0.s2.binaryInput03");
+    const SignalInfo* i4 = m.find_signal("ec0.s2.binaryInput04");
+    ASSERT_TRUE(o3 && i3 && i4);
+    m.set(*o3, 1);
+    m.send_process_data();
+    m.receive_process_data();
+    // Same frame: the output reached the slave, the input was read before the wire copied it.
+    m.send_process_data();
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::Ok);
+    EXPECT_EQ(m.get(*i3), 1u);
+    EXPECT_EQ(m.get(*i4), 0u);
+    m.set(*o3, 0);
+    for (int i = 0; i < 2; ++i) {
+        m.send_process_data();
+        m.receive_process_data();
+    }
+    EXPECT_EQ(m.get(*i3), 0u);
+}
+
+TEST(Master, IdentityMismatchNamesPositionExpectedAndFound) {
+    Bus b({"EK1100", "EL1008", "EL2008"});
+    b.cfg[2].type = "EL2808";
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    try {
+        m.bring_up();
+        FAIL() << "bring-up should fail";
+    } catch (const Error& e) {
+        std::string w = e.what();
+        EXPECT_NE(w.find("ec0 position 2"), std::string::npos) << w;
+        EXPECT_NE(w.find("expected EL2808"), std::string::npos) << w;
+        EXPECT_NE(w.find("found EL2008"), std::string::npos) << w;
+    }
+}
+
+TEST(Master, MissingSlavesAreAClearError) {
+    Bus b({"EK1100", "EL1008"});
+    b.cfg.push_back({5, "EL2008"});
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    try {
+        m.bring_up();
+        FAIL();
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("2 slave(s) on the bus"), std::string::npos) << e.what();
+    }
+}
+
+TEST(Master, UnknownTypeIsRejectedAtConfiguration) {
+    sim::Segment seg;
+    InProcessLink link(seg);
+    EXPECT_THROW(Master(link, 0, {{0, "EL9999"}}, Catalog::builtin()), Error);
+}
+
+TEST(Master, LostFramesAreCountedAndInputsKeepTheirLastValue) {
+    Bus b({"EK1100", "EL1008"});
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    *b.seg.slave(1).sm_buffer(0) = 0x81;
+    m.send_process_data();
+    m.receive_process_data();
+    const SignalInfo* i1 = m.find_signal("ec0.s1.binaryInput01");
+    EXPECT_EQ(m.get(*i1), 1u);
+    b.seg.set_frame_loss(0.5, 42);
+    int lost = 0;
+    for (int i = 0; i < 200; ++i) {
+        *b.seg.slave(1).sm_buffer(0) = 0x00;
+        m.send_process_data();
+        if (m.receive_process_data(0) == CycleStatus::FrameLost) {
+            ++lost;
+            EXPECT_EQ(m.get(*i1), i == 0 ? 1u : m.get(*i1));
+        }
+    }
+    EXPECT_GT(lost, 60);
+    EXPECT_LT(lost, 140);
+    EXPECT_EQ(m.frames_lost(), uint64_t(lost));
+    EXPECT_EQ(b.seg.frames_lost, uint64_t(lost));
+}
+
+TEST(Master, UnpluggedSlaveDropsTheWorkingCounterOthersKeepCycling) {
+    Bus b({"EK1100", "EL2008", "EL1008", "EL1008"});
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    b.seg.unplug(2);
+    *b.seg.slave(3).sm_buffer(0) = 0x02;
+    m.send_process_data();
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::WkcMismatch);
+    EXPECT_EQ(m.wkc(), m.expected_wkc() - 1);
+    EXPECT_EQ(m.get(*m.find_signal("ec0.s3.binaryInput02")), 1u); // the others still exchange data
+    EXPECT_EQ(m.wkc_errors(), 1u);
+}
+
+TEST(Master, CyclicExchangeAllocatesNothing) {
+    Bus b(demo());
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    test::count_allocations(true);
+    for (int i = 0; i < 10000; ++i) {
+        m.send_process_data();
+        m.receive_process_data();
+    }
+    test::count_allocations(false);
+    EXPECT_EQ(test::allocations(), 0);
+    EXPECT_EQ(m.wkc(), m.expected_wkc());
+}
+
+#include "ethercat/sim/sim_config.hpp"
+
+#include <thread>
+
+TEST(Master, OverUdpToASimulatorWithWiring) {
+    const Catalog& cat = Catalog::builtin();
+    sim::SimConfig cfg = sim::SimConfig::parse(R"(
+slaves:
+  - {position: 0, type: EK1100}
+  - {position: 1, type: EL2008}
+  - {position: 2, type: EL1008}
+wiring:
+  - {from: s1.binaryOutput02, to: s2.binaryInput05}
+)", "dio.yaml", cat);
+    sim::Segment seg;
+    cfg.build(seg, cat);
+    sim::UdpServer server(seg, "127.0.0.1", 0);
+    volatile bool stop = false;
+    std::thread t([&] { server.run(stop, 20); });
+    {
+        UdpLink link("127.0.0.1", server.port());
+        Master m(link, 0, {{0, "EK1100"}, {1, "EL2008"}, {2, "EL1008"}}, cat);
+        m.bring_up();
+        m.set(*m.find_signal("ec0.s1.binaryOutput02"), 1);
+        for (int i = 0; i < 3; ++i) {
+            m.send_process_data();
+            m.receive_process_data(200000);
+        }
+        EXPECT_EQ(m.wkc(), m.expected_wkc());
+        EXPECT_EQ(m.get(*m.find_signal("ec0.s2.binaryInput05")), 1u);
+        EXPECT_EQ(m.get(*m.find_signal("ec0.s2.binaryInput02")), 0u);
+    }
+    stop = true;
+    t.join();
+    EXPECT_GT(server.frames, 10u);
+}
+
+TEST(SimConfig, ErrorsNameFileLineAndColumn) {
+    const Catalog& cat = Catalog::builtin();
+    try {
+        sim::SimConfig::parse("slaves:\n  - {position: 0, type: EL9999}\n", "bad.yaml", cat);
+        FAIL();
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("bad.yaml:2:"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("EL9999"), std::string::npos);
+    }
+    try {
+        sim::SimConfig::parse("slaves:\n  - {position: 0, type: EL1008}\nwiring:\n  - {from: s0.binaryInput01, to: s0.binaryOutput01}\n",
+                              "bad.yaml", cat);
+        FAIL();
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("bad.yaml:4:"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(sim::SimConfig::parse("slave: []\n", "typo.yaml", cat), Error);
+}
