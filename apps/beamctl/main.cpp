@@ -1,4 +1,6 @@
 // beamctl: the command-line program. Subcommands:
+//   run      run an IOC from its configuration (buses, RT engine, PVs, CA server)
+//   check    load a configuration and report every error
 //   softioc  serve EPICS database files over Channel Access (like EPICS softIoc)
 //   db       print the loaded database as .db text
 //   sim      run a simulated EtherCAT segment behind a UDP socket
@@ -10,7 +12,10 @@
 #include "core/macros.hpp"
 #include "pv/database.hpp"
 #include "pv/db_file.hpp"
+#include "config/ioc_config.hpp"
 #include "ethercat/catalog.hpp"
+#include "ioc/ioc.hpp"
+#include "rt/engine.hpp"
 #include "ethercat/sim/sim_config.hpp"
 
 #include <CLI/CLI.hpp>
@@ -147,6 +152,12 @@ int main(int argc, char** argv) {
         ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
     dbcmd->add_option("files", dbo.files, "Database files (.db)")->required();
 
+    std::string run_file, check_file;
+    auto* runcmd = app.add_subcommand("run", "Run an IOC: buses, RT engine, PVs and CA server (ioc.yaml)");
+    runcmd->add_option("file", run_file, "IOC configuration")->required();
+    auto* checkcmd = app.add_subcommand("check", "Load an IOC configuration and report errors (exit 1 on any)");
+    checkcmd->add_option("file", check_file, "IOC configuration")->required();
+
     std::string sim_file, sim_bind = "127.0.0.1";
     int sim_port = 0x88A4;
     auto* simcmd = app.add_subcommand("sim", "Run a simulated EtherCAT segment (SIM.yaml) behind UDP");
@@ -159,7 +170,25 @@ int main(int argc, char** argv) {
     try {
         if (*softioc) return run_softioc(soft, acf);
         if (*simcmd) return run_sim(sim_file, sim_bind, sim_port);
+        if (*runcmd) {
+            rt::MonotonicClock clock;
+            ioc::Ioc ioc(config::IocConfig::load(run_file), clock);
+            return ioc.run();
+        }
+        if (*checkcmd) {
+            rt::MonotonicClock clock;
+            ioc::Ioc ioc(config::IocConfig::load(check_file), clock);
+            std::printf("%s: OK (%zu PVs, %zu bus(es))\n", check_file.c_str(), ioc.database().size(), ioc.bus_count());
+            return 0;
+        }
         if (*dbcmd) {
+            if (dbo.files.size() == 1 && dbo.files[0].size() > 5 &&
+                (dbo.files[0].ends_with(".yaml") || dbo.files[0].ends_with(".yml"))) {
+                rt::MonotonicClock clock;
+                ioc::Ioc ioc(config::IocConfig::load(dbo.files[0]), clock);
+                ioc.database().write_db(std::cout);
+                return 0;
+            }
             pv::Database db;
             load_databases(db, dbo);
             db.write_db(std::cout);

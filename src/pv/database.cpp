@@ -10,6 +10,7 @@ namespace beamctl::pv {
 
 bool Address::writable() const {
     if (kind == Kind::RecordType || !field) return false;
+    if (rec->val_read_only && field->name[0] == 'V' && std::strcmp(field->name, "VAL") == 0) return false;
     return !(field->flags & (kReadOnly | kInitOnly));
 }
 
@@ -376,6 +377,7 @@ PutStatus Database::do_put(const Address& a, Prim t, const void* data, uint32_t 
         std::memcpy(e.data, scratch.data(), scratch.size());
         r.set_count(f, m);
         PutStatus st = r.special(f);
+        if (st == PutStatus::Ok && r.put_hook) st = r.put_hook(r, f);
         if (st != PutStatus::Ok) return fail(st);
     } else {
         Elements e = r.elements(f);
@@ -384,6 +386,7 @@ PutStatus Database::do_put(const Address& a, Prim t, const void* data, uint32_t 
         std::memcpy(old, e.data, sz);
         if (!put_element(r, f, e, 0, t, src)) return fail(PutStatus::BadValue);
         PutStatus st = r.special(f);
+        if (st == PutStatus::Ok && r.put_hook) st = r.put_hook(r, f);
         if (st != PutStatus::Ok) {
             std::memcpy(e.data, old, sz);
             return fail(st);

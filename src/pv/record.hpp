@@ -164,6 +164,13 @@ public:
     void async_done(PutStatus st = PutStatus::Ok);
     bool busy() const { return pact; }
 
+    // Set by the code that owns a record's value (a bus, an axis): called after a client's put was
+    // stored and accepted by special(), before processing. Returning other than Ok refuses the put
+    // (the old value is restored). Example: an output PV forwards the value to the RT cycle.
+    std::function<PutStatus(Record&, const FieldDesc&)> put_hook;
+    // Set when VAL belongs to the system (an input from the bus): clients get no write right on it.
+    bool val_read_only = false;
+
     // --- dbCommon fields ---
     char name_[61] = {};
     char desc[41] = {};

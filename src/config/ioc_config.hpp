@@ -1,0 +1,63 @@
+// The IOC configuration file (`beamctl run ioc.yaml`, ARCHITECTURE.md §4) as typed structs.
+// Every error names file:line:col and the key; unknown keys are errors; files it references
+// are resolved relative to it.
+#pragma once
+
+#include "core/macros.hpp"
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace beamctl::config {
+
+struct SdoConfig {
+    uint16_t index = 0;
+    uint8_t sub = 0;
+    uint64_t value = 0;
+    uint8_t size = 4; // bytes: 1, 2, 4 or 8
+};
+
+struct SlaveEntry {
+    int position = 0;
+    std::string type;
+    std::vector<SdoConfig> sdo;
+};
+
+struct LinkConfig {
+    std::string type = "sim"; // sim | udp | raw
+    std::string plant;        // sim: simulator file (wiring, plants), resolved path; may be empty
+    std::string host = "127.0.0.1";
+    uint16_t port = 0x88A4;   // udp
+    std::string iface;        // raw
+};
+
+struct BusConfig {
+    int id = 0;
+    LinkConfig link;
+    std::vector<SlaveEntry> slaves;
+};
+
+struct DbConfig {
+    std::string file; // resolved path
+    MacroMap macros;
+};
+
+struct IocConfig {
+    std::string path; // the file itself
+    std::string name = "IOC";
+    std::string prefix; // "NAME:" unless given
+    double rate_hz = 1000;
+    int cpu = -1;
+    int priority = 80;
+    std::vector<BusConfig> buses;
+    std::vector<DbConfig> db;
+    std::optional<uint16_t> ca_port; // default: EPICS_CAS_SERVER_PORT / 5064
+    std::string acf;                 // resolved path
+
+    static IocConfig load(const std::string& path);
+    static IocConfig parse(const std::string& text, const std::string& path);
+};
+
+} // namespace beamctl::config

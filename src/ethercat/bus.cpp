@@ -1,0 +1,103 @@
+#include "ethercat/bus.hpp"
+
+#include <cstring>
+
+namespace beamctl::ethercat {
+
+struct Bus::ReceiveStage : rt::Stage {
+    Bus& b;
+    explicit ReceiveStage(Bus& bus) : b(bus) {}
+    const char* name() const noexcept override { return "bus receive"; }
+    void run(const rt::CycleInfo& c) noexcept override {
+        if (c.cycle == 0) return; // nothing in flight yet
+        int timeout_us = int(c.period_ns / 2000); // half a period at most
+        b.last_ = b.master_->receive_process_data(timeout_us);
+    }
+};
+
+struct Bus::SendStage : rt::Stage {
+    Bus& b;
+    explicit SendStage(Bus& bus) : b(bus) {}
+    const char* name() const noexcept override { return "bus send"; }
+    void run(const rt::CycleInfo& c) noexcept override {
+        (void)c;
+        b.master_->send_process_data();
+    }
+};
+
+struct Bus::PublishStage : rt::Stage {
+    Bus& b;
+    explicit PublishStage(Bus& bus) : b(bus) {}
+    const char* name() const noexcept override { return "publish"; }
+    void run(const rt::CycleInfo& c) noexcept override {
+        BusSnapshot& s = b.snap_.write_buffer();
+        Master& m = *b.master_;
+        std::memcpy(s.image.data(), m.image(), s.image.size());
+        s.cycle = c.cycle;
+        s.wkc = m.wkc();
+        s.expected_wkc = m.expected_wkc();
+        s.frames_lost = m.frames_lost();
+        s.wkc_errors = m.wkc_errors();
+        s.link_up = b.last_ != CycleStatus::FrameLost && b.last_ != CycleStatus::LinkError;
+        s.wkc_ok = b.last_ == CycleStatus::Ok;
+        b.snap_.publish();
+        b.apply_writes(); // for the next cycle's send
+    }
+};
+
+Bus::Bus(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, const Catalog& catalog)
+    : id_(id), link_(std::move(link)) {
+    master_ = std::make_unique<Master>(*link_, id, std::move(slaves), catalog);
+    receive_ = std::make_unique<ReceiveStage>(*this);
+    send_ = std::make_unique<SendStage>(*this);
+    publish_ = std::make_unique<PublishStage>(*this);
+}
+
+Bus::~Bus() = default;
+
+void Bus::bring_up() {
+    master_->bring_up();
+    std::size_t n = master_->image_size();
+    snap_.init([n](BusSnapshot& s) { s.image.assign(n, 0); });
+}
+
+void Bus::add_stages(rt::Engine& e) {
+    e.add_stage(rt::StageOrder::BusReceive, *receive_);
+    e.add_stage(rt::StageOrder::BusSend, *send_);
+    e.add_stage(rt::StageOrder::Publish, *publish_);
+}
+
+bool Bus::write(const SignalInfo& s, uint64_t value) noexcept {
+    if (!s.output) return false;
+    if (writes_.push(OutputWrite{s.bit_offset, s.bits, value})) return true;
+    writes_dropped_++;
+    return false;
+}
+
+void Bus::apply_writes() noexcept {
+    OutputWrite w;
+    uint8_t* img = master_->image();
+    while (writes_.pop(w)) {
+        for (uint32_t i = 0; i < w.bits; ++i) {
+            uint32_t b = w.bit_offset + i;
+            if (w.value >> i & 1) img[b >> 3] |= uint8_t(1u << (b & 7));
+            else img[b >> 3] &= uint8_t(~(1u << (b & 7)));
+        }
+    }
+}
+
+const BusSnapshot& Bus::snapshot() noexcept {
+    snap_.update();
+    return snap_.read_buffer();
+}
+
+uint64_t Bus::get(const std::vector<uint8_t>& image, const SignalInfo& s) noexcept {
+    uint64_t v = 0;
+    for (uint32_t i = 0; i < s.bits; ++i) {
+        uint32_t b = s.bit_offset + i;
+        if (image[b >> 3] >> (b & 7) & 1) v |= uint64_t(1) << i;
+    }
+    return v;
+}
+
+} // namespace beamctl::ethercat

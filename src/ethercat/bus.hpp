@@ -1,0 +1,71 @@
+// One EtherCAT bus in a running IOC: the master, its link, the RT stages that exchange process data, the snapshot the cycle publishes for
+// non-RT readers and the queue of output writes coming from them.
+// Threading: stages run on the RT thread; write()/snapshot() on ONE non-RT thread (the IOC loop).
+#pragma once
+
+#include "core/spsc_queue.hpp"
+#include "core/triple_buffer.hpp"
+#include "ethercat/master.hpp"
+#include "rt/engine.hpp"
+
+#include <memory>
+#include <vector>
+
+namespace beamctl::ethercat {
+
+struct BusSnapshot {
+    std::vector<uint8_t> image; // process image after the cycle's receive (outputs as sent)
+    uint64_t cycle = 0;
+    uint16_t wkc = 0, expected_wkc = 0;
+    uint64_t frames_lost = 0, wkc_errors = 0;
+    bool link_up = false;   // the last cyclic frame came back
+    bool wkc_ok = false;    // the last WKC was the expected one
+};
+
+struct OutputWrite {
+    uint32_t bit_offset = 0;
+    uint8_t bits = 0;
+    uint64_t value = 0;
+};
+
+class Bus {
+public:
+    // The master code never depends on the simulator: an in-process segment behind `link` is
+    // owned by whoever assembles the IOC.
+    Bus(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, const Catalog& catalog);
+    ~Bus();
+
+    void bring_up(); // non-RT, before the engine starts; throws Error
+    void add_stages(rt::Engine& e);
+
+    // Non-RT: queue an output write for the next cycle. False if the queue is full.
+    bool write(const SignalInfo& s, uint64_t value) noexcept;
+    // Non-RT: the latest published snapshot (refreshed if a newer one exists).
+    const BusSnapshot& snapshot() noexcept;
+    uint64_t writes_dropped() const { return writes_dropped_.load(); }
+
+    Master& master() { return *master_; }
+    int id() const { return id_; }
+    const char* link_kind() const { return link_->kind(); }
+
+    static uint64_t get(const std::vector<uint8_t>& image, const SignalInfo& s) noexcept;
+
+private:
+    struct ReceiveStage;
+    struct SendStage;
+    struct PublishStage;
+    void apply_writes() noexcept;
+
+    int id_;
+    std::unique_ptr<Link> link_;
+    std::unique_ptr<Master> master_;
+    SpscQueue<OutputWrite> writes_{4096};
+    std::atomic<uint64_t> writes_dropped_{0};
+    TripleBuffer<BusSnapshot> snap_;
+    std::unique_ptr<ReceiveStage> receive_;
+    std::unique_ptr<SendStage> send_;
+    std::unique_ptr<PublishStage> publish_;
+    CycleStatus last_ = CycleStatus::Ok;
+};
+
+} // namespace beamctl::ethercat

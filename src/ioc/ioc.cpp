@@ -1,0 +1,330 @@
+#include "ioc/ioc.hpp"
+
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "ethercat/sim/sim_config.hpp"
+#include "pv/convert.hpp"
+#include "pv/db_file.hpp"
+
+#include <cinttypes>
+#include <csignal>
+#include <cstdio>
+#include <sys/signalfd.h>
+#include <unistd.h>
+
+namespace beamctl::ioc {
+namespace {
+log::Logger lg("ioc");
+
+// The simulator follows the engine clock (ns since 2000-01-01 in the slaves' DC registers).
+struct SimTimeStage : rt::Stage {
+    ethercat::sim::Segment& seg;
+    explicit SimTimeStage(ethercat::sim::Segment& s) : seg(s) {}
+    const char* name() const noexcept override { return "simulator time"; }
+    void run(const rt::CycleInfo& c) noexcept override { seg.set_time(c.t_ns); }
+};
+
+pv::DbRecord record(const std::string& type, const std::string& name,
+                    std::vector<std::pair<std::string, std::string>> fields) {
+    pv::DbRecord r;
+    r.type = type;
+    r.name = name;
+    r.loc = SourceLoc{"<generated>", 1, 1};
+    for (auto& [k, v] : fields) r.fields.push_back(pv::DbField{k, v, r.loc});
+    return r;
+}
+
+bool is_signed(const std::string& datatype) {
+    return datatype.rfind("INT", 0) == 0 || datatype.rfind("SINT", 0) == 0 ||
+           datatype.rfind("DINT", 0) == 0 || datatype.rfind("LINT", 0) == 0;
+}
+
+double to_double(uint64_t raw, uint8_t bits, bool sign) {
+    if (sign && bits > 0 && bits < 64 && (raw >> (bits - 1) & 1)) return double(int64_t(raw | (~uint64_t(0) << bits)));
+    if (sign && bits == 64) return double(int64_t(raw));
+    return double(raw);
+}
+
+// Sets a record's VAL from the owner of the value (bypasses the client put hook) and processes.
+void set_value(pv::Database& db, pv::Record& r, double v, bool comm_alarm) {
+    const pv::FieldDesc* f = r.type().find("VAL");
+    pv::Elements e = r.elements(*f);
+    pv::put_element(r, *f, e, 0, pv::Prim::Double, &v);
+    r.udf = 0;
+    if (comm_alarm) r.set_sevr(pv::kStatComm, pv::kInvalid);
+    db.process(r);
+}
+
+} // namespace
+
+std::string entry_pv_suffix(const std::string& e) {
+    struct Map {
+        const char* prefix;
+        const char* pv;
+    };
+    static const Map maps[] = {{"binaryInput", "BI"}, {"binaryOutput", "BO"}, {"analogInput", "AI"},
+                               {"analogOutput", "AO"}};
+    for (auto& m : maps) {
+        std::string p = m.prefix;
+        if (e.size() > p.size() && e.compare(0, p.size(), p) == 0 &&
+            e.find_first_not_of("0123456789", p.size()) == std::string::npos)
+            return std::string(m.pv) + e.substr(p.size());
+    }
+    return e;
+}
+
+Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
+    : cfg_(std::move(cfg)), clock_(clock), catalog_(ethercat::Catalog::builtin()) {
+    rt::EngineConfig ec;
+    ec.rate_hz = cfg_.rate_hz;
+    ec.cpu = cfg_.cpu;
+    ec.priority = cfg_.priority;
+    engine_ = std::make_unique<rt::Engine>(ec, clock_);
+    for (const auto& bc : cfg_.buses) {
+        BusRt b;
+        std::vector<ethercat::SlaveConfig> slaves;
+        for (const auto& s : bc.slaves) {
+            if (!catalog_.find(s.type))
+                throw Error(SB() << cfg_.path << ": bus " << bc.id << " position " << s.position
+                                 << ": unknown device type '" << s.type << "'");
+            slaves.push_back({s.position, s.type});
+        }
+        std::unique_ptr<ethercat::Link> link;
+        if (bc.link.type == "sim") {
+            // The simulated segment has exactly the configured slaves; gaps get an EK1100.
+            b.segment = std::make_unique<ethercat::sim::Segment>();
+            int last = -1;
+            for (const auto& s : bc.slaves) last = std::max(last, s.position);
+            for (int p = 0; p <= last; ++p) {
+                std::string type = "EK1100";
+                for (const auto& s : bc.slaves)
+                    if (s.position == p) type = s.type;
+                b.segment->add(*catalog_.find(type));
+            }
+            if (!bc.link.plant.empty()) {
+                auto sim = ethercat::sim::SimConfig::load(bc.link.plant, catalog_);
+                if (!sim.slaves.empty())
+                    throw Error(SB() << bc.link.plant << ": a plant file used by an IOC takes its slaves from the IOC file; remove 'slaves:'");
+                sim.build(*b.segment, catalog_);
+            }
+            link = std::make_unique<ethercat::InProcessLink>(*b.segment);
+            b.sim_stage = std::make_unique<SimTimeStage>(*b.segment);
+            engine_->add_stage(rt::StageOrder::BusSend, *b.sim_stage);
+        } else {
+            link = std::make_unique<ethercat::UdpLink>(bc.link.host, bc.link.port);
+        }
+        b.bus = std::make_unique<ethercat::Bus>(bc.id, std::move(link), std::move(slaves), catalog_);
+        b.bus->add_stages(*engine_);
+        make_bus_pvs(b, bc);
+        buses_.push_back(std::move(b));
+    }
+    for (const auto& d : cfg_.db) db_.load(pv::load_db_file(d.file, d.macros));
+}
+
+Ioc::~Ioc() { engine_->stop(); }
+
+void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
+    std::string m = SB() << cfg_.prefix << "m" << bc.id;
+    pv::DbFile f;
+    auto bi = [&](const std::string& n, const char* desc, const char* z, const char* o, bool zero_alarm) {
+        std::vector<std::pair<std::string, std::string>> fl = {{"DESC", desc}, {"ZNAM", z}, {"ONAM", o}};
+        if (zero_alarm) fl.push_back({"ZSV", "MAJOR"});
+        f.records.push_back(record("bi", n, fl));
+    };
+    auto li = [&](const std::string& n, const char* desc) { f.records.push_back(record("longin", n, {{"DESC", desc}})); };
+    bi(m + "-Stat-OK", "Bus OK: all slaves OP, WKC complete", "NOT_OK", "OK", true);
+    bi(m + "-LinkUp", "Cyclic frames come back", "DOWN", "UP", true);
+    li(m + "-SlvCntr", "Slaves configured on the bus");
+    li(m + "-Dom-WC", "Working counter of the last cycle");
+    li(m + "-Dom-WC-Exp", "Expected working counter");
+    bi(m + "-Dom-WC-Complete", "Working counter complete", "INCOMPLETE", "COMPLETE", true);
+    li(m + "-MissedFrames", "Cyclic frames that did not come back");
+    li(m + "-WkcErrors", "Cycles with a wrong working counter");
+    f.records.push_back(record("ai", m + "-ThdLatMax", {{"DESC", "RT wake-up latency max"}, {"EGU", "us"}, {"PREC", "1"}}));
+    f.records.push_back(record("ai", m + "-ThdExeMax", {{"DESC", "RT cycle execution time max"}, {"EGU", "us"}, {"PREC", "1"}}));
+    for (const auto& s : bc.slaves) {
+        char sp[16];
+        std::snprintf(sp, sizeof sp, "s%03d", s.position);
+        std::string p = m + sp;
+        bi(p + "-Online", "Slave answers", "OFFLINE", "ONLINE", true);
+        bi(p + "-Operational", "Slave in OP", "NOT_OP", "OP", true);
+        const ethercat::DeviceDesc* d = catalog_.find(s.type);
+        f.records.push_back(record("stringin", p + "-HWType", {{"VAL", s.type}, {"DESC", d->name.substr(0, 40)}}));
+        // Process-data entries of the default PDO assignment.
+        for (const auto& sm : d->sms) {
+            if (sm.type != ethercat::SmType::Outputs && sm.type != ethercat::SmType::Inputs) continue;
+            bool out = sm.type == ethercat::SmType::Outputs;
+            for (auto& [smi, pdo] : d->pdo_assign) {
+                if (smi != sm.index) continue;
+                for (const auto& pd : out ? d->rx_pdos : d->tx_pdos) {
+                    if (pd.index != pdo) continue;
+                    for (const auto& e : pd.entries) {
+                        if (e.name.empty() || e.index == 0) continue;
+                        std::string name = p + "-" + entry_pv_suffix(e.name);
+                        std::string type;
+                        bool analog = e.name.rfind("analog", 0) == 0 || e.bits > 32 || e.datatype == "REAL" || e.datatype == "LREAL";
+                        if (e.bits == 1) type = out ? "bo" : "bi";
+                        else if (analog) type = out ? "ao" : "ai";
+                        else type = out ? "longout" : "longin";
+                        std::string desc = SB() << s.type << " " << e.name;
+                        std::vector<std::pair<std::string, std::string>> fl = {{"DESC", desc.substr(0, 40)}};
+                        if (e.bits == 1) {
+                            fl.push_back({"ZNAM", "0"});
+                            fl.push_back({"ONAM", "1"});
+                        }
+                        f.records.push_back(record(type, name, fl));
+                        auto& r = f.records.back();
+                        r.infos.push_back(pv::DbInfo{"ecmc:signal", SB() << "ec" << bc.id << ".s" << s.position << "." << e.name, r.loc});
+                    }
+                }
+            }
+        }
+    }
+    db_.load(f);
+    auto find = [&](const std::string& n) { return db_.find(n); };
+    b.stat_ok = find(m + "-Stat-OK");
+    b.link_up = find(m + "-LinkUp");
+    b.slave_count = find(m + "-SlvCntr");
+    b.wc = find(m + "-Dom-WC");
+    b.wc_expected = find(m + "-Dom-WC-Exp");
+    b.wc_complete = find(m + "-Dom-WC-Complete");
+    b.missed = find(m + "-MissedFrames");
+    b.wkc_errors = find(m + "-WkcErrors");
+    b.lat_max = find(m + "-ThdLatMax");
+    b.exe_max = find(m + "-ThdExeMax");
+    for (const auto& s : bc.slaves) {
+        char sp[16];
+        std::snprintf(sp, sizeof sp, "s%03d", s.position);
+        b.slave_status.emplace_back(find(m + sp + "-Online"), find(m + sp + "-Operational"));
+    }
+}
+
+void Ioc::make_entry_pvs(BusRt& b) {
+    // Binds every entry PV to the master's signal of the same name (after bring-up).
+    ethercat::Bus& bus = *b.bus;
+    std::string m = SB() << cfg_.prefix << "m" << bus.id();
+    for (const auto& sig : bus.master().signals()) {
+        // "ec0.s3.binaryInput01" -> "<prefix>m0s003-BI01"
+        std::size_t s_at = sig.name.find(".s");
+        std::size_t dot = sig.name.find('.', s_at + 2);
+        char sp[16];
+        std::snprintf(sp, sizeof sp, "s%03d", sig.slave);
+        std::string name = m + sp + "-" + entry_pv_suffix(sig.name.substr(dot + 1));
+        pv::Record* rec = db_.find(name);
+        if (!rec) continue; // an entry outside the default assignment: no PV (yet)
+        EntryPv e{rec, &sig, sig.output};
+        if (sig.output) {
+            ethercat::Bus* busp = &bus;
+            const ethercat::SignalInfo* sg = &sig;
+            rec->put_hook = [busp, sg](pv::Record& r, const pv::FieldDesc& f) {
+                if (std::string_view(f.name) != "VAL") return pv::PutStatus::Ok;
+                double v = 0;
+                pv::Elements el = r.elements(f);
+                pv::get_element(r, f, el, 0, pv::Prim::Double, &v);
+                uint64_t raw = v < 0 ? uint64_t(int64_t(v)) : uint64_t(v);
+                if (sg->bits < 64) raw &= (uint64_t(1) << sg->bits) - 1;
+                return busp->write(*sg, raw) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
+            };
+        } else {
+            rec->val_read_only = true;
+        }
+        b.entries.push_back(e);
+    }
+}
+
+void Ioc::bring_up() {
+    for (auto& b : buses_) {
+        b.bus->bring_up();
+        make_entry_pvs(b);
+        set_value(db_, *b.slave_count, double(b.bus->master().slaves().size()), false);
+    }
+    db_.init_records();
+    brought_up_ = true;
+}
+
+void Ioc::publish() {
+    rt::EngineStats es = engine_->stats();
+    for (auto& b : buses_) {
+        const ethercat::BusSnapshot& s = b.bus->snapshot();
+        bool ok = s.link_up && s.wkc_ok;
+        auto upd = [&](pv::Record* r, double v) {
+            double cur = 0;
+            pv::Address a;
+            a.rec = r;
+            a.field = r->type().find("VAL");
+            db_.get(a, pv::Prim::Double, &cur, 1);
+            if (cur != v || r->udf) set_value(db_, *r, v, false);
+        };
+        upd(b.stat_ok, ok ? 1 : 0);
+        upd(b.link_up, s.link_up ? 1 : 0);
+        upd(b.wc, s.wkc);
+        upd(b.wc_expected, s.expected_wkc);
+        upd(b.wc_complete, s.wkc_ok ? 1 : 0);
+        upd(b.missed, double(s.frames_lost));
+        upd(b.wkc_errors, double(s.wkc_errors));
+        upd(b.lat_max, double(es.latency_max_ns) / 1000.0);
+        upd(b.exe_max, double(es.exec_max_ns) / 1000.0);
+        const auto& slaves = b.bus->master().slaves();
+        for (std::size_t i = 0; i < b.slave_status.size() && i < slaves.size(); ++i) {
+            // Interim: per-slave AL states are read at bring-up; the cycle's WKC says whether
+            // all of them still answer.
+            upd(b.slave_status[i].first, s.link_up ? 1 : 0);
+            upd(b.slave_status[i].second, ok && (slaves[i].al_state & 0x0F) == 8 ? 1 : 0);
+        }
+        for (auto& e : b.entries) {
+            if (e.output) continue;
+            double v = to_double(ethercat::Bus::get(s.image, *e.sig), e.sig->bits, is_signed(e.sig->datatype));
+            bool bad = !ok;
+            if (v != e.last || bad != (e.rec->sevr == pv::kInvalid)) {
+                e.last = v;
+                set_value(db_, *e.rec, v, bad);
+            }
+        }
+    }
+}
+
+int Ioc::run() {
+    if (!brought_up_) bring_up();
+    EventLoop loop;
+    ca::ServerConfig sc = ca::ServerConfig::from_env();
+    if (cfg_.ca_port) sc.port = *cfg_.ca_port;
+    ca::Server server(loop, db_, sc);
+    if (!cfg_.acf.empty()) server.set_access_security(ca::AccessSecurity::load_file(cfg_.acf));
+    server.start();
+    engine_->start();
+    sigset_t mask;
+    sigemptyset(&mask);
+    sigaddset(&mask, SIGTERM);
+    sigaddset(&mask, SIGINT);
+    sigaddset(&mask, SIGHUP);
+    sigprocmask(SIG_BLOCK, &mask, nullptr);
+    int sfd = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC);
+    std::string acf = cfg_.acf;
+    loop.add_fd(sfd, 1, [&](uint32_t) {
+        signalfd_siginfo si;
+        while (::read(sfd, &si, sizeof si) == sizeof si) {
+            if (si.ssi_signo == SIGHUP && !acf.empty()) {
+                try {
+                    server.set_access_security(ca::AccessSecurity::load_file(acf));
+                    LOG_INFO(lg, "access security reloaded from " << acf);
+                } catch (const Error& e) {
+                    LOG_ERR(lg, "access security reload failed, keeping the previous rules: " << e.what());
+                }
+            } else if (si.ssi_signo != SIGHUP) {
+                loop.stop();
+            }
+        }
+    });
+    loop.call_every(0.01, [this] { publish(); });
+    loop.call_every(0.01, [this] { db_.scan_periodic(EventLoop::now_s()); });
+    std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)\n", server.listen_description().c_str(),
+                db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str());
+    std::fflush(stdout);
+    loop.run();
+    engine_->stop();
+    loop.remove_fd(sfd);
+    ::close(sfd);
+    return 0;
+}
+
+} // namespace beamctl::ioc

@@ -1,0 +1,76 @@
+// A running IOC (`beamctl run ioc.yaml`): builds the buses (simulated segments for `sim` links),
+// brings them up, starts the RT engine, creates the PVs with ecmccfg names (master, engine, every
+// slave and its process-data entries), publishes RT snapshots into them and forwards PV writes to
+// the cycle. The IOC loop thread owns the PV database and the CA server.
+#pragma once
+
+#include "ca/server.hpp"
+#include "config/ioc_config.hpp"
+#include "core/event_loop.hpp"
+#include "ethercat/bus.hpp"
+#include "ethercat/catalog.hpp"
+#include "ethercat/sim/segment.hpp"
+#include "pv/database.hpp"
+#include "rt/engine.hpp"
+
+#include <memory>
+#include <vector>
+
+namespace beamctl::ioc {
+
+class Ioc {
+public:
+    // Builds everything from the configuration (nothing runs yet). Throws Error.
+    Ioc(config::IocConfig cfg, rt::Clock& clock);
+    ~Ioc();
+
+    // Every PV this IOC serves, as .db text (`beamctl db ioc.yaml`). Works without bring-up.
+    pv::Database& database() { return db_; }
+    // Brings the buses to OP (non-RT). Throws Error.
+    void bring_up();
+    // Publishes the latest RT snapshots into the PVs (IOC loop thread).
+    void publish();
+    rt::Engine& engine() { return *engine_; }
+    ethercat::Bus& bus(std::size_t i) { return *buses_.at(i).bus; }
+    std::size_t bus_count() const { return buses_.size(); }
+    ethercat::sim::Segment* segment(std::size_t i) { return buses_.at(i).segment.get(); }
+    const config::IocConfig& config() const { return cfg_; }
+
+    // Runs the IOC: engine on its RT thread, CA server and publisher on the calling thread,
+    // until SIGINT/SIGTERM. Prints the ready line.
+    int run();
+
+private:
+    struct EntryPv {
+        pv::Record* rec;
+        const ethercat::SignalInfo* sig;
+        bool output;
+        double last = NAN;
+    };
+    struct BusRt {
+        std::unique_ptr<ethercat::sim::Segment> segment;
+        std::unique_ptr<ethercat::Bus> bus;
+        std::unique_ptr<rt::Stage> sim_stage;
+        std::vector<EntryPv> entries;
+        pv::Record *stat_ok = nullptr, *link_up = nullptr, *slave_count = nullptr, *wc = nullptr,
+                   *wc_expected = nullptr, *wc_complete = nullptr, *missed = nullptr,
+                   *wkc_errors = nullptr, *lat_max = nullptr, *exe_max = nullptr;
+        std::vector<std::pair<pv::Record*, pv::Record*>> slave_status; // Online, Operational
+    };
+    void make_bus_pvs(BusRt& b, const config::BusConfig& bc);
+    void make_entry_pvs(BusRt& b);
+
+    config::IocConfig cfg_;
+    rt::Clock& clock_;
+    const ethercat::Catalog& catalog_;
+    pv::Database db_;
+    std::unique_ptr<rt::Engine> engine_;
+    std::vector<BusRt> buses_;
+    bool brought_up_ = false;
+};
+
+// PV name suffix of a process-data entry, as ecmccfg names them: binaryInput01 -> BI01,
+// binaryOutput01 -> BO01, analogInput01 -> AI01, analogOutput01 -> AO01; others keep their name.
+std::string entry_pv_suffix(const std::string& entry);
+
+} // namespace beamctl::ioc
