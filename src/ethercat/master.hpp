@@ -1,16 +1,20 @@
 // The EtherCAT master: brings a segment up the way a real master does (reset, count, station
-// addresses, SII, identity check, mailbox SMs, PDO layout from SII, process-data SMs and FMMUs,
-// INIT->PREOP->SAFEOP->OP) and exchanges process data cyclically with the working-counter check.
-// Threading: bring_up() and the diagnostics run on a non-RT thread before the cycle starts;
-// send_process_data()/receive_process_data() are the RT path: noexcept, no allocation.
+// addresses, SII, identity check, mailbox SMs, PREOP, startup SDOs, PDO layout from CoE or SII,
+// process-data SMs and FMMUs, SAFEOP, OP) and exchanges process data cyclically with the
+// working-counter check; CoE SDO upload/download over the mailbox.
+// Threading: bring_up(), the SDO calls and the diagnostics run on a non-RT thread, never while
+// another thread runs the cycle; send_process_data()/receive_process_data() are the RT path:
+// noexcept, no allocation.
 #pragma once
 
+#include "core/error.hpp"
 #include "ethercat/device.hpp"
 #include "ethercat/frame.hpp"
 #include "ethercat/link.hpp"
 #include "ethercat/sii.hpp"
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -18,10 +22,36 @@ namespace beamctl::ethercat {
 
 class Catalog;
 
+// A CoE SDO download done in PREOP before the PDO layout is read (ecmccfg's Cfg.EcAddSdo).
+struct StartupSdo {
+    uint16_t index = 0;
+    uint8_t sub = 0;
+    uint64_t value = 0; // written little-endian; must fit `size` bytes (signed or unsigned)
+    uint8_t size = 0;   // [bytes] 1, 2, 4 or 8
+};
+
 // One configured slave: what the configuration expects at a bus position.
 struct SlaveConfig {
+    SlaveConfig() = default;
+    SlaveConfig(int position_, std::string type_, std::vector<StartupSdo> sdos_ = {})
+        : position(position_)
+        , type(std::move(type_))
+        , sdos(std::move(sdos_)) {}
     int position = 0;
-    std::string type; // catalog type, e.g. "EL1008"
+    std::string type;             // catalog type, e.g. "EL1008"
+    std::vector<StartupSdo> sdos; // in order; only for CoE devices
+};
+
+// An SDO transfer the slave aborted; what() names bus, position, object and the abort code.
+class SdoAbort : public Error {
+public:
+    SdoAbort(const std::string& msg, uint32_t code)
+        : Error(msg)
+        , code_(code) {}
+    uint32_t code() const { return code_; }
+
+private:
+    uint32_t code_;
 };
 
 // A process-image entry registered as a signal, e.g. "ec0.s3.positionActual01".
@@ -39,6 +69,11 @@ struct SlaveInfo {
     uint16_t station = 0;
     std::string type;
     SiiInfo sii;
+    // PDO layout in use: read over CoE (0x1C12/0x1C13 and the mappings) in PREOP for CoE
+    // slaves, else the SII defaults.
+    std::vector<std::pair<uint8_t, uint16_t>> pdo_assign; // {sm, pdo}
+    std::vector<Pdo> rx_pdos, tx_pdos;
+    bool pdo_from_coe = false;
     uint8_t al_state = 0;
     uint16_t al_status_code = 0;
     uint32_t out_offset = 0, out_bytes = 0; // byte range in the process image (outputs first)
@@ -84,6 +119,16 @@ public:
         return transact(cmd, uint32_t(adp) | uint32_t(ado) << 16, data, len, retries);
     }
 
+    // ---- CoE SDO (non-RT, after bring_up() reached PREOP) ----
+    // Reads object index:sub of the configured slave at `position` (expedited or normal
+    // transfer). Throws SdoAbort if the slave aborts, Error on timeouts and protocol errors; both
+    // name the bus, position and object ("ec0 position 8: SDO upload 0x8010:01 aborted: ...").
+    std::vector<uint8_t> sdo_upload(int position, uint16_t index, uint8_t sub);
+    // Writes `len` bytes (little-endian value) to index:sub. Throws as sdo_upload.
+    void sdo_download(int position, uint16_t index, uint8_t sub, const void* data, std::size_t len);
+    // How long an SDO waits for its reply.
+    void set_sdo_timeout_ms(int ms) { sdo_timeout_ms_ = ms; }
+
     // Signal access helpers on the image (non-RT convenience; the RT side uses offsets).
     uint64_t get(const SignalInfo& s) const;
     void set(const SignalInfo& s, uint64_t v);
@@ -102,6 +147,15 @@ private:
     };
 
     void read_sii(SlaveInfo& s);
+    void read_pdo_layout(SlaveInfo& s);
+    SlaveInfo& mailbox_slave(int position, const std::string& ctx);
+    // One SDO request/response over the mailbox: `coe` is the CoE data (header + SDO) of the
+    // request; returns the CoE data of the matching reply. Throws SdoAbort / Error with `ctx`.
+    std::vector<uint8_t> sdo_exchange(SlaveInfo& s, const uint8_t* coe, std::size_t len,
+                                      const std::string& ctx);
+    bool mailbox_in_full(const SlaveInfo& s, const std::string& ctx);
+    // Reads the slave->master mailbox; false if it was empty.
+    bool read_mailbox(const SlaveInfo& s, std::vector<uint8_t>& buf, const std::string& ctx);
     void request_state(uint8_t state, const char* name);
     void layout_process_image();
     void configure_sms_and_fmmus();
@@ -120,6 +174,8 @@ private:
     uint16_t wkc_ = 0, expected_wkc_ = 0;
     uint64_t frames_lost_ = 0, wkc_errors_ = 0;
     uint8_t next_idx_ = 0x80; // acyclic indices 0x80..0xFF; cyclic 0..0x7F
+    std::map<int, uint8_t> mbx_counter_; // position -> last mailbox counter sent (1..7)
+    int sdo_timeout_ms_ = 1000;
     std::array<uint8_t, kMaxFrame> rx_{};
 };
 

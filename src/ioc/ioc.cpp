@@ -87,7 +87,9 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
             if (!catalog_.find(s.type))
                 throw Error(SB() << cfg_.path << ": bus " << bc.id << " position " << s.position
                                  << ": unknown device type '" << s.type << "'");
-            slaves.push_back({s.position, s.type});
+            std::vector<ethercat::StartupSdo> sdos;
+            for (const auto& d : s.sdo) sdos.push_back({d.index, d.sub, d.value, d.size});
+            slaves.emplace_back(s.position, s.type, std::move(sdos));
         }
         std::unique_ptr<ethercat::Link> link;
         if (bc.link.type == "sim") {

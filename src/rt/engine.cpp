@@ -57,7 +57,6 @@ void Engine::cycle(uint64_t scheduled) noexcept {
     uint64_t n = cycles_.load(std::memory_order_relaxed);
     if (n > 0) {
         atomic_max(lat_max_, start > scheduled ? start - scheduled : 0);
-        if (start > scheduled + period_ns_) missed_.fetch_add(1, std::memory_order_relaxed);
         int64_t jitter = int64_t(start - last_start_ns_) - int64_t(period_ns_);
         if (jitter < 0) jitter = -jitter;
         if (jitter > jitter_max_.load(std::memory_order_relaxed))
@@ -88,8 +87,13 @@ void Engine::run_cycles(uint64_t n) noexcept {
         cycle(next_ns_);
         next_ns_ += period_ns_;
         uint64_t now = clock_.now_ns();
-        if (now > next_ns_ + period_ns_) // overran by more than a cycle: resynchronise, no burst
-            next_ns_ = now - (now - next_ns_) % period_ns_ + period_ns_;
+        if (now >= next_ns_ + period_ns_) {
+            // Whole periods passed while this cycle ran: those slots are missed (counted), and the
+            // schedule skips them instead of bursting to catch up.
+            uint64_t skipped = (now - next_ns_) / period_ns_;
+            missed_.fetch_add(skipped, std::memory_order_relaxed);
+            next_ns_ += skipped * period_ns_;
+        }
     }
 }
 

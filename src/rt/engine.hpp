@@ -69,7 +69,7 @@ struct StageStats {
 
 struct EngineStats {
     uint64_t cycles = 0;
-    uint64_t missed = 0;         // cycles whose start was later than one period
+    uint64_t missed = 0;         // cycle slots skipped because earlier cycles overran
     uint64_t latency_max_ns = 0; // wake-up latency (ecmc ThdLatMax)
     uint64_t exec_max_ns = 0;    // time of all stages of one cycle (ecmc ThdExeMax)
     uint64_t exec_last_ns = 0;

@@ -125,3 +125,15 @@ def test_db_and_check_commands(tmp_path):
     wrong.write_text(IOC.format(name="T", prefix="T:").replace("EL3104", "EL9999"))
     r = subprocess.run([str(BEAMCTL), "check", str(wrong)], capture_output=True, text=True, timeout=30)
     assert r.returncode == 1 and "EL9999" in r.stderr, r.stderr
+
+
+def test_startup_sdo_needs_a_coe_device(tmp_path):
+    require_binary()
+    (tmp_path / "plant.yaml").write_text(PLANT)
+    cfg = tmp_path / "ioc.yaml"
+    text = IOC.format(name="T", prefix="T:").replace(
+        "{position: 2, type: EL1008}", "{position: 2, type: EL1008, sdo: [{index: 0x8000, sub: 1, value: 1, size: 1}]}")
+    cfg.write_text(text)
+    r = subprocess.run([str(BEAMCTL), "check", str(cfg)], capture_output=True, text=True, timeout=30)
+    assert r.returncode == 1
+    assert "position 2" in r.stderr and "CoE" in r.stderr, r.stderr

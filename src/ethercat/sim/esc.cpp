@@ -1,5 +1,8 @@
 #include "ethercat/sim/esc.hpp"
 
+#include "ethercat/coe.hpp"
+#include "ethercat/sii.hpp"
+
 #include <algorithm>
 #include <cstring>
 
@@ -31,7 +34,17 @@ void copy_bits(const uint8_t* src, uint32_t sb, uint8_t* dst, uint32_t db, uint3
     }
 }
 
+constexpr uint8_t kSmStatusMailboxFull = 0x08;
+
+// Register block of SM n if it is an enabled mailbox SM, else nullptr.
+uint8_t* mailbox_sm(std::array<uint8_t, 65536>& mem, int n) {
+    uint8_t* r = &mem[reg::kSm + 8 * n];
+    return (r[6] & 1) && (r[4] & 3) == 2 && le16(r + 2) ? r : nullptr;
+}
+
 } // namespace
+
+Esc::~Esc() = default;
 
 Esc::Esc(const DeviceDesc& desc, std::vector<uint16_t> sii) : desc_(desc), sii_(std::move(sii)) {
     mem_[reg::kType] = 0x11; // ET1100-like
@@ -45,6 +58,20 @@ Esc::Esc(const DeviceDesc& desc, std::vector<uint16_t> sii) : desc_(desc), sii_(
     put_le16(&mem_[reg::kWdDivider], 2498);
     put_le16(&mem_[reg::kWdProcessData], 1000);
     put_le16(&mem_[reg::kSiiControl], 0x0040); // 8-byte reads
+    for (const auto& s : desc_.sms) {
+        if (s.type == SmType::MailboxOut) mbx_out_ = s.index;
+        if (s.type == SmType::MailboxIn) mbx_in_ = s.index;
+    }
+    if (desc_.coe && mbx_out_ >= 0 && mbx_in_ >= 0) {
+        uint32_t serial = 0;
+        if (sii_.size() > kSiiSerialWord + 1)
+            serial = uint32_t(sii_[kSiiSerialWord]) | uint32_t(sii_[kSiiSerialWord + 1]) << 16;
+        coe_ = std::make_unique<CoeServer>(desc_, serial);
+    }
+}
+
+uint32_t Esc::expected_sm_bytes(uint8_t sm) const {
+    return coe_ ? coe_->sm_bytes(sm) : desc_.sm_bytes(sm);
 }
 
 uint8_t* Esc::sm_buffer(uint8_t sm) {
@@ -57,24 +84,52 @@ uint8_t* Esc::sm_buffer(uint8_t sm) {
 
 uint16_t Esc::sm_length(uint8_t sm) const {
     uint16_t len = le16(&mem_[reg::kSm + 8 * sm + 2]);
-    return len ? len : uint16_t(desc_.sm_bytes(sm));
+    return len ? len : uint16_t(expected_sm_bytes(sm));
 }
 
-void Esc::read_phys(uint16_t ado, uint8_t* data, uint16_t len) noexcept {
+bool Esc::read_phys(uint16_t ado, uint8_t* data, uint16_t len) noexcept {
     uint32_t end = uint32_t(ado) + len;
+    uint8_t emptied = 0; // slave->master mailboxes whose last byte this read takes
+    for (int n = 0; n < 8; ++n) {
+        uint8_t* r = mailbox_sm(mem_, n);
+        if (!r) continue;
+        uint32_t s = le16(r), l = le16(r + 2);
+        if (end <= s || ado >= s + l || (r[4] >> 2 & 3) != 0) continue; // ECAT-read mailboxes only
+        if (!(r[5] & kSmStatusMailboxFull)) return false; // nothing to read: no access
+        if (ado <= s + l - 1 && end > s + l - 1) emptied |= uint8_t(1u << n);
+    }
     if (ado <= reg::kDcSystemTime + 7 && end > reg::kDcSystemTime) {
         uint64_t offset = le64(&mem_[reg::kDcOffset]);
         put_le64(&mem_[reg::kDcSystemTime], local_time_ns_ + offset);
     }
     for (uint32_t i = 0; i < len; ++i) data[i] = mem_[(ado + i) & 0xFFFF];
+    for (int n = 0; n < 8; ++n)
+        if (emptied >> n & 1) mem_[reg::kSm + 8 * n + 5] &= uint8_t(~kSmStatusMailboxFull);
+    return true;
 }
 
-void Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
+bool Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
+    uint32_t end = uint32_t(ado) + len;
+    uint8_t filled = 0; // master->slave mailboxes whose last byte this write covers
+    for (int n = 0; n < 8; ++n) {
+        uint8_t* r = mailbox_sm(mem_, n);
+        if (!r) continue;
+        uint32_t s = le16(r), l = le16(r + 2);
+        if (end <= s || ado >= s + l) continue;
+        if ((r[4] >> 2 & 3) != 1 || (r[5] & kSmStatusMailboxFull)) { // read mailbox, or full
+            ++mailbox_rejected_writes;
+            return false;
+        }
+        if (ado <= s + l - 1 && end > s + l - 1) filled |= uint8_t(1u << n);
+    }
     bool al = false, sii = false, latch = false;
+    uint8_t sm_written = 0;
     for (uint32_t i = 0; i < len; ++i) {
         uint32_t a = (ado + i) & 0xFFFF;
         if (!writable(a)) continue;
         mem_[a] = data[i];
+        if (a >= reg::kSm && a < reg::kSm + 8 * 8)
+            sm_written |= uint8_t(1u << ((a - reg::kSm) / 8));
         if (a == reg::kAlControl) al = true;
         if (a == reg::kSiiControl + 1) sii = true;
         if (a >= reg::kDcRecvTime && a < reg::kDcRecvTime + 4) latch = true;
@@ -84,8 +139,17 @@ void Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
         for (int p = 0; p < 4; ++p) put_le32(&mem_[reg::kDcRecvTime + 4 * p], uint32_t(t));
         put_le64(&mem_[reg::kDcRecvTimeEpu], t);
     }
+    for (int n = 0; n < 8; ++n) {
+        uint8_t* r = &mem_[reg::kSm + 8 * n];
+        if (filled >> n & 1) r[5] |= kSmStatusMailboxFull;
+        if ((sm_written >> n & 1) && !(r[6] & 1)) { // a disabled SM forgets its buffer state
+            r[5] &= uint8_t(~kSmStatusMailboxFull);
+            if (n == mbx_out_) last_counter_ = 0;
+        }
+    }
     if (sii) sii_command();
     if (al) al_control_written();
+    return true;
 }
 
 bool Esc::logical(Datagram& d, bool read, bool write, uint16_t& wkc) noexcept {
@@ -137,25 +201,14 @@ void Esc::process(Datagram& d) noexcept {
     case kArmw: {
         bool me = d.adp() == 0;
         if (d.cmd() == kArmw) {
-            if (me) {
-                read_phys(d.ado(), d.data, len);
-            } else {
-                write_phys(d.ado(), d.data, len);
-            }
-            wkc = 1;
+            wkc = (me ? read_phys(d.ado(), d.data, len) : write_phys(d.ado(), d.data, len)) ? 1 : 0;
         } else if (me) {
-            if (d.cmd() == kAprd) {
-                read_phys(d.ado(), d.data, len);
-                wkc = 1;
-            } else if (d.cmd() == kApwr) {
-                write_phys(d.ado(), d.data, len);
-                wkc = 1;
-            } else {
-                read_phys(d.ado(), tmp, len);
-                write_phys(d.ado(), d.data, len);
-                std::memcpy(d.data, tmp, len);
-                wkc = 3;
-            }
+            if (d.cmd() == kAprd)
+                wkc = read_phys(d.ado(), d.data, len) ? 1 : 0;
+            else if (d.cmd() == kApwr)
+                wkc = write_phys(d.ado(), d.data, len) ? 1 : 0;
+            else
+                wkc = read_write(d.ado(), d.data, len, tmp);
         }
         d.set_adp(uint16_t(d.adp() + 1));
         break;
@@ -167,49 +220,102 @@ void Esc::process(Datagram& d) noexcept {
         uint16_t adp = d.adp();
         bool me = adp == station_address() && adp != 0;
         if (d.cmd() == kFrmw) {
-            if (me) read_phys(d.ado(), d.data, len);
-            else write_phys(d.ado(), d.data, len);
-            wkc = 1;
+            wkc = (me ? read_phys(d.ado(), d.data, len) : write_phys(d.ado(), d.data, len)) ? 1 : 0;
         } else if (me) {
-            if (d.cmd() == kFprd) {
-                read_phys(d.ado(), d.data, len);
-                wkc = 1;
-            } else if (d.cmd() == kFpwr) {
-                write_phys(d.ado(), d.data, len);
-                wkc = 1;
-            } else {
-                read_phys(d.ado(), tmp, len);
-                write_phys(d.ado(), d.data, len);
-                std::memcpy(d.data, tmp, len);
-                wkc = 3;
-            }
+            if (d.cmd() == kFprd)
+                wkc = read_phys(d.ado(), d.data, len) ? 1 : 0;
+            else if (d.cmd() == kFpwr)
+                wkc = write_phys(d.ado(), d.data, len) ? 1 : 0;
+            else
+                wkc = read_write(d.ado(), d.data, len, tmp);
         }
         break;
     }
     case kBrd:
-        read_phys(d.ado(), tmp, len);
-        for (uint16_t i = 0; i < len; ++i) d.data[i] |= tmp[i];
-        wkc = 1;
+        if (read_phys(d.ado(), tmp, len)) {
+            for (uint16_t i = 0; i < len; ++i) d.data[i] |= tmp[i];
+            wkc = 1;
+        }
         d.set_adp(uint16_t(d.adp() + 1));
         break;
     case kBwr:
-        write_phys(d.ado(), d.data, len);
-        wkc = 1;
+        wkc = write_phys(d.ado(), d.data, len) ? 1 : 0;
         d.set_adp(uint16_t(d.adp() + 1));
         break;
-    case kBrw:
-        read_phys(d.ado(), tmp, len);
-        write_phys(d.ado(), d.data, len);
-        for (uint16_t i = 0; i < len; ++i) d.data[i] |= tmp[i];
-        wkc = 3;
+    case kBrw: {
+        bool r = read_phys(d.ado(), tmp, len);
+        wkc = (r ? 1 : 0) + (write_phys(d.ado(), d.data, len) ? 2 : 0);
+        if (r)
+            for (uint16_t i = 0; i < len; ++i) d.data[i] |= tmp[i];
         d.set_adp(uint16_t(d.adp() + 1));
         break;
+    }
     case kLrd: logical(d, true, false, wkc); break;
     case kLwr: logical(d, false, true, wkc); break;
     case kLrw: logical(d, true, true, wkc); break;
     default: break; // NOP and unknown commands pass untouched
     }
     if (wkc) d.add_wkc(wkc);
+}
+
+uint16_t Esc::read_write(uint16_t ado, uint8_t* data, uint16_t len, uint8_t* tmp) noexcept {
+    bool r = read_phys(ado, tmp, len);
+    bool w = write_phys(ado, data, len);
+    if (r) std::memcpy(data, tmp, len);
+    return uint16_t((r ? 1 : 0) + (w ? 2 : 0));
+}
+
+void Esc::run_firmware() noexcept {
+    if (mbx_out_ < 0 || mbx_in_ < 0) return;
+    const uint8_t* r0 = &mem_[reg::kSm + 8 * mbx_out_];
+    const uint8_t* r1 = &mem_[reg::kSm + 8 * mbx_in_];
+    if (!(r0[5] & kSmStatusMailboxFull)) return;                              // no request
+    if (al_state() == kInit) return;                                          // mailbox not running
+    if (!mailbox_sm(mem_, mbx_in_) || (r1[5] & kSmStatusMailboxFull)) return; // no room to reply
+    try {
+        serve_mailbox(uint8_t(mbx_out_), uint8_t(mbx_in_));
+    } catch (...) { // out of memory: the request is lost, as on a slave that ran out of buffers
+    }
+}
+
+void Esc::serve_mailbox(uint8_t sm_out, uint8_t sm_in) {
+    uint8_t* r0 = &mem_[reg::kSm + 8 * sm_out];
+    uint8_t* r1 = &mem_[reg::kSm + 8 * sm_in];
+    uint32_t in_start = le16(r0), in_len = std::min<uint32_t>(le16(r0 + 2), 65536 - in_start);
+    uint32_t out_start = le16(r1), out_len = std::min<uint32_t>(le16(r1 + 2), 65536 - out_start);
+    std::vector<uint8_t> req(mem_.begin() + in_start, mem_.begin() + in_start + in_len);
+    r0[5] &= uint8_t(~kSmStatusMailboxFull); // the PDI read the request: the master may write again
+    ++mailbox_requests;
+    if (req.size() < coe::kMailboxHeader || out_len < coe::kMailboxHeader + 4) return;
+    uint16_t mlen = le16(req.data());
+    uint8_t type = req[5] & 0x0F, counter = req[5] >> 4 & 7;
+    if (counter != 0 && counter == last_counter_) return; // a repeated request: served already
+    last_counter_ = counter;
+    std::vector<uint8_t> reply(out_len, 0);
+    std::size_t n = 0;
+    uint16_t err = 0;
+    if (coe::kMailboxHeader + mlen > req.size())
+        err = coe::kMbxErrInvalidSize;
+    else if (type == coe::kMbxCoE && coe_)
+        n = coe_->handle(req.data() + coe::kMailboxHeader, mlen, reply.data() + coe::kMailboxHeader,
+                         out_len - coe::kMailboxHeader, al_state(), err);
+    else
+        err = coe::kMbxErrUnsupportedProtocol;
+    if (n == 0 && err == 0) return;
+    uint8_t reply_type = coe::kMbxCoE;
+    if (n == 0) { // mailbox error reply: service 1, detail
+        reply_type = coe::kMbxError;
+        put_le16(reply.data() + coe::kMailboxHeader, 0x0001);
+        put_le16(reply.data() + coe::kMailboxHeader + 2, err);
+        n = 4;
+    }
+    reply_counter_ = uint8_t(reply_counter_ % 7 + 1);
+    put_le16(reply.data(), uint16_t(n));
+    put_le16(reply.data() + 2, 0); // address: the master
+    reply[4] = 0;                  // channel 0, priority 0
+    reply[5] = uint8_t(reply_type | reply_counter_ << 4);
+    std::memcpy(&mem_[out_start], reply.data(), out_len);
+    r1[5] |= kSmStatusMailboxFull;
 }
 
 void Esc::sii_command() noexcept {
@@ -251,7 +357,7 @@ uint16_t Esc::check_process_sms() const noexcept {
     for (const auto& s : desc_.sms) {
         if (s.type != SmType::Outputs && s.type != SmType::Inputs) continue;
         if (s.is_virtual) continue;
-        uint32_t want = desc_.sm_bytes(s.index);
+        uint32_t want = expected_sm_bytes(s.index);
         const uint8_t* r = &mem_[reg::kSm + 8 * s.index];
         bool active = r[6] & 1;
         uint16_t code = s.type == SmType::Outputs ? kAlInvalidOutputs : kAlInvalidInputs;

@@ -1,15 +1,19 @@
 // Simulated EtherCAT slave controller (ESC): 64 KiB of register and process RAM, the EtherCAT
 // datagram semantics of one slave (addressing, working counter, FMMU logical mapping with bit
-// granularity), the SII EEPROM interface, sync managers and the AL state machine with its checks.
-// The simulator's segment calls process() for every datagram that passes this slave, in order.
+// granularity), the SII EEPROM interface, sync managers (mailbox SMs with their full/empty
+// handshake), the AL state machine with its checks and, for CoE devices, the slave firmware's
+// mailbox handling with an SDO server. The simulator's segment calls process() for every datagram
+// that passes this slave, in order, and run_firmware() once after each frame.
 // Threading: a segment and its ESCs belong to one thread (the master's, for in-process links).
 #pragma once
 
 #include "ethercat/device.hpp"
 #include "ethercat/frame.hpp"
+#include "ethercat/sim/coe_server.hpp"
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace beamctl::ethercat::sim {
@@ -37,10 +41,15 @@ enum AlStatusCode : uint16_t {
 class Esc {
 public:
     Esc(const DeviceDesc& desc, std::vector<uint16_t> sii);
+    ~Esc();
 
     // Applies datagram d as this slave would and updates its working counter. `position` is
     // this slave's index in the segment (for logging only).
     void process(Datagram& d) noexcept;
+    // What the slave's microcontroller does between frames: serves a mailbox request waiting in
+    // the master->slave mailbox once the slave->master mailbox is free. Allocates only while
+    // serving a request (never when idle).
+    void run_firmware() noexcept;
 
     // The slave's view of time (ns since 2000-01-01), advanced by the segment each frame.
     void set_local_time(uint64_t ns) noexcept { local_time_ns_ = ns; }
@@ -57,14 +66,24 @@ public:
     uint16_t sm_length(uint8_t sm) const;
     bool outputs_valid() const { return al_state() == kOp; }
     uint8_t* memory() { return mem_.data(); }
+    // The CoE object dictionary (nullptr if the device has no CoE).
+    CoeServer* coe() { return coe_.get(); }
+    // Bytes of process data SM `sm` must have for SAFEOP: from the current CoE PDO assignment,
+    // or the device's default assignment without CoE.
+    uint32_t expected_sm_bytes(uint8_t sm) const;
 
     // Counters of what the slave saw (for tests and diagnostics).
     uint64_t frames_seen = 0;
     uint64_t output_writes = 0; // logical writes that reached an output FMMU
+    uint64_t mailbox_requests = 0, mailbox_rejected_writes = 0;
 
 private:
-    void read_phys(uint16_t ado, uint8_t* data, uint16_t len) noexcept;
-    void write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept;
+    // False (no access, no working counter) if the range touches a mailbox buffer that the
+    // master may not access now (writing a full or reading an empty mailbox).
+    bool read_phys(uint16_t ado, uint8_t* data, uint16_t len) noexcept;
+    bool write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept;
+    uint16_t read_write(uint16_t ado, uint8_t* data, uint16_t len, uint8_t* tmp) noexcept; // WKC
+    void serve_mailbox(uint8_t sm_out, uint8_t sm_in);
     bool logical(Datagram& d, bool read, bool write, uint16_t& wkc) noexcept;
     void al_control_written() noexcept;
     void sii_command() noexcept;
@@ -76,6 +95,10 @@ private:
     std::vector<uint16_t> sii_;
     std::array<uint8_t, 65536> mem_{};
     uint64_t local_time_ns_ = 0;
+    std::unique_ptr<CoeServer> coe_;
+    int mbx_out_ = -1, mbx_in_ = -1; // SM indices of the mailboxes (-1: none)
+    uint8_t last_counter_ = 0;       // counter of the last request served (repeat detection)
+    uint8_t reply_counter_ = 0;
 };
 
 } // namespace beamctl::ethercat::sim

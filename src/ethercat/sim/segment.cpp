@@ -46,6 +46,8 @@ bool Segment::process(uint8_t* frame, std::size_t len) noexcept {
         for (auto& s : slaves_)
             if (s.plugged) s.esc->process(d);
     });
+    for (auto& s : slaves_)
+        if (s.plugged) s.esc->run_firmware();
     if (corrupt_ > 0 && len >= 2 &&
         std::uniform_real_distribution<double>(0, 1)(corrupt_rng_) < corrupt_) {
         ++frames_corrupted;
