@@ -73,9 +73,10 @@ build) deps; build release ;;
 demo)
     deps; build release
     export EPICS_CAS_SERVER_PORT=${EPICS_CAS_SERVER_PORT:-5064}
-    echo "== demo soft IOC (Ctrl-C to stop); from another shell, with pyepics:"
-    echo "   /usr/bin/python3 -c \"import epics; print(epics.caget('DEMO:temperature'))\""
-    exec build/release/beamctl softioc -m "P=DEMO:" examples/softioc/demo.db ;;
+    echo "== demo beamline IOC: a simulated EtherCAT segment of 14 terminals + soft records (Ctrl-C to stop)"
+    echo "   from another shell, with pyepics:"
+    echo "   /usr/bin/python3 -c \"import epics; print(epics.caget('DEMO:m0-Stat-OK', as_string=True), epics.caget('DEMO:temperature'))\""
+    exec build/release/beamctl run examples/demo/ioc.yaml ;;
 unit) deps test; build release; unit ;;
 system) deps test; build release; shift; system "$@" ;;
 fuzz) deps test; fuzz ;;

@@ -40,6 +40,10 @@ struct Bus::PublishStage : rt::Stage {
         s.wkc_errors = m.wkc_errors();
         s.link_up = b.last_ != CycleStatus::FrameLost && b.last_ != CycleStatus::LinkError;
         s.wkc_ok = b.last_ == CycleStatus::Ok;
+        for (std::size_t i = 0; i < s.slave_al.size(); ++i) {
+            s.slave_al[i] = m.slave_al_status(i);
+            s.slave_online[i] = m.slave_online(i) && s.link_up;
+        }
         b.snap_.publish();
         b.apply_writes(); // for the next cycle's send
     }
@@ -57,8 +61,12 @@ Bus::~Bus() = default;
 
 void Bus::bring_up() {
     master_->bring_up();
-    std::size_t n = master_->image_size();
-    snap_.init([n](BusSnapshot& s) { s.image.assign(n, 0); });
+    std::size_t n = master_->image_size(), k = master_->slaves().size();
+    snap_.init([n, k](BusSnapshot& s) {
+        s.image.assign(n, 0);
+        s.slave_al.assign(k, 0);
+        s.slave_online.assign(k, 0);
+    });
 }
 
 void Bus::add_stages(rt::Engine& e) {

@@ -20,6 +20,8 @@ struct BusSnapshot {
     uint64_t frames_lost = 0, wkc_errors = 0;
     bool link_up = false;   // the last cyclic frame came back
     bool wkc_ok = false;    // the last WKC was the expected one
+    std::vector<uint8_t> slave_al;     // per configured slave: AL status (state | 0x10 error)
+    std::vector<uint8_t> slave_online; // per configured slave: answered its last status poll
 };
 
 struct OutputWrite {

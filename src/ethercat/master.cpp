@@ -447,6 +447,19 @@ void Master::build_cyclic_frames() {
         off += len;
     }
     if (cyclic_.back().parts.empty()) cyclic_.pop_back();
+    // One FPRD of AL status (0x0130) per cycle, rotating over the configured slaves: every slave's
+    // state and presence is seen every N cycles without any acyclic traffic.
+    status_frame_ = -1;
+    if (!slaves_.empty()) {
+        if (cyclic_.empty() || cyclic_.back().frame.room() < 2) cyclic_.emplace_back();
+        int at = cyclic_.back().frame.add(kFprd, 0, slaves_[0].station, 0x0130, 2);
+        status_frame_ = int(cyclic_.size() - 1);
+        status_offset_ = uint32_t(at);
+    }
+    slave_al_.assign(slaves_.size(), 0);
+    slave_online_.assign(slaves_.size(), 1);
+    for (std::size_t i = 0; i < slaves_.size(); ++i) slave_al_[i] = slaves_[i].al_state;
+    status_next_ = 0;
     for (std::size_t i = 0; i < cyclic_.size(); ++i) { // tag each frame by its index
         cyclic_[i].idx = uint8_t(i);
         for_each_datagram(cyclic_[i].frame.data(), cyclic_[i].frame.size(), [&](Datagram& d) {
@@ -468,6 +481,13 @@ CycleStatus Master::send_process_data() noexcept {
             std::memset(f + p.data_offset + n_out, 0, p.len - n_out);
             put_le16(f + p.data_offset + p.len, 0); // WKC
         }
+        if (&cf == &cyclic_[std::size_t(status_frame_ < 0 ? 0 : status_frame_)] && status_frame_ >= 0) {
+            uint8_t* d = f + status_offset_;
+            put_le16(d - 8, slaves_[status_next_].station); // ADP of the FPRD header
+            std::memset(d, 0, 4);                           // data and WKC
+            status_sent_ = status_next_;
+            status_next_ = status_next_ + 1 == slaves_.size() ? 0 : status_next_ + 1;
+        }
         if (!link_.send(f, cf.frame.size())) st = CycleStatus::LinkError;
     }
     return st;
@@ -485,6 +505,13 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
             break;
         }
         bool ok = for_each_datagram(rx_.data(), n, [&](Datagram& d) {
+            if (d.cmd() == kFprd && d.ado() == 0x0130 && d.len() == 2 && status_sent_ < slaves_.size() &&
+                d.adp() == slaves_[status_sent_].station) {
+                bool answered = d.wkc() == 1;
+                slave_online_[status_sent_] = answered;
+                if (answered) slave_al_[status_sent_] = d.data[0];
+                return;
+            }
             if (d.cmd() != kLrw || d.idx() >= cyclic_.size()) return;
             const CyclicFrame& cf = cyclic_[d.idx()];
             for (auto& p : cf.parts) {

@@ -103,6 +103,10 @@ public:
     uint16_t expected_wkc() const { return expected_wkc_; }
     uint64_t frames_lost() const { return frames_lost_; }
     uint64_t wkc_errors() const { return wkc_errors_; }
+    // AL status byte (state | 0x10 error) and presence of slave i, from the rotating poll: each
+    // slave is read once every slaves().size() cycles.
+    uint8_t slave_al_status(std::size_t i) const noexcept { return slave_al_[i]; }
+    bool slave_online(std::size_t i) const noexcept { return slave_online_[i]; }
 
     // ---- diagnostics (non-RT) ----
     const std::vector<SignalInfo>& signals() const { return signals_; }
@@ -171,6 +175,10 @@ private:
     std::vector<uint8_t> image_;
     uint32_t outputs_bytes_ = 0;
     std::vector<CyclicFrame> cyclic_;
+    int status_frame_ = -1;      // frame holding the rotating AL-status FPRD
+    uint32_t status_offset_ = 0; // its data offset in that frame
+    std::size_t status_next_ = 0, status_sent_ = ~std::size_t(0);
+    std::vector<uint8_t> slave_al_, slave_online_; // RT-written, read through the bus snapshot
     uint16_t wkc_ = 0, expected_wkc_ = 0;
     uint64_t frames_lost_ = 0, wkc_errors_ = 0;
     uint8_t next_idx_ = 0x80; // acyclic indices 0x80..0xFF; cyclic 0..0x7F

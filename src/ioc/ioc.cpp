@@ -6,6 +6,7 @@
 #include "pv/convert.hpp"
 #include "pv/db_file.hpp"
 
+#include <algorithm>
 #include <cinttypes>
 #include <csignal>
 #include <cstdio>
@@ -80,6 +81,9 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     ec.cpu = cfg_.cpu;
     ec.priority = cfg_.priority;
     engine_ = std::make_unique<rt::Engine>(ec, clock_);
+    for (auto& bc : cfg_.buses) // the master keeps its slaves in position order; so do the PVs
+        std::sort(bc.slaves.begin(), bc.slaves.end(),
+                  [](const auto& a, const auto& b) { return a.position < b.position; });
     for (const auto& bc : cfg_.buses) {
         BusRt b;
         std::vector<ethercat::SlaveConfig> slaves;
@@ -266,12 +270,10 @@ void Ioc::publish() {
         upd(b.wkc_errors, double(s.wkc_errors));
         upd(b.lat_max, double(es.latency_max_ns) / 1000.0);
         upd(b.exe_max, double(es.exec_max_ns) / 1000.0);
-        const auto& slaves = b.bus->master().slaves();
-        for (std::size_t i = 0; i < b.slave_status.size() && i < slaves.size(); ++i) {
-            // Interim: per-slave AL states are read at bring-up; the cycle's WKC says whether
-            // all of them still answer.
-            upd(b.slave_status[i].first, s.link_up ? 1 : 0);
-            upd(b.slave_status[i].second, ok && (slaves[i].al_state & 0x0F) == 8 ? 1 : 0);
+        for (std::size_t i = 0; i < b.slave_status.size() && i < s.slave_al.size(); ++i) {
+            bool online = s.slave_online[i];
+            upd(b.slave_status[i].first, online ? 1 : 0);
+            upd(b.slave_status[i].second, online && s.slave_al[i] == 8 ? 1 : 0);
         }
         for (auto& e : b.entries) {
             if (e.output) continue;

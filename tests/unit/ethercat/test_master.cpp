@@ -217,3 +217,32 @@ TEST(SimConfig, ErrorsNameFileLineAndColumn) {
     }
     EXPECT_THROW(sim::SimConfig::parse("slave: []\n", "typo.yaml", cat), Error);
 }
+
+TEST(Master, RotatingStatusPollSeesEverySlaveAndALostOne) {
+    Bus b({"EK1100", "EL2008", "EL1008", "EL1008"});
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    for (int i = 0; i < 8; ++i) {
+        m.send_process_data();
+        EXPECT_EQ(m.receive_process_data(), CycleStatus::Ok); // the poll does not count in the WKC
+    }
+    for (std::size_t i = 0; i < 4; ++i) {
+        EXPECT_TRUE(m.slave_online(i));
+        EXPECT_EQ(m.slave_al_status(i), 8);
+    }
+    b.seg.unplug(2);
+    for (int i = 0; i < 4; ++i) { // one full round of the poll
+        m.send_process_data();
+        m.receive_process_data();
+    }
+    EXPECT_FALSE(m.slave_online(2));
+    EXPECT_TRUE(m.slave_online(1));
+    EXPECT_TRUE(m.slave_online(3));
+    // A slave that drops to SAFEOP with an error shows it in its status byte.
+    b.seg.slave(3).memory()[0x0130] = 0x14;
+    for (int i = 0; i < 4; ++i) {
+        m.send_process_data();
+        m.receive_process_data();
+    }
+    EXPECT_EQ(m.slave_al_status(3), 0x14);
+}
