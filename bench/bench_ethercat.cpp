@@ -1,9 +1,14 @@
 // EtherCAT cycle cost for a 40-terminal segment:
 //   BM_MasterCycle40: the master alone (send + receive + WKC check) over an echo link, i.e. the
 //     master CPU per cycle that the target (<= 5 us) is about;
-//   BM_SimulatedCycle40: master + in-process simulator (every ESC processing the frame).
+//   BM_SimulatedCycle40: master + in-process simulator (every ESC processing the frame);
+//   BM_UdpRoundTrip40, BM_VethRoundTrip40: master and simulator on two CPUs, over UDP loopback
+//     and over a veth pair with raw sockets (the latter needs root; bench/veth_rate.sh measures
+//     the cycle rate with `beamctl run` and `beamctl sim --iface` as separate processes).
 #include "ethercat/catalog.hpp"
 #include "ethercat/master.hpp"
+#include "ethercat/raw_link.hpp"
+#include "ethercat/sim/raw_server.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "ethercat/sim/sim_config.hpp"
 
@@ -12,7 +17,13 @@
 
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <random>
+#include <string>
 
 using namespace beamctl::ethercat;
 
@@ -111,7 +122,7 @@ BENCHMARK(BM_MasterCycle40);
 
 // Master and simulator in different threads on different CPUs, frames over UDP on loopback:
 // one full cycle round trip per iteration (the inverse is the highest cycle rate this transport
-// sustains here). The veth/AF_PACKET figure needs the raw link (not implemented yet).
+// sustains here).
 void BM_UdpRoundTrip40(benchmark::State& st) {
     auto types = forty();
     std::vector<SlaveConfig> cfg;
@@ -145,6 +156,71 @@ void BM_UdpRoundTrip40(benchmark::State& st) {
     t.join();
 }
 BENCHMARK(BM_UdpRoundTrip40)->UseRealTime();
+
+// The same over a veth pair made for the run (both ends in this namespace): the master's RawLink
+// on one end, sim::RawServer on the other (CPU 1). Counters: max round trip and cycles slower
+// than 50 us (half a 10 kHz period: the master's receive timeout at that rate).
+// spin: 0 both sides sleep in ppoll, 1 the simulator busy-polls, 2 both busy-poll.
+void BM_VethRoundTrip40(benchmark::State& st) {
+    const int spin = int(st.range(0));
+    std::string tag = std::to_string(std::random_device{}() % 1000000);
+    std::string a = "bcbm" + tag, b = "bcbs" + tag;
+    std::string up = "ip link add " + a + " type veth peer name " + b + " && ip link set " + a +
+                     " up && ip link set " + b + " up";
+    struct Veth { // deletes the pair (both ends) however the run ends
+        std::string a;
+        ~Veth() {
+            if (!a.empty()) (void)std::system(("ip link del " + a + " 2>/dev/null").c_str());
+        }
+    } veth;
+    if (std::system((up + " 2>/dev/null").c_str()) != 0) {
+        st.SkipWithError("cannot create a veth pair (needs root / CAP_NET_ADMIN)");
+        return;
+    }
+    veth.a = a;
+    {
+        auto types = forty();
+        std::vector<SlaveConfig> cfg;
+        sim::Segment seg;
+        for (std::size_t i = 0; i < types.size(); ++i) {
+            seg.add(*Catalog::builtin().find(types[i]));
+            cfg.push_back({int(i), types[i]});
+        }
+        sim::RawServer server(seg, b, spin >= 1);
+        volatile bool stop = false;
+        std::thread t([&] {
+            cpu_set_t set;
+            CPU_ZERO(&set);
+            CPU_SET(1, &set);
+            pthread_setaffinity_np(pthread_self(), sizeof set, &set);
+            server.run(stop, 50);
+        });
+        try {
+            RawLink link(a, spin >= 2);
+            Master m(link, 0, cfg, Catalog::builtin());
+            m.bring_up();
+            uint64_t bad = 0, late = 0;
+            int64_t max_ns = 0;
+            for (auto _ : st) {
+                auto t0 = std::chrono::steady_clock::now();
+                m.send_process_data();
+                if (m.receive_process_data(100000) != CycleStatus::Ok) ++bad;
+                int64_t ns = (std::chrono::steady_clock::now() - t0).count();
+                max_ns = std::max(max_ns, ns);
+                if (ns > 50000) ++late;
+            }
+            st.counters["bad_cycles"] = double(bad);
+            st.counters["over_50us"] = double(late);
+            st.counters["max_us"] = double(max_ns) / 1000;
+            st.counters["rate_hz"] = benchmark::Counter(double(st.iterations()), benchmark::Counter::kIsRate);
+        } catch (const std::exception& e) {
+            st.SkipWithError(e.what());
+        }
+        stop = true;
+        t.join();
+    }
+}
+BENCHMARK(BM_VethRoundTrip40)->ArgName("spin")->Arg(0)->Arg(1)->Arg(2)->UseRealTime();
 
 } // namespace
 

@@ -3,7 +3,7 @@
 //   check    load a configuration and report every error
 //   softioc  serve EPICS database files over Channel Access (like EPICS softIoc)
 //   db       print the loaded database as .db text
-//   sim      run a simulated EtherCAT segment behind a UDP socket
+//   sim      run a simulated EtherCAT segment behind a UDP socket or on a network interface
 #include "ca/access_security.hpp"
 #include "ca/server.hpp"
 #include "core/error.hpp"
@@ -16,6 +16,7 @@
 #include "ethercat/catalog.hpp"
 #include "ioc/ioc.hpp"
 #include "rt/engine.hpp"
+#include "ethercat/sim/raw_server.hpp"
 #include "ethercat/sim/sim_config.hpp"
 
 #include <CLI/CLI.hpp>
@@ -104,17 +105,26 @@ int run_softioc(const DbOptions& o, const std::string& acf_path) {
 
 volatile bool g_sim_stop = false;
 
-int run_sim(const std::string& file, const std::string& bind, int port) {
+int run_sim(const std::string& file, const std::string& bind, int port, const std::string& iface, bool busy_poll) {
     const ethercat::Catalog& cat = ethercat::Catalog::builtin();
     ethercat::sim::SimConfig cfg = ethercat::sim::SimConfig::load(file, cat);
     if (cfg.slaves.empty()) throw Error(SB() << file << ": slaves: is required for beamctl sim");
     ethercat::sim::Segment seg;
     cfg.build(seg, cat);
-    ethercat::sim::UdpServer server(seg, bind, uint16_t(port));
     struct sigaction sa {};
     sa.sa_handler = [](int) { g_sim_stop = true; };
     sigaction(SIGINT, &sa, nullptr);
     sigaction(SIGTERM, &sa, nullptr);
+    if (!iface.empty()) {
+        ethercat::sim::RawServer server(seg, iface, busy_poll);
+        std::printf("ready: simulated segment of %zu slaves on interface %s\n", seg.size(), iface.c_str());
+        std::fflush(stdout);
+        server.run(g_sim_stop);
+        LOG_INFO(lg, "sim: served " << server.frames << " frames on " << iface << " (" << server.ignored
+                                    << " ignored, " << server.send_errors << " send errors)");
+        return 0;
+    }
+    ethercat::sim::UdpServer server(seg, bind, uint16_t(port));
     std::printf("ready: simulated segment of %zu slaves on udp %s:%u\n", seg.size(), bind.c_str(),
                 unsigned(server.port()));
     std::fflush(stdout);
@@ -158,18 +168,27 @@ int main(int argc, char** argv) {
     auto* checkcmd = app.add_subcommand("check", "Load an IOC configuration and report errors (exit 1 on any)");
     checkcmd->add_option("file", check_file, "IOC configuration")->required();
 
-    std::string sim_file, sim_bind = "127.0.0.1";
+    std::string sim_file, sim_bind = "127.0.0.1", sim_iface;
     int sim_port = 0x88A4;
-    auto* simcmd = app.add_subcommand("sim", "Run a simulated EtherCAT segment (SIM.yaml) behind UDP");
+    bool sim_busy_poll = false;
+    auto* simcmd = app.add_subcommand("sim", "Run a simulated EtherCAT segment (SIM.yaml) behind UDP or on an interface");
     simcmd->add_option("file", sim_file, "Simulator configuration (slaves:, wiring:)")->required();
-    simcmd->add_option("--udp", sim_port, "UDP port for EtherCAT frames (0: any free port)")
-        ->check(CLI::Range(0, 65535));
-    simcmd->add_option("--bind", sim_bind, "Address to bind (default 127.0.0.1)");
+    auto* sim_udp = simcmd->add_option("--udp", sim_port, "UDP port for EtherCAT frames (0: any free port)")
+                        ->check(CLI::Range(0, 65535));
+    auto* sim_bind_opt = simcmd->add_option("--bind", sim_bind, "Address to bind (default 127.0.0.1)");
+    auto* sim_iface_opt =
+        simcmd->add_option("--iface", sim_iface,
+                           "Serve raw EtherCAT frames on this network interface instead of UDP (root or CAP_NET_RAW)")
+            ->excludes(sim_udp)
+            ->excludes(sim_bind_opt);
+    simcmd->add_flag("--busy-poll", sim_busy_poll,
+                     "With --iface: spin on the socket instead of sleeping (answers at once like hardware; keeps a CPU busy)")
+        ->needs(sim_iface_opt);
 
     CLI11_PARSE(app, argc, argv);
     try {
         if (*softioc) return run_softioc(soft, acf);
-        if (*simcmd) return run_sim(sim_file, sim_bind, sim_port);
+        if (*simcmd) return run_sim(sim_file, sim_bind, sim_port, sim_iface, sim_busy_poll);
         if (*runcmd) {
             rt::MonotonicClock clock;
             ioc::Ioc ioc(config::IocConfig::load(run_file), clock);

@@ -122,19 +122,25 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
             bc.id = b["id"] ? int(get_uint(c, b["id"], where + ".id", 15)) : int(i);
             if (!ids.insert(bc.id).second) throw Error(SB() << c.at(b) << ": " << where << ": bus id " << bc.id << " used twice");
             if (auto l = b["link"]) {
-                only_keys(c, l, where + ".link", {"type", "plant", "host", "port", "iface"});
+                only_keys(c, l, where + ".link", {"type", "plant", "host", "port", "iface", "busy_poll"});
                 if (!l["type"]) throw Error(SB() << c.at(l) << ": " << where << ".link: missing 'type' (sim, udp or raw)");
                 bc.link.type = get<std::string>(c, l["type"], where + ".link.type");
                 if (bc.link.type != "sim" && bc.link.type != "udp" && bc.link.type != "raw")
                     throw Error(SB() << c.at(l["type"]) << ": " << where << ".link.type: '" << bc.link.type
                                      << "' should be sim, udp or raw");
-                if (bc.link.type == "raw")
-                    throw Error(SB() << c.at(l["type"]) << ": " << where
-                                     << ".link.type: raw (AF_PACKET) links are not supported by this version yet");
                 if (l["plant"]) bc.link.plant = c.resolve(get<std::string>(c, l["plant"], where + ".link.plant"));
                 if (l["host"]) bc.link.host = get<std::string>(c, l["host"], where + ".link.host");
                 if (l["port"]) bc.link.port = uint16_t(get_uint(c, l["port"], where + ".link.port", 65535));
                 if (l["iface"]) bc.link.iface = get<std::string>(c, l["iface"], where + ".link.iface");
+                if (auto bp = l["busy_poll"]) {
+                    bool v = false;
+                    if (!bp.IsScalar() || !YAML::convert<bool>::decode(bp, v))
+                        throw Error(SB() << c.at(bp) << ": " << where << ".link.busy_poll: should be true or false");
+                    bc.link.busy_poll = v;
+                }
+                if (bc.link.type == "raw" && bc.link.iface.empty())
+                    throw Error(SB() << c.at(l) << ": " << where
+                                     << ".link: a raw link needs 'iface' (the network interface of the segment)");
             }
             auto slaves = b["slaves"];
             if (!slaves || !slaves.IsSequence())

@@ -30,7 +30,8 @@ struct LinkConfig {
     std::string plant;        // sim: simulator file (wiring, plants), resolved path; may be empty
     std::string host = "127.0.0.1";
     uint16_t port = 0x88A4;   // udp
-    std::string iface;        // raw
+    std::string iface;        // raw: network interface of the segment
+    bool busy_poll = false;   // raw: spin in receive instead of sleeping (no wake-up latency)
 };
 
 struct BusConfig {

@@ -1,5 +1,6 @@
 #include "ethercat/bus.hpp"
 
+#include <chrono>
 #include <cstring>
 
 namespace beamctl::ethercat {
@@ -37,6 +38,7 @@ struct Bus::PublishStage : rt::Stage {
         s.wkc = m.wkc();
         s.expected_wkc = m.expected_wkc();
         s.frames_lost = m.frames_lost();
+        s.frames_late = m.frames_late();
         s.wkc_errors = m.wkc_errors();
         s.link_up = b.last_ != CycleStatus::FrameLost && b.last_ != CycleStatus::LinkError;
         s.wkc_ok = b.last_ == CycleStatus::Ok;
@@ -57,7 +59,25 @@ Bus::Bus(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, co
     publish_ = std::make_unique<PublishStage>(*this);
 }
 
-Bus::~Bus() = default;
+Bus::~Bus() { stop_health(); }
+
+void Bus::start_health(double period_s) {
+    if (health_.joinable()) return;
+    master_->start_cycling();
+    health_stop_ = false;
+    health_ = std::thread([this, period_s] {
+        while (!health_stop_.load()) {
+            master_->check_and_recover();
+            for (double t = 0; t < period_s && !health_stop_.load(); t += 0.01)
+                std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        }
+    });
+}
+
+void Bus::stop_health() {
+    health_stop_ = true;
+    if (health_.joinable()) health_.join();
+}
 
 void Bus::bring_up() {
     master_->bring_up();
@@ -70,6 +90,7 @@ void Bus::bring_up() {
 }
 
 void Bus::add_stages(rt::Engine& e) {
+    master_->set_cycle_time_ns(e.period_ns());
     e.add_stage(rt::StageOrder::BusReceive, *receive_);
     e.add_stage(rt::StageOrder::BusSend, *send_);
     e.add_stage(rt::StageOrder::Publish, *publish_);

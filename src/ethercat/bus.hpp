@@ -9,6 +9,7 @@
 #include "rt/engine.hpp"
 
 #include <memory>
+#include <thread>
 #include <vector>
 
 namespace beamctl::ethercat {
@@ -17,7 +18,7 @@ struct BusSnapshot {
     std::vector<uint8_t> image; // process image after the cycle's receive (outputs as sent)
     uint64_t cycle = 0;
     uint16_t wkc = 0, expected_wkc = 0;
-    uint64_t frames_lost = 0, wkc_errors = 0;
+    uint64_t frames_lost = 0, frames_late = 0, wkc_errors = 0;
     bool link_up = false;   // the last cyclic frame came back
     bool wkc_ok = false;    // the last WKC was the expected one
     std::vector<uint8_t> slave_al;     // per configured slave: AL status (state | 0x10 error)
@@ -39,6 +40,10 @@ public:
 
     void bring_up(); // non-RT, before the engine starts; throws Error
     void add_stages(rt::Engine& e);
+    // Starts the non-RT health thread (once the RT cycle runs): lost slaves are reported and
+    // brought back to OP when they return, using acyclic datagrams carried by the cycle.
+    void start_health(double period_s = 0.1);
+    void stop_health();
 
     // Non-RT: queue an output write for the next cycle. False if the queue is full.
     bool write(const SignalInfo& s, uint64_t value) noexcept;
@@ -68,6 +73,8 @@ private:
     std::unique_ptr<SendStage> send_;
     std::unique_ptr<PublishStage> publish_;
     CycleStatus last_ = CycleStatus::Ok;
+    std::thread health_;
+    std::atomic<bool> health_stop_{false};
 };
 
 } // namespace beamctl::ethercat

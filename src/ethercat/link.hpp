@@ -1,6 +1,6 @@
 // How the master reaches a segment: one interface, several transports (ethercat.md §5).
 //   InProcessLink: straight into a simulated segment in this process (the default, and tests).
-//   (UDP to `beamctl sim` and AF_PACKET raw sockets follow the same interface.)
+//   UdpLink: UDP to a `beamctl sim --udp` process; RawLink (raw_link.hpp): AF_PACKET on a NIC/veth.
 // send/receive are called from the master's thread only; they never allocate.
 #pragma once
 

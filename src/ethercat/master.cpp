@@ -7,6 +7,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <thread>
+#include <chrono>
 #include <cstring>
 #include <iomanip>
 #include <map>
@@ -20,6 +22,9 @@ log::Logger lg("ethercat.master");
 constexpr uint16_t kAlControl = 0x0120, kAlStatus = 0x0130, kSiiControl = 0x0502,
                    kSiiAddress = 0x0504, kSiiData = 0x0508, kFmmu = 0x0600, kSm = 0x0800;
 constexpr uint16_t kStationBase = 0x1001;
+constexpr uint8_t kAcyclicIdx = 0xFE; // tag of the acyclic datagram travelling with the cycle
+// Cyclic datagram index: bits 3-6 = cycle sequence (mod 16), bits 0-2 = frame number.
+constexpr std::size_t kMaxCyclicFrames = 8;
 
 std::string hex(uint32_t v, int w = 8) {
     std::ostringstream os;
@@ -122,6 +127,7 @@ std::string Master::slave_name(const SlaveInfo& s) const {
 }
 
 int Master::transact(uint8_t cmd, uint32_t addr, void* data, uint16_t len, int retries) {
+    if (cycling_.load(std::memory_order_acquire)) return transact_via_cycle(cmd, addr, data, len, retries);
     FrameBuilder f;
     for (int attempt = 0; attempt <= retries; ++attempt) {
         uint8_t idx = next_idx_;
@@ -203,12 +209,19 @@ bool Master::read_al_state(std::size_t i, uint8_t& state, uint16_t& code) {
 }
 
 void Master::request_state(uint8_t state, const char* name) {
-    for (auto& s : slaves_) {
+    std::vector<std::size_t> all(slaves_.size());
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = i;
+    request_state(all, state, name);
+}
+
+void Master::request_state(const std::vector<std::size_t>& which, uint8_t state, const char* name) {
+    for (std::size_t i : which) {
+        auto& s = slaves_[i];
         uint16_t v = state;
         if (transact(kFpwr, s.station, kAlControl, &v, 2) != 1)
             throw Error(SB() << slave_name(s) << ": no answer to the " << name << " request");
     }
-    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+    for (std::size_t i : which) {
         uint8_t st = 0;
         uint16_t code = 0;
         bool reached = false;
@@ -266,46 +279,20 @@ void Master::bring_up() {
         s.station = uint16_t(kStationBase + c.position);
         s.type = c.type;
         read_sii(s);
-        const DeviceDesc* want = catalog_.find(c.type);
-        if (s.sii.vendor != want->vendor || s.sii.product != want->product || s.sii.revision != want->revision) {
-            const DeviceDesc* got = catalog_.find(s.sii.vendor, s.sii.product, s.sii.revision);
-            throw Error(SB() << "ec" << bus_ << " position " << c.position << ": expected " << c.type
-                             << " (vendor " << hex(want->vendor) << ", product " << hex(want->product)
-                             << ", revision " << hex(want->revision) << "), found "
-                             << (got ? got->type : (s.sii.name.empty() ? std::string("an unknown device") : s.sii.name))
-                             << " (vendor " << hex(s.sii.vendor) << ", product " << hex(s.sii.product)
-                             << ", revision " << hex(s.sii.revision) << ")");
-        }
+        check_identity(s);
         slaves_.push_back(std::move(s));
     }
     // 5. Mailbox SMs from SII, then PREOP.
-    for (auto& s : slaves_) {
-        for (auto& sm : s.sii.sms) {
-            if (sm.type != SmType::MailboxOut && sm.type != SmType::MailboxIn) continue;
-            uint8_t r[8] = {};
-            bool out = sm.type == SmType::MailboxOut;
-            put_le16(r, out ? s.sii.rx_mbx_offset : s.sii.tx_mbx_offset);
-            put_le16(r + 2, out ? s.sii.rx_mbx_size : s.sii.tx_mbx_size);
-            r[4] = sm.control;
-            r[6] = 1;
-            if (transact(kFpwr, s.station, uint16_t(kSm + 8 * sm.index), r, 8) != 1)
-                throw Error(SB() << slave_name(s) << ": no answer while configuring mailbox SM" << int(sm.index));
-        }
-    }
+    for (auto& s : slaves_) configure_mailbox(s);
     request_state(2, "PREOP");
     // 6. PREOP: startup SDOs (ecmccfg order: before the PDO layout), then the PDO layout, read
     // over CoE where the slave has it.
-    for (std::size_t i = 0; i < slaves_.size(); ++i) {
-        for (const StartupSdo& sdo : cfg_[i].sdos) {
-            uint8_t b[8];
-            put_le64(b, sdo.value);
-            sdo_download(slaves_[i].position, sdo.index, sdo.sub, b, sdo.size);
-        }
-    }
+    for (std::size_t i = 0; i < slaves_.size(); ++i) apply_startup_sdos(i);
     for (auto& s : slaves_) read_pdo_layout(s);
     // 7. Process data: layout, SMs and FMMUs, SAFEOP; valid outputs, then OP.
     layout_process_image();
     configure_sms_and_fmmus();
+    configure_dc();
     build_cyclic_frames();
     request_state(4, "SAFEOP");
     for (int i = 0; i < 3; ++i) {
@@ -315,6 +302,11 @@ void Master::bring_up() {
     request_state(8, "OP");
     send_process_data();
     receive_process_data();
+    // The status poll saw SAFEOP during bring-up; start the cycle with the states just read.
+    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+        slave_al_[i].store(slaves_[i].al_state, std::memory_order_relaxed);
+        slave_online_[i].store(1, std::memory_order_relaxed);
+    }
     LOG_INFO(lg, "ec" << bus_ << ": " << slaves_.size() << " slave(s) in OP, image " << image_.size()
                       << " bytes (" << outputs_bytes_ << " out), expected WKC " << expected_wkc_);
 }
@@ -377,8 +369,47 @@ void Master::layout_process_image() {
     }
 }
 
+void Master::check_identity(const SlaveInfo& s) const {
+    const DeviceDesc* want = catalog_.find(s.type);
+    if (s.sii.vendor != want->vendor || s.sii.product != want->product || s.sii.revision != want->revision) {
+        const DeviceDesc* got = catalog_.find(s.sii.vendor, s.sii.product, s.sii.revision);
+        throw Error(SB() << "ec" << bus_ << " position " << s.position << ": expected " << s.type
+                         << " (vendor " << hex(want->vendor) << ", product " << hex(want->product)
+                         << ", revision " << hex(want->revision) << "), found "
+                         << (got ? got->type : (s.sii.name.empty() ? std::string("an unknown device") : s.sii.name))
+                         << " (vendor " << hex(s.sii.vendor) << ", product " << hex(s.sii.product)
+                         << ", revision " << hex(s.sii.revision) << ")");
+    }
+}
+
+void Master::configure_mailbox(const SlaveInfo& s) {
+    for (auto& sm : s.sii.sms) {
+        if (sm.type != SmType::MailboxOut && sm.type != SmType::MailboxIn) continue;
+        uint8_t r[8] = {};
+        bool out = sm.type == SmType::MailboxOut;
+        put_le16(r, out ? s.sii.rx_mbx_offset : s.sii.tx_mbx_offset);
+        put_le16(r + 2, out ? s.sii.rx_mbx_size : s.sii.tx_mbx_size);
+        r[4] = sm.control;
+        r[6] = 1;
+        if (transact(kFpwr, s.station, uint16_t(kSm + 8 * sm.index), r, 8) != 1)
+            throw Error(SB() << slave_name(s) << ": no answer while configuring mailbox SM" << int(sm.index));
+    }
+}
+
+void Master::apply_startup_sdos(std::size_t i) {
+    for (const StartupSdo& sdo : cfg_[i].sdos) {
+        uint8_t b[8];
+        put_le64(b, sdo.value);
+        sdo_download(slaves_[i].position, sdo.index, sdo.sub, b, sdo.size);
+    }
+}
+
 void Master::configure_sms_and_fmmus() {
-    for (auto& s : slaves_) {
+    for (auto& s : slaves_) configure_process_data(s);
+}
+
+void Master::configure_process_data(const SlaveInfo& s) {
+    {
         int fmmu = 0;
         uint32_t out_off = s.out_offset, in_off = s.in_offset;
         for (auto& sm : s.sii.sms) {
@@ -456,9 +487,25 @@ void Master::build_cyclic_frames() {
         status_frame_ = int(cyclic_.size() - 1);
         status_offset_ = uint32_t(at);
     }
-    slave_al_.assign(slaves_.size(), 0);
-    slave_online_.assign(slaves_.size(), 1);
-    for (std::size_t i = 0; i < slaves_.size(); ++i) slave_al_[i] = slaves_[i].al_state;
+    // The reference clock's time travels with the cycle (FRMW 0x0910): read at the reference,
+    // written to every later slave, which compares it with its own system time.
+    dc_frame_ = -1;
+    if (dc_ref_ >= 0) {
+        if (cyclic_.empty() || cyclic_.back().frame.room() < 8) cyclic_.emplace_back();
+        int at = cyclic_.back().frame.add(kFrmw, 0, slaves_[std::size_t(dc_ref_)].station, 0x0910, 8);
+        dc_frame_ = int(cyclic_.size() - 1);
+        dc_offset_ = uint32_t(at);
+    }
+    if (cyclic_.size() > kMaxCyclicFrames)
+        throw Error(SB() << "ec" << bus_ << ": process image of " << image_.size() << " bytes needs more than "
+                         << kMaxCyclicFrames << " frames per cycle");
+    slave_al_ = std::make_unique<std::atomic<uint8_t>[]>(slaves_.size());
+    slave_online_ = std::make_unique<std::atomic<uint8_t>[]>(slaves_.size());
+    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+        slave_al_[i] = slaves_[i].al_state;
+        slave_online_[i] = 1;
+    }
+    lost_.assign(slaves_.size(), 0);
     status_next_ = 0;
     for (std::size_t i = 0; i < cyclic_.size(); ++i) { // tag each frame by its index
         cyclic_[i].idx = uint8_t(i);
@@ -471,8 +518,12 @@ void Master::build_cyclic_frames() {
 
 CycleStatus Master::send_process_data() noexcept {
     CycleStatus st = CycleStatus::Ok;
-    for (auto& cf : cyclic_) {
+    seq_ = uint8_t((seq_ + 1) & 0x0F);
+    for (std::size_t fi = 0; fi < cyclic_.size(); ++fi) {
+        auto& cf = cyclic_[fi];
         uint8_t* f = cf.frame.data();
+        uint8_t tag = uint8_t(seq_ << 3 | fi);
+        for_each_datagram(f, cf.frame.size(), [&](Datagram& d) { d.hdr[1] = tag; });
         for (auto& p : cf.parts) {
             // Outputs from the image; the input part of the datagram is sent as zeros.
             uint32_t out_end = std::min(p.image_offset + p.len, outputs_bytes_);
@@ -488,7 +539,19 @@ CycleStatus Master::send_process_data() noexcept {
             status_sent_ = status_next_;
             status_next_ = status_next_ + 1 == slaves_.size() ? 0 : status_next_ + 1;
         }
+        if (dc_frame_ >= 0 && &cf == &cyclic_[std::size_t(dc_frame_)]) std::memset(f + dc_offset_, 0, 10);
         if (!link_.send(f, cf.frame.size())) st = CycleStatus::LinkError;
+    }
+    if (!acyc_in_flight_ && acyc_req_.pop(acyc_cur_)) {
+        acyc_frame_.reset();
+        int at = acyc_frame_.add(acyc_cur_.cmd, kAcyclicIdx, acyc_cur_.addr, acyc_cur_.len, acyc_cur_.data);
+        if (at >= 0 && link_.send(acyc_frame_.data(), acyc_frame_.size())) {
+            acyc_in_flight_ = true;
+        } else {
+            AcyclicReply r;
+            r.wkc = -1;
+            acyc_rep_.push(r);
+        }
     }
     return st;
 }
@@ -497,23 +560,47 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
     CycleStatus st = CycleStatus::Ok;
     uint32_t wkc = 0;
     std::size_t got = 0;
-    for (std::size_t k = 0; k < cyclic_.size(); ++k) {
+    std::size_t expect = cyclic_.size() + (acyc_in_flight_ ? 1 : 0);
+    for (std::size_t k = 0, guard = 0; k < expect && guard < expect + 16; ++k, ++guard) {
         std::size_t n = link_.receive(rx_.data(), rx_.size(), timeout_us);
         if (n == 0) {
-            frames_lost_ += cyclic_.size() - got;
-            st = CycleStatus::FrameLost;
+            if (got < cyclic_.size()) {
+                frames_lost_ += cyclic_.size() - got;
+                st = CycleStatus::FrameLost;
+            }
             break;
+        }
+        // A frame of an earlier cycle that came back after its time-out: too old, drop it.
+        if (n >= 2 + kDatagramOverhead) {
+            uint8_t idx = rx_[3];
+            if (idx != kAcyclicIdx && (idx >> 3 & 0x0F) != seq_) {
+                frames_late_++;
+                --k;
+                continue;
+            }
         }
         bool ok = for_each_datagram(rx_.data(), n, [&](Datagram& d) {
             if (d.cmd() == kFprd && d.ado() == 0x0130 && d.len() == 2 && status_sent_ < slaves_.size() &&
                 d.adp() == slaves_[status_sent_].station) {
                 bool answered = d.wkc() == 1;
-                slave_online_[status_sent_] = answered;
-                if (answered) slave_al_[status_sent_] = d.data[0];
+                slave_online_[status_sent_].store(answered, std::memory_order_relaxed);
+                if (answered) slave_al_[status_sent_].store(d.data[0], std::memory_order_relaxed);
                 return;
             }
-            if (d.cmd() != kLrw || d.idx() >= cyclic_.size()) return;
-            const CyclicFrame& cf = cyclic_[d.idx()];
+            if (d.cmd() == kFrmw && d.ado() == 0x0910 && d.len() == 8) {
+                if (d.wkc()) dc_time_.store(le64(d.data), std::memory_order_relaxed);
+                return;
+            }
+            if (d.idx() == kAcyclicIdx && acyc_in_flight_) {
+                AcyclicReply r;
+                r.wkc = d.wkc();
+                std::memcpy(r.data, d.data, std::min<std::size_t>(d.len(), kMaxAcyclic));
+                acyc_rep_.push(r);
+                acyc_in_flight_ = false;
+                return;
+            }
+            if (d.cmd() != kLrw || (d.idx() & 7) >= cyclic_.size()) return;
+            const CyclicFrame& cf = cyclic_[d.idx() & 7];
             for (auto& p : cf.parts) {
                 if (d.logical() != p.image_offset || d.len() != p.len) continue;
                 wkc += d.wkc();
@@ -529,6 +616,12 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
             st = CycleStatus::FrameLost;
         }
         ++got;
+    }
+    if (acyc_in_flight_) { // its frame did not come back: the requester retries
+        AcyclicReply r;
+        r.wkc = -1;
+        acyc_rep_.push(r);
+        acyc_in_flight_ = false;
     }
     wkc_ = uint16_t(wkc);
     if (st == CycleStatus::Ok && wkc_ != expected_wkc_) {
@@ -796,6 +889,169 @@ void Master::set(const SignalInfo& s, uint64_t v) {
         if (v >> i & 1) image_[b >> 3] |= uint8_t(1u << (b & 7));
         else image_[b >> 3] &= uint8_t(~(1u << (b & 7)));
     }
+}
+
+} // namespace beamctl::ethercat
+
+// ---- while cycling ---------------------------------------------------------------------------
+
+namespace beamctl::ethercat {
+
+int Master::transact_via_cycle(uint8_t cmd, uint32_t addr, void* data, uint16_t len, int retries) {
+    if (len > kMaxAcyclic) return -1;
+    AcyclicRequest req;
+    req.cmd = cmd;
+    req.addr = addr;
+    req.len = len;
+    std::memcpy(req.data, data, len);
+    for (int attempt = 0; attempt <= retries; ++attempt) {
+        while (!acyc_req_.push(req)) std::this_thread::sleep_for(std::chrono::microseconds(100));
+        AcyclicReply rep;
+        auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(500);
+        bool got = false;
+        while (std::chrono::steady_clock::now() < deadline) {
+            if (acyc_rep_.pop(rep)) {
+                got = true;
+                break;
+            }
+            std::this_thread::sleep_for(std::chrono::microseconds(100));
+        }
+        if (!got) return -1; // the cycle is not running
+        if (rep.wkc >= 0) {
+            std::memcpy(data, rep.data, len);
+            return rep.wkc;
+        }
+    }
+    return -1;
+}
+
+void Master::recover_slave(std::size_t i) {
+    SlaveInfo& s = slaves_[i];
+    uint16_t ack = 0x0011; // INIT, acknowledge any error
+    transact(kFpwr, s.station, kAlControl, &ack, 2);
+    uint8_t zeros[256] = {};
+    transact(kFpwr, s.station, kFmmu, zeros, 256);
+    transact(kFpwr, s.station, kSm, zeros, 128);
+    SlaveInfo fresh = s;
+    read_sii(fresh);
+    check_identity(fresh);
+    configure_mailbox(fresh);
+    request_state({i}, 2, "PREOP");
+    mbx_counter_.erase(s.position);
+    apply_startup_sdos(i);
+    SlaveInfo layout = fresh;
+    read_pdo_layout(layout);
+    auto bits = [](const SlaveInfo& x, bool out) {
+        uint32_t n = 0;
+        for (auto& [smi, pdo] : x.pdo_assign)
+            for (auto& p : out ? x.rx_pdos : x.tx_pdos)
+                if (p.index == pdo) n += p.bit_size();
+        return n;
+    };
+    if (bits(layout, true) != bits(s, true) || bits(layout, false) != bits(s, false))
+        throw Error(SB() << slave_name(s) << ": came back with a different PDO layout; restart the IOC");
+    configure_process_data(s);
+    request_state({i}, 4, "SAFEOP");
+    request_state({i}, 8, "OP");
+}
+
+int Master::check_and_recover() {
+    int recovered = 0;
+    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+        SlaveInfo& s = slaves_[i];
+        bool online = slave_online(i);
+        uint8_t al = slave_al_status(i);
+        if (online && al == 8) {
+            if (lost_[i]) {
+                lost_[i] = 0;
+                LOG_INFO(lg, slave_name(s) << ": back in OP");
+            }
+            continue;
+        }
+        if (!lost_[i]) {
+            lost_[i] = 1;
+            if (!online) LOG_WARN(lg, slave_name(s) << ": lost (no answer at station " << hex(s.station, 4) << ")");
+            else LOG_WARN(lg, slave_name(s) << ": left OP (AL status " << hex(al, 2) << ")");
+        }
+        if (!online) {
+            // Is something at its position again, without its station address (power cycle)?
+            uint16_t addr = 0xFFFF;
+            if (transact(kAprd, uint16_t(-s.position), 0x0010, &addr, 2, 0) != 1) continue;
+            // Only a slave without an address is ours to take: with a slave missing, positions
+            // shift and the one answering may be a neighbour that still has its own address.
+            if (addr == 0) {
+                uint16_t st = s.station;
+                if (transact(kApwr, uint16_t(-s.position), 0x0010, &st, 2) != 1) continue;
+            } else if (addr != s.station) {
+                continue;
+            }
+        }
+        try {
+            recover_slave(i);
+            ++recovered;
+            recoveries_++;
+            LOG_INFO(lg, slave_name(s) << ": configured again and back in OP");
+        } catch (const Error& e) {
+            LOG_WARN(lg, slave_name(s) << ": recovery failed: " << e.what());
+        }
+    }
+    return recovered;
+}
+
+} // namespace beamctl::ethercat
+
+namespace beamctl::ethercat {
+
+void Master::configure_dc() {
+    // Minimal distributed clocks (ethercat.md §4): latch receive times, delays from the reference
+    // (line topology), offsets so every slave's system time is the master's time, SYNC0 at the
+    // cycle time for slaves whose ESI asks for it (AssignActivate).
+    dc_ref_ = -1;
+    std::vector<std::size_t> dc;
+    for (std::size_t i = 0; i < slaves_.size(); ++i)
+        if (slaves_[i].sii.dc_assign_activate) dc.push_back(i);
+    if (dc.empty()) return;
+    dc_ref_ = int(dc.front());
+    uint32_t latch = 0;
+    if (transact(kBwr, 0, 0x0900, &latch, 4) < 1) throw Error(SB() << "ec" << bus_ << ": DC receive-time latch got no answer");
+    uint32_t t_ref = 0;
+    // One master timestamp for the latch: every slave's offset is computed against it.
+    auto t = std::chrono::system_clock::now().time_since_epoch();
+    uint64_t master_ns = uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(t).count()) -
+                         946684800ull * 1000000000ull; // EtherCAT epoch 2000-01-01
+    for (std::size_t k = 0; k < dc.size(); ++k) {
+        SlaveInfo& s = slaves_[dc[k]];
+        uint8_t rt[4] = {};
+        if (transact(kFprd, s.station, 0x0900, rt, 4) != 1)
+            throw Error(SB() << slave_name(s) << ": no answer reading DC receive times");
+        uint32_t t0 = le32(rt);
+        if (k == 0) t_ref = t0;
+        uint8_t delay[4];
+        put_le32(delay, t0 - t_ref);
+        uint8_t local[8] = {};
+        if (transact(kFprd, s.station, 0x0918, local, 8) != 1 || transact(kFpwr, s.station, 0x0928, delay, 4) != 1)
+            throw Error(SB() << slave_name(s) << ": no answer configuring DC delay");
+        uint8_t offset[8]; // system time = master time, seen through this slave's delay
+        put_le64(offset, master_ns + (t0 - t_ref) - le64(local));
+        if (transact(kFpwr, s.station, 0x0920, offset, 8) != 1)
+            throw Error(SB() << slave_name(s) << ": no answer configuring DC offset");
+        // SYNC0: deactivate, cycle time, start 100 ms ahead on a cycle boundary, activate.
+        uint16_t aa = s.sii.dc_assign_activate;
+        uint16_t off = 0;
+        uint8_t cyc[4];
+        put_le32(cyc, uint32_t(cycle_ns_));
+        uint8_t st[8] = {};
+        transact(kFprd, s.station, 0x0910, st, 8);
+        uint64_t start = (le64(st) + 100'000'000ull) / cycle_ns_ * cycle_ns_;
+        uint8_t start_b[8];
+        put_le64(start_b, start);
+        uint8_t act[2] = {uint8_t(aa), uint8_t(aa >> 8)};
+        if (transact(kFpwr, s.station, 0x0980, &off, 2) != 1 || transact(kFpwr, s.station, 0x09A0, cyc, 4) != 1 ||
+            transact(kFpwr, s.station, 0x0990, start_b, 8) != 1 || transact(kFpwr, s.station, 0x0980, act, 2) != 1)
+            throw Error(SB() << slave_name(s) << ": no answer configuring SYNC0");
+    }
+    LOG_INFO(lg, "ec" << bus_ << ": distributed clocks on " << dc.size() << " slave(s), reference "
+                      << slave_name(slaves_[std::size_t(dc_ref_)]) << ", SYNC0 every " << cycle_ns_ << " ns");
 }
 
 } // namespace beamctl::ethercat

@@ -11,7 +11,11 @@
 #include "ethercat/device.hpp"
 #include "ethercat/frame.hpp"
 #include "ethercat/link.hpp"
+#include "core/spsc_queue.hpp"
 #include "ethercat/sii.hpp"
+
+#include <atomic>
+#include <memory>
 
 #include <cstdint>
 #include <map>
@@ -103,10 +107,32 @@ public:
     uint16_t expected_wkc() const { return expected_wkc_; }
     uint64_t frames_lost() const { return frames_lost_; }
     uint64_t wkc_errors() const { return wkc_errors_; }
+    // Cyclic frames that came back after their cycle's receive time-out (dropped as too old).
+    uint64_t frames_late() const { return frames_late_; }
     // AL status byte (state | 0x10 error) and presence of slave i, from the rotating poll: each
     // slave is read once every slaves().size() cycles.
-    uint8_t slave_al_status(std::size_t i) const noexcept { return slave_al_[i]; }
-    bool slave_online(std::size_t i) const noexcept { return slave_online_[i]; }
+    uint8_t slave_al_status(std::size_t i) const noexcept { return slave_al_[i].load(std::memory_order_relaxed); }
+    bool slave_online(std::size_t i) const noexcept { return slave_online_[i].load(std::memory_order_relaxed); }
+
+    // ---- while cycling (non-RT) ----
+    // From now on transact() (and SII, SDO, state requests) travel as one extra datagram per
+    // cycle through the RT thread's frames instead of using the link directly. Call after
+    // bring_up(), before the RT thread starts.
+    void start_cycling() { cycling_.store(true, std::memory_order_release); }
+    // One health pass (non-RT thread, while cycling): a slave that stopped answering is reported
+    // once; a slave that answers again at its position (power-cycled: INIT, no station address)
+    // or left OP is configured again and brought back to OP while the others keep cycling.
+    // Returns the number of slaves brought back.
+    int check_and_recover();
+    uint64_t recoveries() const { return recoveries_.load(); }
+
+    // ---- distributed clocks ----
+    // Cycle time for SYNC0 of DC slaves [ns]; set before bring_up() (default 1 ms).
+    void set_cycle_time_ns(uint64_t ns) { cycle_ns_ = ns; }
+    // Index (in slaves()) of the reference clock: the first slave with DC, or -1.
+    int dc_reference() const { return dc_ref_; }
+    // The reference clock's system time as the last cycle's FRMW 0x0910 returned it [ns].
+    uint64_t dc_reference_time() const { return dc_time_.load(std::memory_order_relaxed); }
 
     // ---- diagnostics (non-RT) ----
     const std::vector<SignalInfo>& signals() const { return signals_; }
@@ -161,6 +187,14 @@ private:
     // Reads the slave->master mailbox; false if it was empty.
     bool read_mailbox(const SlaveInfo& s, std::vector<uint8_t>& buf, const std::string& ctx);
     void request_state(uint8_t state, const char* name);
+    void request_state(const std::vector<std::size_t>& which, uint8_t state, const char* name);
+    void check_identity(const SlaveInfo& s) const;
+    void configure_mailbox(const SlaveInfo& s);
+    void apply_startup_sdos(std::size_t i);
+    void configure_process_data(const SlaveInfo& s);
+    void recover_slave(std::size_t i);
+    void configure_dc();
+    int transact_via_cycle(uint8_t cmd, uint32_t addr, void* data, uint16_t len, int retries);
     void layout_process_image();
     void configure_sms_and_fmmus();
     void build_cyclic_frames();
@@ -178,7 +212,35 @@ private:
     int status_frame_ = -1;      // frame holding the rotating AL-status FPRD
     uint32_t status_offset_ = 0; // its data offset in that frame
     std::size_t status_next_ = 0, status_sent_ = ~std::size_t(0);
-    std::vector<uint8_t> slave_al_, slave_online_; // RT-written, read through the bus snapshot
+    std::unique_ptr<std::atomic<uint8_t>[]> slave_al_, slave_online_; // written by the RT thread
+
+    // Acyclic datagrams while cycling: one in flight, in its own frame after the cyclic ones.
+    static constexpr std::size_t kMaxAcyclic = 512;
+    struct AcyclicRequest {
+        uint8_t cmd = 0;
+        uint32_t addr = 0;
+        uint16_t len = 0;
+        uint8_t data[kMaxAcyclic];
+    };
+    struct AcyclicReply {
+        int wkc = -1;
+        uint8_t data[kMaxAcyclic];
+    };
+    std::atomic<bool> cycling_{false};
+    SpscQueue<AcyclicRequest> acyc_req_{2};
+    SpscQueue<AcyclicReply> acyc_rep_{2};
+    FrameBuilder acyc_frame_;
+    AcyclicRequest acyc_cur_;
+    bool acyc_in_flight_ = false;
+    std::vector<uint8_t> lost_; // health thread: slaves reported lost
+    std::atomic<uint64_t> recoveries_{0};
+    uint64_t cycle_ns_ = 1'000'000;
+    uint8_t seq_ = 0;          // cycle sequence (mod 16) carried in the cyclic datagram index
+    uint64_t frames_late_ = 0;
+    int dc_ref_ = -1;               // reference clock slave index
+    int dc_frame_ = -1;             // frame holding the FRMW 0x0910
+    uint32_t dc_offset_ = 0;        // its data offset in that frame
+    std::atomic<uint64_t> dc_time_{0};
     uint16_t wkc_ = 0, expected_wkc_ = 0;
     uint64_t frames_lost_ = 0, wkc_errors_ = 0;
     uint8_t next_idx_ = 0x80; // acyclic indices 0x80..0xFF; cyclic 0..0x7F

@@ -2,6 +2,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "ethercat/raw_link.hpp"
 #include "ethercat/sim/sim_config.hpp"
 #include "pv/convert.hpp"
 #include "pv/db_file.hpp"
@@ -116,6 +117,8 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
             link = std::make_unique<ethercat::InProcessLink>(*b.segment);
             b.sim_stage = std::make_unique<SimTimeStage>(*b.segment);
             engine_->add_stage(rt::StageOrder::BusSend, *b.sim_stage);
+        } else if (bc.link.type == "raw") {
+            link = std::make_unique<ethercat::RawLink>(bc.link.iface, bc.link.busy_poll);
         } else {
             link = std::make_unique<ethercat::UdpLink>(bc.link.host, bc.link.port);
         }
@@ -127,7 +130,10 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     for (const auto& d : cfg_.db) db_.load(pv::load_db_file(d.file, d.macros));
 }
 
-Ioc::~Ioc() { engine_->stop(); }
+Ioc::~Ioc() {
+    for (auto& b : buses_) b.bus->stop_health();
+    engine_->stop();
+}
 
 void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
     std::string m = SB() << cfg_.prefix << "m" << bc.id;
@@ -145,6 +151,7 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
     li(m + "-Dom-WC-Exp", "Expected working counter");
     bi(m + "-Dom-WC-Complete", "Working counter complete", "INCOMPLETE", "COMPLETE", true);
     li(m + "-MissedFrames", "Cyclic frames that did not come back");
+    li(m + "-LateFrames", "Cyclic frames back after the time-out");
     li(m + "-WkcErrors", "Cycles with a wrong working counter");
     f.records.push_back(record("ai", m + "-ThdLatMax", {{"DESC", "RT wake-up latency max"}, {"EGU", "us"}, {"PREC", "1"}}));
     f.records.push_back(record("ai", m + "-ThdExeMax", {{"DESC", "RT cycle execution time max"}, {"EGU", "us"}, {"PREC", "1"}}));
@@ -195,6 +202,7 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
     b.wc_expected = find(m + "-Dom-WC-Exp");
     b.wc_complete = find(m + "-Dom-WC-Complete");
     b.missed = find(m + "-MissedFrames");
+    b.late = find(m + "-LateFrames");
     b.wkc_errors = find(m + "-WkcErrors");
     b.lat_max = find(m + "-ThdLatMax");
     b.exe_max = find(m + "-ThdExeMax");
@@ -267,6 +275,7 @@ void Ioc::publish() {
         upd(b.wc_expected, s.expected_wkc);
         upd(b.wc_complete, s.wkc_ok ? 1 : 0);
         upd(b.missed, double(s.frames_lost));
+        upd(b.late, double(s.frames_late));
         upd(b.wkc_errors, double(s.wkc_errors));
         upd(b.lat_max, double(es.latency_max_ns) / 1000.0);
         upd(b.exe_max, double(es.exec_max_ns) / 1000.0);
@@ -296,6 +305,7 @@ int Ioc::run() {
     if (!cfg_.acf.empty()) server.set_access_security(ca::AccessSecurity::load_file(cfg_.acf));
     server.start();
     engine_->start();
+    for (auto& b : buses_) b.bus->start_health();
     sigset_t mask;
     sigemptyset(&mask);
     sigaddset(&mask, SIGTERM);
@@ -325,6 +335,7 @@ int Ioc::run() {
                 db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str());
     std::fflush(stdout);
     loop.run();
+    for (auto& b : buses_) b.bus->stop_health();
     engine_->stop();
     loop.remove_fd(sfd);
     ::close(sfd);

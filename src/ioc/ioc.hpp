@@ -53,7 +53,7 @@ private:
         std::unique_ptr<rt::Stage> sim_stage;
         std::vector<EntryPv> entries;
         pv::Record *stat_ok = nullptr, *link_up = nullptr, *slave_count = nullptr, *wc = nullptr,
-                   *wc_expected = nullptr, *wc_complete = nullptr, *missed = nullptr,
+                   *wc_expected = nullptr, *wc_complete = nullptr, *missed = nullptr, *late = nullptr,
                    *wkc_errors = nullptr, *lat_max = nullptr, *exe_max = nullptr;
         std::vector<std::pair<pv::Record*, pv::Record*>> slave_status; // Online, Operational
     };

@@ -100,7 +100,7 @@ bool Esc::read_phys(uint16_t ado, uint8_t* data, uint16_t len) noexcept {
     }
     if (ado <= reg::kDcSystemTime + 7 && end > reg::kDcSystemTime) {
         uint64_t offset = le64(&mem_[reg::kDcOffset]);
-        put_le64(&mem_[reg::kDcSystemTime], local_time_ns_ + offset);
+        put_le64(&mem_[reg::kDcSystemTime], local_time_ns_ + hop_delay_ns_ + offset); // as the frame passes
     }
     for (uint32_t i = 0; i < len; ++i) data[i] = mem_[(ado + i) & 0xFFFF];
     for (int n = 0; n < 8; ++n)
@@ -122,7 +122,7 @@ bool Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
         }
         if (ado <= s + l - 1 && end > s + l - 1) filled |= uint8_t(1u << n);
     }
-    bool al = false, sii = false, latch = false;
+    bool al = false, sii = false, latch = false, systime = false;
     uint8_t sm_written = 0;
     for (uint32_t i = 0; i < len; ++i) {
         uint32_t a = (ado + i) & 0xFFFF;
@@ -133,9 +133,19 @@ bool Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
         if (a == reg::kAlControl) al = true;
         if (a == reg::kSiiControl + 1) sii = true;
         if (a >= reg::kDcRecvTime && a < reg::kDcRecvTime + 4) latch = true;
+        if (a == reg::kDcSystemTime) systime = true;
     }
-    if (latch) { // a write to 0x0900 latches the receive time of every port (ideal: no delay)
-        uint64_t t = local_time_ns_;
+    if (systime && len >= 4) {
+        // The reference clock's time arrives (FRMW/ARMW): the difference to this slave's own
+        // system time, compensated by its delay, is what its drift control would act on.
+        uint64_t written = le64(&mem_[reg::kDcSystemTime]);
+        int64_t own = int64_t(system_time() + hop_delay_ns_); // when the frame passes here
+        int64_t diff = int64_t(written + le32(&mem_[reg::kDcDelay])) - own;
+        uint32_t mag = uint32_t(std::min<int64_t>(diff < 0 ? -diff : diff, 0x7FFFFFFF));
+        put_le32(&mem_[reg::kDcDiff], mag | (diff < 0 ? 0x80000000u : 0));
+    }
+    if (latch) { // a write to 0x0900 latches the receive time of every port
+        uint64_t t = local_time_ns_ + hop_delay_ns_;
         for (int p = 0; p < 4; ++p) put_le32(&mem_[reg::kDcRecvTime + 4 * p], uint32_t(t));
         put_le64(&mem_[reg::kDcRecvTimeEpu], t);
     }

@@ -53,6 +53,11 @@ public:
 
     // The slave's view of time (ns since 2000-01-01), advanced by the segment each frame.
     void set_local_time(uint64_t ns) noexcept { local_time_ns_ = ns; }
+    // Propagation delay from the master to this slave's port 0 [ns] (position x per-hop delay):
+    // what the receive-time latch (0x0900) adds to the ideal common clock.
+    void set_hop_delay(uint64_t ns) noexcept { hop_delay_ns_ = ns; }
+    // Local system time at this instant (local clock + offset) [ns since 2000-01-01].
+    uint64_t system_time() const noexcept { return local_time_ns_ + le64(&mem_[reg::kDcOffset]); }
 
     uint8_t al_state() const { return mem_[reg::kAlStatus] & 0x0F; }
     bool al_error() const { return mem_[reg::kAlStatus] & 0x10; }
@@ -95,6 +100,7 @@ private:
     std::vector<uint16_t> sii_;
     std::array<uint8_t, 65536> mem_{};
     uint64_t local_time_ns_ = 0;
+    uint64_t hop_delay_ns_ = 0;
     std::unique_ptr<CoeServer> coe_;
     int mbx_out_ = -1, mbx_in_ = -1; // SM indices of the mailboxes (-1: none)
     uint8_t last_counter_ = 0;       // counter of the last request served (repeat detection)

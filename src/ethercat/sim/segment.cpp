@@ -9,6 +9,7 @@ Esc& Segment::add(const DeviceDesc& desc) {
     const DeviceDesc& d = *descs_.back();
     slaves_.push_back(Slot{std::make_unique<Esc>(d, build_sii(d)), &d, true});
     slaves_.back().esc->set_local_time(time_ns_);
+    slaves_.back().esc->set_hop_delay(kHopDelayNs * (slaves_.size() - 1));
     return *slaves_.back().esc;
 }
 
@@ -23,6 +24,7 @@ void Segment::replug(std::size_t position) {
     Slot& s = slaves_.at(position);
     s.esc = std::make_unique<Esc>(*s.desc, build_sii(*s.desc));
     s.esc->set_local_time(time_ns_);
+    s.esc->set_hop_delay(kHopDelayNs * position);
     s.plugged = true;
 }
 

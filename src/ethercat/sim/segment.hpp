@@ -16,6 +16,7 @@ namespace beamctl::ethercat::sim {
 
 class Segment {
 public:
+    static constexpr uint64_t kHopDelayNs = 150; // propagation delay per slave (E-bus + ESC)
     Segment() = default;
     // Appends a slave of this device type at the next position; its SII comes from build_sii.
     Esc& add(const DeviceDesc& desc);

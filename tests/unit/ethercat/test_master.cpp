@@ -246,3 +246,77 @@ TEST(Master, RotatingStatusPollSeesEverySlaveAndALostOne) {
     }
     EXPECT_EQ(m.slave_al_status(3), 0x14);
 }
+
+TEST(Master, DistributedClocksDelaysOffsetsSync0AndReferenceTime) {
+    Bus b({"EK1100", "EL1008", "EL7211", "EL2008", "EL5042"});
+    b.seg.set_time(5'000'000'000ull);
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.set_cycle_time_ns(500'000);
+    m.bring_up();
+    ASSERT_EQ(m.dc_reference(), 2); // the first slave with DC: EL7211
+    auto reg32 = [&](int pos, uint16_t a) { return le32(b.seg.slave(pos).memory() + a); };
+    // Delays from the reference: 2 hops further for EL5042 (positions 2 -> 4).
+    EXPECT_EQ(reg32(2, 0x0928), 0u);
+    EXPECT_EQ(reg32(4, 0x0928), 2 * sim::Segment::kHopDelayNs);
+    // SYNC0 configured: cycle time and AssignActivate (EL7211 0x0700, EL5042 0x0300).
+    EXPECT_EQ(reg32(2, 0x09A0), 500'000u);
+    EXPECT_EQ(b.seg.slave(2).memory()[0x0981], 0x07);
+    EXPECT_EQ(b.seg.slave(4).memory()[0x0981], 0x03);
+    EXPECT_EQ(b.seg.slave(1).memory()[0x0981], 0x00); // EL1008 has no DC
+    // All DC slaves share one system time; every cycle the reference time travels to the others.
+    EXPECT_EQ(b.seg.slave(2).system_time(), b.seg.slave(4).system_time());
+    b.seg.set_time(5'000'500'000ull);
+    m.send_process_data();
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::Ok);
+    // The reference's time as the frame passed it (2 hops from the master).
+    EXPECT_EQ(m.dc_reference_time(), b.seg.slave(2).system_time() + 2 * sim::Segment::kHopDelayNs);
+    // EL5042 compares it, plus its delay, with its own time as the frame passes: no difference.
+    EXPECT_EQ(reg32(4, 0x092C), 0u);
+}
+
+namespace {
+// Holds back one returning frame (it "arrives" after the cycle's time-out) and delivers it
+// first in the next cycle, as a slow wire would.
+struct LateLink : Link {
+    Link& inner;
+    bool hold_next = false;
+    std::vector<uint8_t> held;
+    explicit LateLink(Link& l) : inner(l) {}
+    bool send(const uint8_t* f, std::size_t n) noexcept override { return inner.send(f, n); }
+    std::size_t receive(uint8_t* buf, std::size_t cap, int t) noexcept override {
+        if (!held.empty() && !hold_next) {
+            std::size_t n = held.size();
+            std::memcpy(buf, held.data(), n);
+            held.clear();
+            return n;
+        }
+        std::size_t n = inner.receive(buf, cap, t);
+        if (n && hold_next) {
+            held.assign(buf, buf + n);
+            hold_next = false;
+            return 0;
+        }
+        return n;
+    }
+    const char* kind() const noexcept override { return "late"; }
+};
+} // namespace
+
+TEST(Master, AFrameThatComesBackLateIsDroppedNotUsedByTheNextCycle) {
+    Bus b({"EK1100", "EL1008"});
+    LateLink late(b.link);
+    Master m(late, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    const SignalInfo* i1 = m.find_signal("ec0.s1.binaryInput01");
+    *b.seg.slave(1).sm_buffer(0) = 0x01; // this value travels in the late frame
+    late.hold_next = true;
+    m.send_process_data();
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::FrameLost);
+    EXPECT_EQ(m.get(*i1), 0u);
+    *b.seg.slave(1).sm_buffer(0) = 0x00; // the next cycle reads the new value
+    m.send_process_data();
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::Ok);
+    EXPECT_EQ(m.get(*i1), 0u);
+    EXPECT_EQ(m.frames_late(), 1u);
+    EXPECT_EQ(m.frames_lost(), 1u);
+}

@@ -8,6 +8,9 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <thread>
+
 using namespace beamctl;
 
 namespace {
@@ -133,4 +136,41 @@ TEST(Engine, QueuedOutputWriteReachesTheSlaveInTheNextCycle) {
     EXPECT_EQ(*seg.slave(1).sm_buffer(0), 0);
     e.run_cycles(1); // sent in the next
     EXPECT_EQ(*seg.slave(1).sm_buffer(0), 0x10);
+}
+
+// Real time on a thread (the health thread needs the cycle to carry its datagrams): only
+// behaviour is asserted, with generous time-outs.
+TEST(Engine, LostSlaveIsRecoveredWhileTheOthersKeepCycling) {
+    const auto& cat = ethercat::Catalog::builtin();
+    ethercat::sim::Segment seg;
+    std::vector<ethercat::SlaveConfig> cfg;
+    const char* types[] = {"EK1100", "EL2008", "EL7041", "EL1008"};
+    for (int i = 0; i < 4; ++i) {
+        seg.add(*cat.find(types[i]));
+        cfg.push_back({i, types[i]});
+    }
+    cfg[2].sdos.push_back({0x8010, 1, 900, 2}); // startup SDO, applied again on recovery
+    ethercat::Bus bus(0, std::make_unique<ethercat::InProcessLink>(seg), cfg, cat);
+    bus.bring_up();
+    rt::MonotonicClock clock;
+    rt::Engine e({1000}, clock);
+    bus.add_stages(e);
+    e.start();
+    bus.start_health(0.02);
+    auto& m = bus.master();
+    auto wait = [](auto pred) {
+        for (int i = 0; i < 1000 && !pred(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        return pred();
+    };
+    EXPECT_TRUE(wait([&] { return m.slave_online(2) && m.slave_al_status(2) == 8; }));
+    seg.unplug(2);
+    EXPECT_TRUE(wait([&] { return !m.slave_online(2); }));
+    EXPECT_TRUE(m.slave_online(3)); // the others keep cycling
+    seg.replug(2); // powered up again: INIT, no station address
+    EXPECT_TRUE(wait([&] { return m.recoveries() == 1 && m.slave_online(2) && m.slave_al_status(2) == 8; }));
+    EXPECT_TRUE(wait([&] { return bus.snapshot().wkc_ok; }));
+    bus.stop_health();
+    e.stop();
+    EXPECT_EQ(seg.slave(2).al_state(), 8);
+    EXPECT_EQ(seg.slave(2).station_address(), 0x1003);
 }
