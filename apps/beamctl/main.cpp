@@ -10,6 +10,7 @@
 #include "core/event_loop.hpp"
 #include "core/log.hpp"
 #include "core/macros.hpp"
+#include "core/signals.hpp"
 #include "pv/database.hpp"
 #include "pv/db_file.hpp"
 #include "config/ioc_config.hpp"
@@ -24,7 +25,6 @@
 #include <csignal>
 #include <cstdio>
 #include <iostream>
-#include <sys/signalfd.h>
 #include <unistd.h>
 
 #ifndef BEAMCTL_VERSION
@@ -64,33 +64,8 @@ int run_softioc(const DbOptions& o, const std::string& acf_path) {
     server.start();
 
     // Signals: TERM/INT stop cleanly, HUP reloads the access-security file.
-    sigset_t mask;
-    sigemptyset(&mask);
-    sigaddset(&mask, SIGTERM);
-    sigaddset(&mask, SIGINT);
-    sigaddset(&mask, SIGHUP);
-    sigprocmask(SIG_BLOCK, &mask, nullptr);
-    int sfd = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC);
-    loop.add_fd(sfd, 1 /*EPOLLIN*/, [&](uint32_t) {
-        signalfd_siginfo si;
-        while (::read(sfd, &si, sizeof si) == sizeof si) {
-            if (si.ssi_signo == SIGHUP) {
-                if (acf_path.empty()) {
-                    LOG_WARN(lg, "SIGHUP: no access-security file to reload (use --acf)");
-                    continue;
-                }
-                try {
-                    server.set_access_security(ca::AccessSecurity::load_file(acf_path));
-                    LOG_INFO(lg, "access security reloaded from " << acf_path);
-                } catch (const Error& e) {
-                    LOG_ERR(lg, "access security reload failed, keeping the previous rules: " << e.what());
-                }
-            } else {
-                LOG_INFO(lg, "signal " << si.ssi_signo << ": stopping");
-                loop.stop();
-            }
-        }
-    });
+    LoopSignals signals(loop, acf_path.empty() ? std::function<void()>()
+                                               : [&] { server.reload_access_security(acf_path); });
     if (!db.records().empty()) loop.call_every(0.01, [&db] { db.scan_periodic(EventLoop::now_s()); });
 
     std::printf("ready: CA on %s, %zu PVs\n", server.listen_description().c_str(), db.size());
@@ -98,8 +73,6 @@ int run_softioc(const DbOptions& o, const std::string& acf_path) {
                 unsigned(server.udp_port()));
     std::fflush(stdout);
     loop.run();
-    loop.remove_fd(sfd);
-    ::close(sfd);
     return 0;
 }
 

@@ -334,6 +334,17 @@ void Server::set_access_security(AccessSecurity acf) {
     refresh_all_rights();
 }
 
+bool Server::reload_access_security(const std::string& path) {
+    try {
+        set_access_security(AccessSecurity::load_file(path));
+        LOG_INFO(lg, "access security reloaded from " << path);
+        return true;
+    } catch (const Error& e) {
+        LOG_ERR(lg, "access security reload failed, keeping the previous rules: " << e.what());
+        return false;
+    }
+}
+
 void Server::refresh_all_rights() {
     for (auto& [fd, c] : conns_) {
         c->circuit->refresh_rights();

@@ -62,6 +62,8 @@ public:
     std::string listen_description() const; // "127.0.0.1:5064" etc.
     // Replaces the access-security configuration; rights of open channels are re-sent.
     void set_access_security(AccessSecurity acf);
+    // Loads an ACF file and applies it; on an error logs it and keeps the current rules.
+    bool reload_access_security(const std::string& path);
     const ServerStats& stats() const { return ctx_.stats; }
     std::size_t client_count() const { return conns_.size(); }
 

@@ -2,6 +2,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "core/signals.hpp"
 #include "ethercat/raw_link.hpp"
 #include "ethercat/sim/sim_config.hpp"
 #include "pv/convert.hpp"
@@ -11,7 +12,6 @@
 #include <cinttypes>
 #include <csignal>
 #include <cstdio>
-#include <sys/signalfd.h>
 #include <unistd.h>
 
 namespace beamctl::ioc {
@@ -306,29 +306,8 @@ int Ioc::run() {
     server.start();
     engine_->start();
     for (auto& b : buses_) b.bus->start_health();
-    sigset_t mask;
-    sigemptyset(&mask);
-    sigaddset(&mask, SIGTERM);
-    sigaddset(&mask, SIGINT);
-    sigaddset(&mask, SIGHUP);
-    sigprocmask(SIG_BLOCK, &mask, nullptr);
-    int sfd = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC);
     std::string acf = cfg_.acf;
-    loop.add_fd(sfd, 1, [&](uint32_t) {
-        signalfd_siginfo si;
-        while (::read(sfd, &si, sizeof si) == sizeof si) {
-            if (si.ssi_signo == SIGHUP && !acf.empty()) {
-                try {
-                    server.set_access_security(ca::AccessSecurity::load_file(acf));
-                    LOG_INFO(lg, "access security reloaded from " << acf);
-                } catch (const Error& e) {
-                    LOG_ERR(lg, "access security reload failed, keeping the previous rules: " << e.what());
-                }
-            } else if (si.ssi_signo != SIGHUP) {
-                loop.stop();
-            }
-        }
-    });
+    LoopSignals signals(loop, acf.empty() ? std::function<void()>() : [&] { server.reload_access_security(acf); });
     loop.call_every(0.01, [this] { publish(); });
     loop.call_every(0.01, [this] { db_.scan_periodic(EventLoop::now_s()); });
     std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)\n", server.listen_description().c_str(),
@@ -337,8 +316,6 @@ int Ioc::run() {
     loop.run();
     for (auto& b : buses_) b.bus->stop_health();
     engine_->stop();
-    loop.remove_fd(sfd);
-    ::close(sfd);
     return 0;
 }
 

@@ -4,9 +4,26 @@
 #include <cstdlib>
 #include <new>
 
+// Every form of global operator new/delete is replaced (plain, array, nothrow, aligned), all on
+// malloc/aligned_alloc/free, so allocation and deallocation always match (ASan checks that).
+
 namespace {
 std::atomic<bool> g_on{false};
 std::atomic<long> g_count{0};
+
+void* allocate(std::size_t n, std::size_t align, bool nothrow) {
+    if (g_on.load(std::memory_order_relaxed)) g_count.fetch_add(1, std::memory_order_relaxed);
+    if (n == 0) n = 1;
+    void* p = nullptr;
+    if (align <= alignof(std::max_align_t)) {
+        p = std::malloc(n);
+    } else {
+        std::size_t rounded = (n + align - 1) / align * align;
+        p = std::aligned_alloc(align, rounded);
+    }
+    if (!p && !nothrow) throw std::bad_alloc();
+    return p;
+}
 } // namespace
 
 namespace beamctl::test {
@@ -17,13 +34,27 @@ void count_allocations(bool on) {
 long allocations() { return g_count.load(); }
 } // namespace beamctl::test
 
-void* operator new(std::size_t n) {
-    if (g_on.load(std::memory_order_relaxed)) g_count.fetch_add(1, std::memory_order_relaxed);
-    if (void* p = std::malloc(n ? n : 1)) return p;
-    throw std::bad_alloc();
+void* operator new(std::size_t n) { return allocate(n, 0, false); }
+void* operator new[](std::size_t n) { return allocate(n, 0, false); }
+void* operator new(std::size_t n, const std::nothrow_t&) noexcept { return allocate(n, 0, true); }
+void* operator new[](std::size_t n, const std::nothrow_t&) noexcept { return allocate(n, 0, true); }
+void* operator new(std::size_t n, std::align_val_t a) { return allocate(n, std::size_t(a), false); }
+void* operator new[](std::size_t n, std::align_val_t a) { return allocate(n, std::size_t(a), false); }
+void* operator new(std::size_t n, std::align_val_t a, const std::nothrow_t&) noexcept {
+    return allocate(n, std::size_t(a), true);
 }
-void* operator new[](std::size_t n) { return operator new(n); }
+void* operator new[](std::size_t n, std::align_val_t a, const std::nothrow_t&) noexcept {
+    return allocate(n, std::size_t(a), true);
+}
 void operator delete(void* p) noexcept { std::free(p); }
 void operator delete[](void* p) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
+void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
