@@ -190,6 +190,7 @@ bool Esc::logical(Datagram& d, bool read, bool write, uint16_t& wkc) noexcept {
         if (fw && write) {
             copy_bits(d.data, frame_bit, mem_.data(), phys_bit, bits);
             did_write = true;
+            last_output_ns_ = local_time_ns_;
         }
     }
     if (did_read) wkc += 1;
@@ -276,6 +277,7 @@ uint16_t Esc::read_write(uint16_t ado, uint8_t* data, uint16_t len, uint8_t* tmp
 }
 
 void Esc::run_firmware() noexcept {
+    check_watchdog();
     if (mbx_out_ < 0 || mbx_in_ < 0) return;
     const uint8_t* r0 = &mem_[reg::kSm + 8 * mbx_out_];
     const uint8_t* r1 = &mem_[reg::kSm + 8 * mbx_in_];
@@ -347,7 +349,26 @@ void Esc::sii_command() noexcept {
     put_le16(&mem_[reg::kSiiControl], ctl | 0x0040); // never busy: the command completed
 }
 
+void Esc::check_watchdog() noexcept {
+    // SM watchdog (ethercat.md §3): in OP, an output SM with its watchdog enabled (control bit 6)
+    // that receives no data for divider x time (0x0400 x 0x0420 x 40 ns; 100 ms by default)
+    // takes the slave to SAFEOP with error 0x001B.
+    if (al_state() != kOp) return;
+    uint64_t wd_ns = uint64_t(le16(&mem_[reg::kWdDivider]) + 2) * 40 * le16(&mem_[reg::kWdProcessData]);
+    if (wd_ns == 0 || local_time_ns_ < last_output_ns_ + wd_ns) return;
+    for (int n = 0; n < 8; ++n) {
+        const uint8_t* r = &mem_[reg::kSm + 8 * n];
+        bool ecat_writes = (r[4] & 0x0C) == 0x04, watchdog = r[4] & 0x40, mailbox = (r[4] & 0x03) == 0x02;
+        if ((r[6] & 1) && ecat_writes && watchdog && !mailbox) {
+            ++watchdog_trips;
+            set_al(kSafeop, kAlSmWatchdog);
+            return;
+        }
+    }
+}
+
 void Esc::set_al(uint8_t state, uint16_t code) noexcept {
+    if (state == kOp && al_state() != kOp) last_output_ns_ = local_time_ns_; // the watchdog starts now
     mem_[reg::kAlStatus] = uint8_t(state | (code ? 0x10 : 0));
     mem_[reg::kAlStatus + 1] = 0;
     put_le16(&mem_[reg::kAlStatusCode], code);

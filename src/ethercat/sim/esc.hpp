@@ -80,6 +80,7 @@ public:
     // Counters of what the slave saw (for tests and diagnostics).
     uint64_t frames_seen = 0;
     uint64_t output_writes = 0; // logical writes that reached an output FMMU
+    uint64_t watchdog_trips = 0; // OP -> SAFEOP by the SM watchdog
     uint64_t mailbox_requests = 0, mailbox_rejected_writes = 0;
 
 private:
@@ -95,12 +96,14 @@ private:
     bool check_mailbox_sms() const noexcept;
     uint16_t check_process_sms() const noexcept; // 0 or the AL status code
     void set_al(uint8_t state, uint16_t code) noexcept;
+    void check_watchdog() noexcept;
 
     DeviceDesc desc_;
     std::vector<uint16_t> sii_;
     std::array<uint8_t, 65536> mem_{};
     uint64_t local_time_ns_ = 0;
     uint64_t hop_delay_ns_ = 0;
+    uint64_t last_output_ns_ = 0; // local time of the last process-data write (SM watchdog)
     std::unique_ptr<CoeServer> coe_;
     int mbx_out_ = -1, mbx_in_ = -1; // SM indices of the mailboxes (-1: none)
     uint8_t last_counter_ = 0;       // counter of the last request served (repeat detection)

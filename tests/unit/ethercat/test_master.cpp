@@ -320,3 +320,25 @@ TEST(Master, AFrameThatComesBackLateIsDroppedNotUsedByTheNextCycle) {
     EXPECT_EQ(m.frames_late(), 1u);
     EXPECT_EQ(m.frames_lost(), 1u);
 }
+
+TEST(Master, SmWatchdogTakesASlaveWithoutOutputDataToSafeop) {
+    Bus b({"EK1100", "EL2008", "EL1008"});
+    b.seg.set_time(1'000'000'000ull);
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    // Cycling every 1 ms for 300 ms keeps the outputs alive.
+    for (int i = 1; i <= 300; ++i) {
+        b.seg.set_time(1'000'000'000ull + i * 1'000'000ull);
+        m.send_process_data();
+        m.receive_process_data();
+    }
+    EXPECT_EQ(b.seg.slave(1).al_state(), 8);
+    // 150 ms without process data (default watchdog 100 ms), then any frame passes.
+    b.seg.set_time(1'450'000'000ull);
+    uint16_t v = 0;
+    m.transact(kBrd, 0, 0x0130, &v, 2);
+    EXPECT_EQ(b.seg.slave(1).al_state(), 4);                 // EL2008 has a watched output SM
+    EXPECT_EQ(b.seg.slave(1).al_status_code(), 0x001B);
+    EXPECT_TRUE(b.seg.slave(1).al_error());
+    EXPECT_EQ(b.seg.slave(2).al_state(), 8);                 // EL1008 has no outputs
+}
