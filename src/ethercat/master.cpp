@@ -454,9 +454,8 @@ void Master::build_cyclic_frames() {
     cyclic_.clear();
     expected_wkc_ = 0;
     uint32_t off = 0, total = uint32_t(image_.size());
-    uint8_t idx = 0;
     cyclic_.emplace_back();
-    while (off < total || (total == 0 && cyclic_.back().parts.empty() && false)) {
+    while (off < total) {
         CyclicFrame* cf = &cyclic_.back();
         std::size_t room = cf->frame.room();
         if (room < 16) {
@@ -465,7 +464,7 @@ void Master::build_cyclic_frames() {
             room = cf->frame.room();
         }
         uint32_t len = uint32_t(std::min<std::size_t>(room, total - off));
-        int at = cf->frame.add(kLrw, idx, off, uint16_t(len));
+        int at = cf->frame.add(kLrw, 0, off, uint16_t(len)); // index set per cycle when sent
         // Expected WKC of this datagram: +2 per slave whose outputs overlap, +1 per inputs.
         uint16_t exp = 0;
         for (auto& s : slaves_) {
@@ -473,7 +472,6 @@ void Master::build_cyclic_frames() {
             if (s.in_bytes && s.in_offset < off + len && s.in_offset + s.in_bytes > off) exp += 1;
         }
         cf->parts.push_back({uint32_t(at), off, len, exp});
-        cf->idx = idx;
         expected_wkc_ = uint16_t(expected_wkc_ + exp);
         off += len;
     }
@@ -507,13 +505,6 @@ void Master::build_cyclic_frames() {
     }
     lost_.assign(slaves_.size(), 0);
     status_next_ = 0;
-    for (std::size_t i = 0; i < cyclic_.size(); ++i) { // tag each frame by its index
-        cyclic_[i].idx = uint8_t(i);
-        for_each_datagram(cyclic_[i].frame.data(), cyclic_[i].frame.size(), [&](Datagram& d) {
-            d.hdr[1] = uint8_t(i);
-        });
-    }
-    (void)idx;
 }
 
 CycleStatus Master::send_process_data() noexcept {

@@ -173,7 +173,6 @@ private:
             uint16_t expected_wkc;
         };
         std::vector<Part> parts;
-        uint8_t idx = 0;
     };
 
     void read_sii(SlaveInfo& s);

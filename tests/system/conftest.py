@@ -276,6 +276,17 @@ class IocServer:
         return 0
 
 
+class RunServer(IocServer):
+    """One `beamctl run ioc.yaml` process on a pool port (same life cycle as IocServer)."""
+
+    def __init__(self, workdir, config, port):
+        super().__init__(workdir, [], port, name="run")
+        self.config = str(config)
+
+    def argv(self):
+        return [str(BEAMCTL), "run", self.config]
+
+
 class IocFactory:
     def __init__(self, tmp_path, prefix):
         self.tmp_path = Path(tmp_path)

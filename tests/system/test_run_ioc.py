@@ -7,7 +7,7 @@ import time
 import pytest
 from epics import ca
 
-from conftest import BEAMCTL, IocServer, acquire_port, connect, forget_pvs, release_port, require_binary, wait_for
+from conftest import BEAMCTL, IocServer, RunServer, acquire_port, connect, forget_pvs, release_port, require_binary, wait_for
 
 IOC = """
 ioc: {{name: {name}, prefix: "{prefix}"}}
@@ -28,15 +28,6 @@ wiring:
   - {from: s1.binaryOutput03, to: s2.binaryInput05}
   - {from: s1.binaryOutput04, to: s2.binaryInput06}
 """
-
-
-class RunServer(IocServer):
-    def __init__(self, workdir, config, port):
-        super().__init__(workdir, [], port, name="run")
-        self.config = str(config)
-
-    def argv(self):
-        return [str(BEAMCTL), "run", self.config]
 
 
 @pytest.fixture

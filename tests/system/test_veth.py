@@ -12,7 +12,7 @@ import time
 import pytest
 from epics import ca
 
-from conftest import (BEAMCTL, REPO_ROOT, IocServer, acquire_port, connect, forget_pvs, release_port,
+from conftest import (BEAMCTL, REPO_ROOT, IocServer, RunServer, acquire_port, connect, forget_pvs, release_port,
                       require_binary, wait_for)
 
 DIO = REPO_ROOT / "examples" / "sim" / "dio.yaml"
@@ -79,15 +79,6 @@ class SimServer(IocServer):
 
     def argv(self):
         return ["ip", "netns", "exec", self.ns, str(BEAMCTL), "sim", str(DIO), "--iface", self.iface]
-
-
-class RunServer(IocServer):
-    def __init__(self, workdir, config, port):
-        super().__init__(workdir, [], port, name="run")
-        self.config = str(config)
-
-    def argv(self):
-        return [str(BEAMCTL), "run", self.config]
 
 
 @pytest.fixture

@@ -7,6 +7,8 @@
 #include "ethercat/master.hpp"
 #include "ethercat/sim/segment.hpp"
 
+#include "sim_bus.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -14,27 +16,12 @@
 
 using namespace beamctl;
 using namespace beamctl::ethercat;
+using beamctl::ethercat::simbus::Bus;
+using beamctl::ethercat::simbus::demo;
+using beamctl::ethercat::simbus::kDemo;
 
 namespace {
 
-const char* kDemo[] = {"EK1100", "EL1008", "EL1008", "EL2008", "EL2808", "EL3104", "EL4134",
-                       "EL5101", "EL7041", "EL7211", "EL5042", "EL3102", "EL4102", "EL1252"};
-
-struct Bus {
-    sim::Segment seg;
-    InProcessLink link{seg};
-    std::vector<SlaveConfig> cfg;
-    explicit Bus(std::vector<std::string> types) {
-        for (std::size_t i = 0; i < types.size(); ++i) {
-            seg.add(*Catalog::builtin().find(types[i]));
-            cfg.push_back({int(i), types[i]});
-        }
-    }
-};
-
-std::vector<std::string> demo() {
-    return std::vector<std::string>(std::begin(kDemo), std::end(kDemo));
-}
 
 uint16_t station(int position) {
     return uint16_t(0x1001 + position);

@@ -7,32 +7,15 @@
 #include "ethercat/master.hpp"
 #include "ethercat/sim/segment.hpp"
 
-#include <gtest/gtest.h>
+#include "sim_bus.hpp"
 
+#include <gtest/gtest.h>
 
 using namespace beamctl;
 using namespace beamctl::ethercat;
-
-namespace {
-
-const char* kDemo[] = {"EK1100", "EL1008", "EL1008", "EL2008", "EL2808", "EL3104", "EL4134",
-                       "EL5101", "EL7041", "EL7211", "EL5042", "EL3102", "EL4102", "EL1252"};
-
-struct Bus {
-    sim::Segment seg;
-    InProcessLink link{seg};
-    std::vector<SlaveConfig> cfg;
-    explicit Bus(std::vector<std::string> types) {
-        for (std::size_t i = 0; i < types.size(); ++i) {
-            seg.add(*Catalog::builtin().find(types[i]));
-            cfg.push_back({int(i), types[i]});
-        }
-    }
-};
-
-std::vector<std::string> demo() { return std::vector<std::string>(std::begin(kDemo), std::end(kDemo)); }
-
-} // namespace
+using beamctl::ethercat::simbus::Bus;
+using beamctl::ethercat::simbus::demo;
+using beamctl::ethercat::simbus::kDemo;
 
 TEST(Master, BringsFourteenTerminalsToOp) {
     Bus b(demo());
