@@ -108,12 +108,15 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
                     if (s.position == p) type = s.type;
                 b.segment->add(*catalog_.find(type));
             }
+            // The plant: the file's stages, signals and wiring; every drive it does not name
+            // moves a default stage (also without a plant file).
+            ethercat::sim::SimConfig sim;
             if (!bc.link.plant.empty()) {
-                auto sim = ethercat::sim::SimConfig::load(bc.link.plant, catalog_);
+                sim = ethercat::sim::SimConfig::load(bc.link.plant, catalog_);
                 if (!sim.slaves.empty())
                     throw Error(SB() << bc.link.plant << ": a plant file used by an IOC takes its slaves from the IOC file; remove 'slaves:'");
-                sim.build(*b.segment, catalog_);
             }
+            b.plant = sim.build(*b.segment, catalog_);
             link = std::make_unique<ethercat::InProcessLink>(*b.segment);
             b.sim_stage = std::make_unique<SimTimeStage>(*b.segment);
             engine_->add_stage(rt::StageOrder::BusSend, *b.sim_stage);

@@ -9,6 +9,7 @@
 #include "core/event_loop.hpp"
 #include "ethercat/bus.hpp"
 #include "ethercat/catalog.hpp"
+#include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "pv/database.hpp"
 #include "rt/engine.hpp"
@@ -34,6 +35,7 @@ public:
     ethercat::Bus& bus(std::size_t i) { return *buses_.at(i).bus; }
     std::size_t bus_count() const { return buses_.size(); }
     ethercat::sim::Segment* segment(std::size_t i) { return buses_.at(i).segment.get(); }
+    ethercat::sim::Plant* plant(std::size_t i) { return buses_.at(i).plant.get(); }
     const config::IocConfig& config() const { return cfg_; }
 
     // Runs the IOC: engine on its RT thread, CA server and publisher on the calling thread,
@@ -49,6 +51,7 @@ private:
     };
     struct BusRt {
         std::unique_ptr<ethercat::sim::Segment> segment;
+        std::shared_ptr<ethercat::sim::Plant> plant; // runs in the segment's on_frame
         std::unique_ptr<ethercat::Bus> bus;
         std::unique_ptr<rt::Stage> sim_stage;
         std::vector<EntryPv> entries;

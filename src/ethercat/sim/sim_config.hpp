@@ -1,42 +1,82 @@
-// The simulator's configuration (SIM.yaml, also the `plant:` file of an IOC's sim link):
-//   slaves: [{position: 0, type: EK1100}, {position: 1, type: EL2008}, ...]   (optional when the
-//            IOC configuration already lists the bus)
-//   wiring: [{from: s1.binaryOutput01, to: s2.binaryInput01}, ...]          (outputs -> inputs)
-// Plant models (stages, switches, signal sources) extend this file in later steps.
+// The simulator's configuration (SIM.yaml, also the `plant:` file of an IOC's sim link). Every
+// key is documented in docs/simulator.md.
+//   slaves:  [{position: 0, type: EK1100}, ...]   (omitted when the IOC file lists the bus)
+//   wiring:  [{from: s3.binaryOutput01, to: s1.binaryInput01}, ...]            outputs -> inputs
+//   stages:  [{name: x, drive: s11, travel: [-50, 50], limits: {...}, home: {...}, encoders: [...]}]
+//   signals: [{to: s5.analogInput01, shape: sine, amplitude: 5, frequency: 1}, {to: ..., stage: x, gain: 0.1}]
+// Every drive terminal (EL70x1 stepper, EL72x1 servo) that no stage names moves a default stage
+// (no hard stops, no switches), so a bus can be tried before anyone writes a plant.
 #pragma once
 
 #include "ethercat/catalog.hpp"
+#include "ethercat/sim/io_point.hpp"
+#include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
 
+#include <memory>
 #include <string>
 #include <vector>
 
 namespace beamctl::ethercat::sim {
 
-// Where an entry lives in a simulated slave: bit range inside one SM buffer (default PDOs).
-struct EntryLocation {
-    uint8_t sm = 0;
-    uint32_t bit = 0;
-    uint8_t bits = 0;
-    bool output = false; // RxPDO (master -> slave)
+// "s3.binaryOutput01" (or "ec0.s3.binaryOutput01") as written in the file, with its place.
+struct EntryRef {
+    int slave = -1;
+    std::string entry;
+    std::string where; // file:line:col
 };
-// Throws Error naming the device and entry if it has no such entry.
-EntryLocation locate_entry(const DeviceDesc& d, std::string_view entry);
 
 struct Wire {
-    int from_slave = 0, to_slave = 0;
-    std::string from_entry, to_entry;
-    EntryLocation from, to;
+    EntryRef from, to;
 };
+
+struct StageConfig {
+    StageParams stage;
+    MotorParams motor;
+    EntryRef drive;                  // slave of the drive terminal (entry unused)
+    double feedback_counts_per_rev = 0; // drive's own positionActual01; 0 = terminal default
+    struct Encoder {
+        EntryRef entry;
+        double counts_per_unit = 1000;
+        bool absolute = false;
+        double zero = 0; // absolute: position that reads 0 [units]
+    };
+    std::vector<Encoder> encoders;
+    struct Switch {
+        SwitchModel::Kind kind;
+        EntryRef input;
+        double at = 0, width = 1;
+        bool normally_closed = true;
+    };
+    std::vector<Switch> switches;
+    std::string where;
+};
+
+struct SignalConfig {
+    EntryRef to;
+    SignalModel::Shape shape = SignalModel::Shape::Constant;
+    double amplitude = 0, offset = 0, frequency = 1, phase = 0, gain = 1, noise = 0, full_scale = 10;
+    std::string stage; // sensor of this stage's position
+    std::string where;
+};
+
+// Which drive model a device type gets (by Beckhoff family): EL/EP70xx stepper, EL/EP72xx servo.
+enum class DriveKind { None, Stepper, Cia402 };
+DriveKind drive_kind(const DeviceDesc& d);
 
 struct SimConfig {
     std::vector<std::pair<int, std::string>> slaves; // {position, type}
     std::vector<Wire> wiring;
-    // Loads SIM.yaml; every error has file:line:col. Unknown keys are errors.
+    std::vector<StageConfig> stages;
+    std::vector<SignalConfig> signals;
+    // Loads SIM.yaml; every error has file:line:col. Unknown keys are errors. With slaves:, the
+    // whole plant is also checked against them (entries exist, inputs driven once, ...).
     static SimConfig load(const std::string& path, const Catalog& catalog);
     static SimConfig parse(const std::string& text, const std::string& filename, const Catalog& catalog);
-    // Builds the segment (if `slaves` is given) and installs the wiring as its on_frame hook.
-    void build(Segment& seg, const Catalog& catalog) const;
+    // Adds the slaves (if `slaves` is given) and builds the plant over the segment, installed as
+    // its on_frame hook. Errors (file:line:col) when an entry, drive or stage does not fit the
+    // segment. An empty configuration still gives every drive its default stage.
+    std::shared_ptr<Plant> build(Segment& seg, const Catalog& catalog) const;
 };
 
 // Runs a segment behind a UDP socket: every datagram is an EtherCAT frame, processed and sent
