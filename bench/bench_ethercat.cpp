@@ -2,6 +2,8 @@
 //   BM_MasterCycle40: the master alone (send + receive + WKC check) over an echo link, i.e. the
 //     master CPU per cycle that the target (<= 5 us) is about;
 //   BM_SimulatedCycle40: master + in-process simulator (every ESC processing the frame);
+//   BM_SimulatedCycle40WithPlant: the same with the terminal and plant models running after each
+//     frame (6 drives moving stages, 12 analog signals, a wire), 1 ms of simulated time per cycle;
 //   BM_UdpRoundTrip40, BM_VethRoundTrip40: master and simulator on two CPUs, over UDP loopback
 //     and over a veth pair with raw sockets (the latter needs root; bench/veth_rate.sh measures
 //     the cycle rate with `beamctl run` and `beamctl sim --iface` as separate processes).
@@ -64,12 +66,24 @@ struct Fixture {
     sim::Segment seg;
     InProcessLink link{seg};
     std::unique_ptr<Master> m;
-    Fixture() {
+    std::shared_ptr<sim::Plant> plant;
+    explicit Fixture(bool with_plant = false) {
         std::vector<SlaveConfig> cfg;
         auto types = forty();
         for (std::size_t i = 0; i < types.size(); ++i) {
             seg.add(*Catalog::builtin().find(types[i]));
             cfg.push_back({int(i), types[i]});
+        }
+        if (with_plant) {
+            // Default stages for every drive, a generator on every EL3104 channel, a DO->DI wire.
+            std::string yaml = "signals:\n";
+            for (std::size_t i = 0; i < types.size(); ++i)
+                if (types[i] == "EL3104")
+                    for (int ch = 1; ch <= 4; ++ch)
+                        yaml += "  - {to: s" + std::to_string(i) + ".analogInput0" + std::to_string(ch) +
+                                ", shape: sine, amplitude: 5, frequency: 3}\n";
+            yaml += "wiring:\n  - {from: s2.binaryOutput01, to: s1.binaryInput01}\n";
+            plant = sim::SimConfig::parse(yaml, "bench", Catalog::builtin()).build(seg, Catalog::builtin());
         }
         m = std::make_unique<Master>(link, 0, cfg, Catalog::builtin());
         m->bring_up();
@@ -86,6 +100,37 @@ void BM_SimulatedCycle40(benchmark::State& st) {
     st.counters["wkc_ok"] = f.m->wkc() == f.m->expected_wkc();
 }
 BENCHMARK(BM_SimulatedCycle40);
+
+void BM_SimulatedCycle40WithPlant(benchmark::State& st) {
+    Fixture f(true);
+    // enable every drive (stepper: enable bit; CiA402: shutdown, then enable operation) with a
+    // small velocity so that the stages really move
+    uint64_t t = 1'000'000'000;
+    auto cycle = [&] {
+        t += 1'000'000;
+        f.seg.set_time(t);
+        f.m->send_process_data();
+        f.m->receive_process_data(0);
+    };
+    for (uint64_t cia_cw : {0x06, 0x0F}) {
+        for (const auto& s : f.m->signals()) {
+            bool stepper = f.m->slaves()[std::size_t(s.slave)].type == "EL7041";
+            if (s.name.ends_with(".driveControl01")) f.m->set(s, stepper ? 1 : cia_cw);
+            if (s.name.ends_with(".velocitySetpoint01")) f.m->set(s, 1000);
+        }
+        for (int i = 0; i < 3; ++i) cycle();
+    }
+    for (auto _ : st) {
+        t += 1'000'000;
+        f.seg.set_time(t);
+        f.m->send_process_data();
+        benchmark::DoNotOptimize(f.m->receive_process_data(0));
+    }
+    st.counters["stages"] = double(f.plant->stages().size());
+    st.counters["signals"] = double(f.plant->signals.size());
+    st.counters["wkc_ok"] = f.m->wkc() == f.m->expected_wkc();
+}
+BENCHMARK(BM_SimulatedCycle40WithPlant);
 
 // Forwards to another link; retargeted after bring-up.
 struct ForwardLink : Link {

@@ -111,7 +111,8 @@ bool Esc::read_phys(uint16_t ado, uint8_t* data, uint16_t len) noexcept {
 bool Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
     uint32_t end = uint32_t(ado) + len;
     uint8_t filled = 0; // master->slave mailboxes whose last byte this write covers
-    for (int n = 0; n < 8; ++n) {
+    // Sync-manager buffers live in process RAM (0x1000 and up): register writes skip this check.
+    for (int n = 0; end > 0x1000 && n < 8; ++n) {
         uint8_t* r = mailbox_sm(mem_, n);
         if (!r) continue;
         uint32_t s = le16(r), l = le16(r + 2);
@@ -121,6 +122,12 @@ bool Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
             return false;
         }
         if (ado <= s + l - 1 && end > s + l - 1) filled |= uint8_t(1u << n);
+    }
+    if (ado >= 0x1000 && end <= 0x10000) { // process RAM only: no register side effects
+        std::memcpy(&mem_[ado], data, len);
+        for (int n = 0; filled && n < 8; ++n)
+            if (filled >> n & 1) mem_[reg::kSm + 8 * n + 5] |= kSmStatusMailboxFull;
+        return true;
     }
     bool al = false, sii = false, latch = false, systime = false;
     uint8_t sm_written = 0;
@@ -149,7 +156,7 @@ bool Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
         for (int p = 0; p < 4; ++p) put_le32(&mem_[reg::kDcRecvTime + 4 * p], uint32_t(t));
         put_le64(&mem_[reg::kDcRecvTimeEpu], t);
     }
-    for (int n = 0; n < 8; ++n) {
+    for (int n = 0; (filled | sm_written) && n < 8; ++n) {
         uint8_t* r = &mem_[reg::kSm + 8 * n];
         if (filled >> n & 1) r[5] |= kSmStatusMailboxFull;
         if ((sm_written >> n & 1) && !(r[6] & 1)) { // a disabled SM forgets its buffer state

@@ -98,16 +98,17 @@ private:
     void set_al(uint8_t state, uint16_t code) noexcept;
     void check_watchdog() noexcept;
 
-    DeviceDesc desc_;
-    std::vector<uint16_t> sii_;
-    std::array<uint8_t, 65536> mem_{};
+    // Per-frame state first, next to each other (the 64 KiB memory image comes last).
     uint64_t local_time_ns_ = 0;
     uint64_t hop_delay_ns_ = 0;
     uint64_t last_output_ns_ = 0; // local time of the last process-data write (SM watchdog)
+    DeviceDesc desc_;
+    std::vector<uint16_t> sii_;
     std::unique_ptr<CoeServer> coe_;
     int mbx_out_ = -1, mbx_in_ = -1; // SM indices of the mailboxes (-1: none)
     uint8_t last_counter_ = 0;       // counter of the last request served (repeat detection)
     uint8_t reply_counter_ = 0;
+    std::array<uint8_t, 65536> mem_{};
 };
 
 } // namespace beamctl::ethercat::sim
