@@ -307,7 +307,7 @@ void Master::bring_up() {
         slave_al_[i].store(slaves_[i].al_state, std::memory_order_relaxed);
         slave_online_[i].store(1, std::memory_order_relaxed);
     }
-    LOG_INFO(lg, "ec" << bus_ << ": " << slaves_.size() << " slave(s) in OP, image " << image_.size()
+    LOG_INFO(lg, "ec" << bus_ << ": " << slaves_.size() << " slave(s) in OP, image " << bus_bytes_
                       << " bytes (" << outputs_bytes_ << " out), expected WKC " << expected_wkc_);
 }
 
@@ -343,7 +343,20 @@ void Master::layout_process_image() {
         for (auto& [i, b] : v) off += b;
         s.in_bytes = off - s.in_offset;
     }
-    image_.assign(off, 0);
+    bus_bytes_ = off;
+    // After the bus part, the master's own memory (not exchanged on the bus), as ECMC has it:
+    // ec<m>.masterstatus and per slave the constant entries ONE (all bits set) and ZERO, which
+    // axis configurations use for unused inputs (`ec0.s3.ONE.0`).
+    uint32_t mem = (off + 3) / 4 * 4;
+    image_.assign(mem + 4 + 8 * slaves_.size(), 0);
+    masterstatus_offset_ = mem;
+    signals_.push_back(SignalInfo{SB() << "ec" << bus_ << ".masterstatus", -1, mem * 8, 32, false, "UINT32"});
+    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+        uint32_t at = mem + 4 + 8 * uint32_t(i);
+        std::memset(image_.data() + at, 0xFF, 4);
+        signals_.push_back(SignalInfo{SB() << "ec" << bus_ << ".s" << slaves_[i].position << ".ONE", slaves_[i].position, at * 8, 32, false, "UINT32"});
+        signals_.push_back(SignalInfo{SB() << "ec" << bus_ << ".s" << slaves_[i].position << ".ZERO", slaves_[i].position, (at + 4) * 8, 32, false, "UINT32"});
+    }
     // Signals: every named entry of the assigned PDOs, in PDO order.
     for (auto& s : slaves_) {
         for (int dir = 0; dir < 2; ++dir) {
@@ -453,7 +466,7 @@ void Master::build_cyclic_frames() {
     // One LRW per chunk of the image; chunks packed into as few frames as fit.
     cyclic_.clear();
     expected_wkc_ = 0;
-    uint32_t off = 0, total = uint32_t(image_.size());
+    uint32_t off = 0, total = bus_bytes_;
     cyclic_.emplace_back();
     while (off < total) {
         CyclicFrame* cf = &cyclic_.back();
@@ -619,6 +632,8 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
         wkc_errors_++;
         st = CycleStatus::WkcMismatch;
     }
+    uint32_t ok = st == CycleStatus::Ok ? 1 : 0;
+    std::memcpy(image_.data() + masterstatus_offset_, &ok, 4); // little-endian host, as the bus part
     return st;
 }
 

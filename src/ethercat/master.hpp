@@ -61,7 +61,7 @@ private:
 // A process-image entry registered as a signal, e.g. "ec0.s3.positionActual01".
 struct SignalInfo {
     std::string name;
-    int slave = 0;
+    int slave = 0;           // bus position (-1: the master itself, e.g. ec0.masterstatus)
     uint32_t bit_offset = 0; // in the process image
     uint8_t bits = 0;
     bool output = false;
@@ -100,8 +100,11 @@ public:
     CycleStatus send_process_data() noexcept;
     // Receives them (waiting up to timeout_us each), copies inputs into the image, checks WKC.
     CycleStatus receive_process_data(int timeout_us = 2000) noexcept;
+    // The process image: the part exchanged on the bus (outputs of all slaves, then inputs) and,
+    // after it, the master's own memory (ec<m>.masterstatus, per-slave ONE/ZERO).
     uint8_t* image() { return image_.data(); }
     std::size_t image_size() const { return image_.size(); }
+    std::size_t bus_bytes() const { return bus_bytes_; }
     uint32_t outputs_size() const { return outputs_bytes_; }
     uint16_t wkc() const { return wkc_; }
     uint16_t expected_wkc() const { return expected_wkc_; }
@@ -207,6 +210,8 @@ private:
     std::vector<SignalInfo> signals_;
     std::vector<uint8_t> image_;
     uint32_t outputs_bytes_ = 0;
+    uint32_t bus_bytes_ = 0;            // image bytes exchanged on the bus (LRW)
+    uint32_t masterstatus_offset_ = 0;  // byte offset of ec<m>.masterstatus in the image
     std::vector<CyclicFrame> cyclic_;
     int status_frame_ = -1;      // frame holding the rotating AL-status FPRD
     uint32_t status_offset_ = 0; // its data offset in that frame

@@ -221,6 +221,7 @@ void Ioc::make_entry_pvs(BusRt& b) {
     ethercat::Bus& bus = *b.bus;
     std::string m = SB() << cfg_.prefix << "m" << bus.id();
     for (const auto& sig : bus.master().signals()) {
+        if (sig.slave < 0) continue; // the master's own signals (ec0.masterstatus) have bus PVs
         // "ec0.s3.binaryInput01" -> "<prefix>m0s003-BI01"
         std::size_t s_at = sig.name.find(".s");
         std::size_t dot = sig.name.find('.', s_at + 2);

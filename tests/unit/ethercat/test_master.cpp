@@ -325,3 +325,24 @@ TEST(Master, SmWatchdogTakesASlaveWithoutOutputDataToSafeop) {
     EXPECT_TRUE(b.seg.slave(1).al_error());
     EXPECT_EQ(b.seg.slave(2).al_state(), 8);                 // EL1008 has no outputs
 }
+
+TEST(Master, MasterStatusAndConstantEntriesAreSignals) {
+    Bus b({"EK1100", "EL2008", "EL1008"});
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    const SignalInfo* ms = m.find_signal("ec0.masterstatus");
+    const SignalInfo* one = m.find_signal("ec0.s2.ONE");
+    const SignalInfo* zero = m.find_signal("ec0.s1.ZERO");
+    ASSERT_TRUE(ms && one && zero);
+    EXPECT_GE(ms->bit_offset, m.bus_bytes() * 8); // the master's memory, not on the bus
+    EXPECT_EQ(m.get(*one), 0xFFFFFFFFu);
+    EXPECT_EQ(m.get(*zero), 0u);
+    m.send_process_data();
+    ASSERT_EQ(m.receive_process_data(), CycleStatus::Ok);
+    EXPECT_EQ(m.get(*ms), 1u);
+    b.seg.unplug(2); // WKC drops: not OK
+    m.send_process_data();
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::WkcMismatch);
+    EXPECT_EQ(m.get(*ms), 0u);
+    EXPECT_EQ(m.get(*one), 0xFFFFFFFFu); // never touched by the bus
+}
