@@ -136,11 +136,15 @@ def test_bus_over_veth_reaches_op_and_wires_do_to_di(veth_bus):
     assert ca.put(bo5, 1, wait=True) == 1
     time.sleep(0.1)
     assert ca.get(bi5) == 0
-    # ~2000 cycles so far. The simulator is an ordinary process: on a loaded machine it may now
-    # and then answer later than the master's 500 us receive timeout; a transport fault (frames
-    # dropped, padding or foreign frames taken for answers) would miss or spoil far more.
-    missed, wkc_errors = get(p + "m0-MissedFrames"), get(p + "m0-WkcErrors")
-    assert missed <= 3 and wkc_errors <= 3, (missed, wkc_errors)
+    # The simulator is an ordinary process: on a loaded machine it may answer later than the
+    # master's receive timeout, so frames can be missed in time (that is timing, measured in
+    # bench/, not asserted here). Each of those still comes back and is counted late; a frame
+    # that never comes back (dropped, or spoiled by padding or foreign frames taken for answers)
+    # is a transport fault. The last frame or two may still be on the way.
+    missed, late = get(p + "m0-MissedFrames"), get(p + "m0-LateFrames")
+    wkc_errors = get(p + "m0-WkcErrors")
+    assert missed - late <= 2, (missed, late)
+    assert wkc_errors <= 3, wkc_errors
     assert run.alive() and sim.alive()
     # The simulator saw only EtherCAT frames from the master.
     assert sim.stop() == 0
