@@ -880,6 +880,14 @@ const SignalInfo* Master::find_signal(std::string_view name) const {
     return nullptr;
 }
 
+registry::BoundSignal Master::bind(std::string_view name, int bit) {
+    const SignalInfo* s = find_signal(name);
+    if (!s || (bit >= 0 && bit >= s->bits)) return {};
+    bool sign = s->datatype.rfind("INT", 0) == 0 || s->datatype.rfind("SINT", 0) == 0 ||
+                s->datatype.rfind("DINT", 0) == 0 || s->datatype.rfind("LINT", 0) == 0;
+    return registry::BoundSignal{image_.data(), s->bit_offset, s->bits, sign, bit};
+}
+
 uint64_t Master::get(const SignalInfo& s) const {
     uint64_t v = 0;
     for (uint32_t i = 0; i < s.bits; ++i) {

@@ -10,6 +10,7 @@
 #include "core/error.hpp"
 #include "ethercat/device.hpp"
 #include "ethercat/frame.hpp"
+#include "registry/signal.hpp"
 #include "ethercat/link.hpp"
 #include "core/spsc_queue.hpp"
 #include "ethercat/sii.hpp"
@@ -140,6 +141,10 @@ public:
     // ---- diagnostics (non-RT) ----
     const std::vector<SignalInfo>& signals() const { return signals_; }
     const SignalInfo* find_signal(std::string_view name) const;
+    // The signal bound to its place in this master's image, for RT code (axes, PLCs): `bit` >= 0
+    // selects one bit (`ec0.s3.driveStatus01.3`). Unbound (image nullptr) if there is no such
+    // signal. Valid after bring_up() for the master's life.
+    registry::BoundSignal bind(std::string_view name, int bit = -1);
     const std::vector<SlaveInfo>& slaves() const { return slaves_; }
     int bus_id() const { return bus_; }
     // Reads the AL state of one slave (FPRD 0x0130); false if it did not answer.

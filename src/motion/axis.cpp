@@ -1,0 +1,588 @@
+#include "motion/axis.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace beamctl::motion {
+
+const char* error_id::text(uint32_t id) noexcept {
+    switch (id) {
+    case kNone: return "";
+    case kBusNotOk: return "EtherCAT not OK: axis disabled";
+    case kNotEnabled: return "Axis not enabled";
+    case kBusy: return "Axis busy";
+    case kDriveAlarm0: return "Drive alarm 0";
+    case kDriveAlarm0 + 1: return "Drive alarm 1";
+    case kDriveAlarm0 + 2: return "Drive alarm 2";
+    case kDriveTimeout: return "Drive not enabled within the time-out";
+    case kDs402Timeout: return "DS402 drive not operation-enabled within the time-out";
+    case kDs402Fault: return "DS402 drive in fault state";
+    case kMaxVelocity: return "Velocity above the monitoring maximum";
+    case kLag: return "Position lag exceeded";
+    case kExternalInterlock: return "External hardware interlock";
+    case kBothLimits: return "Both limit switches active";
+    case kStall: return "Axis stalled: not at target in time";
+    case kSeqFailed: return "Homing failed: unexpected limit switch";
+    case kSeqCmdData: return "Unknown homing sequence";
+    case kNoHomeFlank: return "Homing failed: no home switch edge";
+    case kNoSecondHomeFlank: return "Homing failed: no second home switch edge";
+    case kVelocityZero: return "Velocity, acceleration or target not valid";
+    case kHomeNotAllowed: return "Homing sequence 0 not allowed";
+    case kEnableLost: return "Drive enable lost";
+    case kHardLimitFwd: return "Hard limit forward";
+    case kHardLimitBwd: return "Hard limit backward";
+    case kSoftLimitFwd: return "Soft limit forward";
+    case kSoftLimitBwd: return "Soft limit backward";
+    }
+    return "Unknown error";
+}
+
+uint32_t AxisStatus::stat_word() const noexcept {
+    uint32_t w = 0;
+    auto bit = [&](int n, bool on) { w |= on ? 1u << n : 0u; };
+    bit(0, enable_cmd);
+    bit(1, enabled);
+    bit(2, busy && command != CommandType::None);
+    bit(3, busy);
+    bit(4, at_target);
+    bit(5, moving);
+    bit(6, !limit_fwd);
+    bit(7, !limit_bwd);
+    bit(8, home_sensor);
+    bit(9, homed);
+    bit(10, true); // in real time
+    bit(14, soft_fwd_enabled);
+    bit(15, soft_bwd_enabled);
+    bit(17, ilock_fwd);
+    bit(18, ilock_bwd);
+    bit(19, soft_limit_fwd);
+    bit(20, soft_limit_bwd);
+    bit(21, busy);
+    w |= uint32_t(sequence_state & 7) << 24;
+    w |= uint32_t(uint8_t(last_interlock) & 0x1F) << 27;
+    return w;
+}
+
+Axis::Axis(const AxisParams& p, const AxisIo& io)
+    : p_(p), io_(io), enc_(p.encoder, io.encoder), drive_(p.drive, io.drive_control, io.drive_status, io.drive_setpoint),
+      ctrl_(p.controller) {
+    if (p_.trajectory.deceleration <= 0) p_.trajectory.deceleration = p_.trajectory.acceleration;
+    st_.soft_fwd_enabled = p_.soft_fwd_enable;
+    st_.soft_bwd_enabled = p_.soft_bwd_enable;
+    traj_.reset({});
+}
+
+double Axis::decel() const noexcept { return p_.trajectory.deceleration; }
+
+double Axis::emergency_decel() const noexcept {
+    return p_.emergency_deceleration > 0 ? p_.emergency_deceleration : 3 * decel();
+}
+
+void Axis::finish(uint64_t tag) noexcept {
+    if (tag) st_.done_tag = tag;
+}
+
+// Ramps the trajectory down; the command finishes when it stands still.
+void Axis::start_stop(double d) noexcept {
+    if (seq_ == Seq::Homing) seq_ = Seq::Stopping;
+    if (!traj_.busy()) {
+        if (seq_ != Seq::Idle) {
+            seq_ = Seq::Idle;
+            finish(tag_);
+        }
+        return;
+    }
+    double jerk = p_.trajectory.jerk > 0 ? std::max(p_.trajectory.jerk, 10 * d) : 0;
+    (void)traj_.stop(d, jerk);
+    seq_ = Seq::Stopping;
+}
+
+// Latches an error (the first one stays until reset), stops with the emergency deceleration and,
+// for the drive-level interlocks, disables the drive at once.
+void Axis::fault(uint32_t id, bool disable) noexcept {
+    if (st_.error_id == 0) st_.error_id = id;
+    start_stop(emergency_decel());
+    if (disable) {
+        enable_req_ = false;
+        st_.enable_cmd = false;
+    }
+}
+
+void Axis::read_inputs() noexcept {
+    // polarity 0 (NC): the signal reads 1 while OK; unbound inputs are always OK
+    auto engaged = [](const registry::BoundSignal& s, int polarity) {
+        if (!s.bound()) return false;
+        bool v = s.get() != 0;
+        return polarity == 0 ? !v : v;
+    };
+    st_.limit_fwd = engaged(io_.limit_fwd, p_.limit_fwd_polarity);
+    st_.limit_bwd = engaged(io_.limit_bwd, p_.limit_bwd_polarity);
+    st_.home_sensor = io_.home.bound() && ((io_.home.get() != 0) != (p_.home_polarity != 0));
+}
+
+uint32_t Axis::check_target(double target) const noexcept {
+    double pos = st_.set_pos;
+    if (target > pos) {
+        if (st_.limit_fwd) return error_id::kHardLimitFwd;
+        if (p_.soft_fwd_enable && target > p_.soft_fwd) return error_id::kSoftLimitFwd;
+    } else if (target < pos) {
+        if (st_.limit_bwd) return error_id::kHardLimitBwd;
+        if (p_.soft_bwd_enable && target < p_.soft_bwd) return error_id::kSoftLimitBwd;
+    }
+    return 0;
+}
+
+uint32_t Axis::command(const AxisCommand& c) noexcept {
+    auto refuse = [&](uint32_t id) {
+        finish(c.tag);
+        if (id && error_id::is_warning(id)) st_.warning_id = id;
+        return id;
+    };
+    switch (c.type) {
+    case CommandType::None: return refuse(0);
+    case CommandType::Power:
+        if (c.on && !enable_req_) { // enabling also resets errors (ECMC enableAutoResetError)
+            st_.error_id = 0;
+            st_.warning_id = 0;
+            drive_.reset();
+            lag_cycles_ = overspeed_cycles_ = overspeed_drive_cycles_ = 0;
+            stall_wait_ = -1;
+        }
+        enable_req_ = c.on;
+        st_.enable_cmd = c.on;
+        if (!c.on && seq_ != Seq::Idle) { // disabling drops the command at once (no ramp)
+            seq_ = Seq::Idle;
+            finish(tag_);
+        }
+        return refuse(0);
+    case CommandType::Reset:
+        st_.error_id = 0;
+        st_.warning_id = 0;
+        st_.last_interlock = Interlock::None;
+        drive_.reset();
+        lag_cycles_ = overspeed_cycles_ = overspeed_drive_cycles_ = 0;
+        stall_wait_ = -1;
+        return refuse(0);
+    case CommandType::Halt:
+        start_stop(c.deceleration > 0 ? c.deceleration : decel());
+        return refuse(0);
+    case CommandType::Stop:
+        start_stop(emergency_decel());
+        return refuse(0);
+    case CommandType::SetPosition:
+        if (seq_ != Seq::Idle) return refuse(error_id::kBusy);
+        if (!std::isfinite(c.position)) return refuse(error_id::kVelocityZero);
+        if (p_.virtual_axis) {
+            traj_.reset({c.position, 0, 0});
+        } else { // bumpless: the setpoint moves with the actual position
+            double delta = c.position - enc_.position();
+            enc_.set_position(c.position);
+            traj_.reset({traj_.state().position + delta, 0, 0});
+            ctrl_.reset();
+        }
+        st_.set_pos = st_.target_pos = traj_.state().position;
+        st_.act_pos = p_.virtual_axis ? st_.set_pos : enc_.position();
+        st_.homed = true;
+        enc_.set_homed(true);
+        return refuse(0);
+    default: break;
+    }
+    // Motion commands. Homing 15/25 (set position) works without enable.
+    if (st_.error_id) return refuse(st_.error_id);
+    if (c.type == CommandType::Home) {
+        int seq = c.homing_sequence ? c.homing_sequence : p_.homing_sequence;
+        if (seq == 25) seq = 15;
+        if (seq == 0) return refuse(error_id::kHomeNotAllowed);
+        if (seq_ != Seq::Idle) return refuse(error_id::kBusy);
+        if (seq == 15) {
+            AxisCommand set{CommandType::SetPosition, p_.homing_position};
+            (void)command(set);
+            return refuse(0);
+        }
+        if (!((seq >= 1 && seq <= 4) || (seq >= 7 && seq <= 10))) return refuse(error_id::kSeqCmdData);
+    }
+    bool enabled = p_.virtual_axis ? enable_req_ : drive_.enabled();
+    if (!enabled) return refuse(error_id::kNotEnabled);
+    st_.warning_id = 0;
+    st_.last_interlock = Interlock::None;
+    if (c.type == CommandType::Home) {
+        home_seq_ = c.homing_sequence ? c.homing_sequence : p_.homing_sequence;
+        home_step_ = 0;
+        tag_ = c.tag;
+        seq_ = Seq::Homing;
+        st_.homed = false;
+        enc_.set_homed(false);
+        st_.command = CommandType::Home;
+        st_.busy = true;
+        st_.at_target = false;
+        move_time_ = 0;
+        stall_wait_ = -1;
+        homing_step(0);
+        return 0;
+    }
+    TrajectoryLimits l = p_.trajectory;
+    if (c.velocity != 0 && c.type != CommandType::MoveVelocity) l.velocity = std::fabs(c.velocity);
+    if (c.acceleration > 0) l.acceleration = c.acceleration;
+    if (c.deceleration > 0) l.deceleration = c.deceleration;
+    else if (c.acceleration > 0) l.deceleration = c.acceleration;
+    if (p_.velocity_enable && p_.velocity_max > 0) l.velocity = std::min(l.velocity, p_.velocity_max);
+    if (!(l.velocity > 0) || !(l.acceleration > 0) || !std::isfinite(c.position) || !std::isfinite(c.velocity))
+        return refuse(error_id::kVelocityZero);
+    double target = 0;
+    TrajectoryResult r;
+    if (c.type == CommandType::MoveVelocity) {
+        double v = c.velocity;
+        if (v == 0) return refuse(error_id::kVelocityZero);
+        if (v > 0 && st_.limit_fwd) return refuse(error_id::kHardLimitFwd);
+        if (v < 0 && st_.limit_bwd) return refuse(error_id::kHardLimitBwd);
+        l.velocity = std::fabs(v);
+        if (p_.velocity_enable && p_.velocity_max > 0) l.velocity = std::min(l.velocity, p_.velocity_max);
+        // Towards an enabled soft limit a velocity move ends at that limit (ECMC brakes only once
+        // the setpoint has passed it and overshoots; stopping at the limit is what users expect).
+        if (v > 0 && p_.soft_fwd_enable) {
+            if (st_.set_pos >= p_.soft_fwd) return refuse(error_id::kSoftLimitFwd);
+            r = traj_.move_to(p_.soft_fwd, l);
+            target = p_.soft_fwd;
+        } else if (v < 0 && p_.soft_bwd_enable) {
+            if (st_.set_pos <= p_.soft_bwd) return refuse(error_id::kSoftLimitBwd);
+            r = traj_.move_to(p_.soft_bwd, l);
+            target = p_.soft_bwd;
+        } else {
+            r = traj_.move_velocity(v, l);
+            target = st_.set_pos;
+        }
+    } else {
+        // relative moves add to the previous target while a relative move runs (as ECMC)
+        bool chained = c.type == CommandType::MoveRelative && seq_ == Seq::Moving && st_.command == CommandType::MoveRelative;
+        target = c.type == CommandType::MoveAbsolute ? c.position : (chained ? st_.target_pos : st_.set_pos) + c.position;
+        if (p_.modulo_range > 0 && c.type == CommandType::MoveAbsolute)
+            target = modulo_target(st_.set_pos, c.position, p_.modulo_range, p_.modulo_type);
+        if (uint32_t w = check_target(target)) return refuse(w);
+        r = traj_.move_to(target, l);
+    }
+    if (r == TrajectoryResult::InvalidLimits || r == TrajectoryResult::InvalidTarget)
+        return refuse(error_id::kVelocityZero);
+    if (seq_ != Seq::Idle && tag_ != c.tag) finish(tag_); // the previous command is superseded
+    tag_ = c.tag;
+    seq_ = traj_.busy() ? Seq::Moving : Seq::Idle;
+    st_.target_pos = target;
+    st_.command = c.type;
+    move_time_ = 0;
+    stall_wait_ = -1;
+    target_cycles_ = 0;
+    if (seq_ == Seq::Idle) finish(tag_); // already there
+    st_.busy = seq_ != Seq::Idle;
+    st_.at_target = false;
+    return 0;
+}
+
+void Axis::homing_step(double) noexcept {
+    // ECMC sequences (ecmcAxisSequencer): all moves are velocity moves; the reference is the
+    // encoder position latched at the sequence's edge, and the axis is re-referenced bumplessly
+    // once it stands still: position = actual - latched + homing position.
+    //   1/2   to the low/high limit at "to", back at "from"; leaving the switch is the edge
+    //   3/4   the same, but the first change of the home switch is the edge
+    //   7/8   backward/forward at "from" to the home switch's rising edge
+    //   9/10  backward/forward at "from" through the cam (both edges), back to its rising edge:
+    //         the reference is the middle of the two latches
+    const int s = home_seq_;
+    const bool bwd = s == 1 || s == 3 || s == 7 || s == 9; // first direction backward
+    const double v_to = p_.homing_velocity_to > 0 ? p_.homing_velocity_to : p_.trajectory.velocity / 10;
+    const double v_from = p_.homing_velocity_from > 0 ? p_.homing_velocity_from : v_to / 2;
+    TrajectoryLimits l = p_.trajectory;
+    if (p_.homing_acceleration > 0) l.acceleration = l.deceleration = p_.homing_acceleration;
+    const double dir = bwd ? -1 : 1;
+    auto go = [&](double v) {
+        l.velocity = std::fabs(v);
+        (void)traj_.move_velocity(v, l);
+    };
+    auto halt = [&] { (void)traj_.stop(l.deceleration, 0); };
+    auto fail = [&](uint32_t id) {
+        fault(id, false);
+        st_.last_interlock = Interlock::UnexpectedLimit;
+        home_step_ = 99;
+    };
+    // the far limit (opposite to the first direction) must never be reached
+    bool far_limit = bwd ? st_.limit_fwd : st_.limit_bwd;
+    bool near_limit = bwd ? st_.limit_bwd : st_.limit_fwd;
+    bool near_last = bwd ? last_lim_bwd_ : last_lim_fwd_;
+    bool home_changed = st_.home_sensor != last_home_;
+    bool home_rising = st_.home_sensor && !last_home_;
+    if (s <= 4) {
+        switch (home_step_) {
+        case 0: // towards the limit at "to" (or already on it)
+            if (near_limit) {
+                home_step_ = 2;
+            } else {
+                go(dir * v_to);
+                home_step_ = 1;
+            }
+            break;
+        case 1:
+            if (near_limit) { // the hard-limit interlock ramps the move down
+                halt();
+                home_step_ = 2;
+            }
+            break;
+        case 2:
+            if (far_limit) return fail(error_id::kSeqFailed);
+            if (!traj_.busy()) {
+                go(-dir * v_from);
+                home_step_ = 3;
+            }
+            break;
+        case 3: {
+            if (far_limit) return fail(s <= 2 ? error_id::kSeqFailed : error_id::kNoHomeFlank);
+            bool edge = s <= 2 ? near_limit != near_last : home_changed;
+            if (edge) {
+                home_edge_pos_ = enc_.position();
+                halt();
+                home_step_ = 10;
+            }
+            break;
+        }
+        default: break;
+        }
+    } else if (s <= 8) {
+        switch (home_step_) {
+        case 0:
+            if (near_limit) return fail(error_id::kSeqFailed);
+            go(dir * v_from);
+            home_step_ = 1;
+            break;
+        case 1:
+            if (near_limit) return fail(error_id::kSeqFailed);
+            if (home_rising) {
+                home_edge_pos_ = enc_.position();
+                halt();
+                home_step_ = 10;
+            }
+            break;
+        default: break;
+        }
+    } else { // 9, 10: centre of the cam
+        switch (home_step_) {
+        case 0:
+            if (near_limit) return fail(error_id::kSeqFailed);
+            go(dir * v_from);
+            home_step_ = 1;
+            break;
+        case 1:
+            if (near_limit) return fail(error_id::kNoHomeFlank);
+            if (home_rising) {
+                home_edge_pos_ = enc_.position();
+                home_step_ = 2;
+            }
+            break;
+        case 2:
+            if (near_limit) return fail(error_id::kNoSecondHomeFlank);
+            if (!st_.home_sensor) { // through the cam
+                halt();
+                home_step_ = 3;
+            }
+            break;
+        case 3:
+            if (!traj_.busy()) {
+                go(-dir * v_from);
+                home_step_ = 4;
+            }
+            break;
+        case 4:
+            if (far_limit) return fail(error_id::kNoSecondHomeFlank);
+            if (home_rising) {
+                home_edge2_pos_ = enc_.position();
+                home_edge_pos_ = (home_edge_pos_ + home_edge2_pos_) / 2;
+                halt();
+                home_step_ = 10;
+            }
+            break;
+        default: break;
+        }
+    }
+    if (home_step_ == 10 && !traj_.busy()) { // standing still past the edge: re-reference
+        double delta = p_.homing_position - home_edge_pos_;
+        enc_.set_position(enc_.position() + delta);
+        traj_.reset({traj_.state().position + delta, 0, 0});
+        ctrl_.reset();
+        st_.set_pos = traj_.state().position;
+        st_.homed = true;
+        enc_.set_homed(true);
+        st_.target_pos = traj_.state().position;
+        if (p_.homing_post_move_enable) {
+            TrajectoryLimits pl = p_.trajectory;
+            pl.velocity = v_to;
+            (void)traj_.move_to(p_.homing_post_move_position, pl);
+            st_.target_pos = p_.homing_post_move_position;
+            home_step_ = 11;
+        } else {
+            home_step_ = 12;
+        }
+    } else if (home_step_ == 11 && !traj_.busy()) {
+        home_step_ = 12;
+    }
+    st_.sequence_state = std::min(home_step_, 7);
+    if (home_step_ == 12) {
+        seq_ = Seq::Idle;
+        st_.sequence_state = 0;
+        finish(tag_);
+    }
+}
+
+void Axis::monitor(double dt) noexcept {
+    const bool homing = seq_ == Seq::Homing;
+    const double v = traj_.state().velocity;
+    // Hard limits block their direction (normal deceleration) with a warning; both is an error
+    // that disables the drive.
+    if (st_.limit_fwd && st_.limit_bwd && !p_.virtual_axis) {
+        st_.last_interlock = Interlock::BothLimits;
+        fault(error_id::kBothLimits, true);
+    }
+    if (st_.limit_fwd && v > 0) {
+        st_.warning_id = error_id::kHardLimitFwd;
+        if (st_.last_interlock == Interlock::None) st_.last_interlock = Interlock::HardFwd;
+        if (!homing) start_stop(decel());
+    }
+    if (st_.limit_bwd && v < 0) {
+        st_.warning_id = error_id::kHardLimitBwd;
+        if (st_.last_interlock == Interlock::None) st_.last_interlock = Interlock::HardBwd;
+        if (!homing) start_stop(decel());
+    }
+    // Soft limits (not while homing): the setpoint beyond an enabled limit stops that direction.
+    bool soft_fwd = p_.soft_fwd_enable && !homing && st_.set_pos > p_.soft_fwd;
+    bool soft_bwd = p_.soft_bwd_enable && !homing && st_.set_pos < p_.soft_bwd;
+    if (soft_fwd && v > 0) {
+        st_.warning_id = error_id::kSoftLimitFwd;
+        st_.last_interlock = Interlock::SoftFwd;
+        start_stop(decel());
+    }
+    if (soft_bwd && v < 0) {
+        st_.warning_id = error_id::kSoftLimitBwd;
+        st_.last_interlock = Interlock::SoftBwd;
+        start_stop(decel());
+    }
+    st_.soft_limit_fwd = p_.soft_fwd_enable && st_.set_pos >= p_.soft_fwd;
+    st_.soft_limit_bwd = p_.soft_bwd_enable && st_.set_pos <= p_.soft_bwd;
+    st_.ilock_fwd = st_.limit_fwd || st_.soft_limit_fwd || st_.error_id;
+    st_.ilock_bwd = st_.limit_bwd || st_.soft_limit_bwd || st_.error_id;
+    // External interlock (NC: active when the input reads 0): disables at once.
+    if (io_.interlock.bound() && ((io_.interlock.get() != 0) == (p_.interlock_polarity != 0))) {
+        st_.last_interlock = Interlock::External;
+        if (st_.enabled || enable_req_) fault(error_id::kExternalInterlock, true);
+    }
+    // Lag: error and emergency stop after more than `time` cycles over tolerance, drive
+    // disabled on the 2 x time-th.
+    if (p_.lag_enable && st_.enabled && std::fabs(st_.pos_err) > p_.lag_tolerance) {
+        lag_cycles_ = std::min(lag_cycles_ + 1, 2 * p_.lag_time_cycles + 1);
+        if (lag_cycles_ > p_.lag_time_cycles) {
+            st_.last_interlock = Interlock::Lag;
+            fault(error_id::kLag, lag_cycles_ >= 2 * p_.lag_time_cycles);
+        }
+    } else {
+        lag_cycles_ = 0;
+    }
+    // At target: monitoring enabled, idle, setpoint at the target and actual at the setpoint
+    // for more than `time` cycles.
+    bool in = p_.target_enable && !st_.busy && std::fabs(st_.target_pos - st_.set_pos) < std::max(p_.target_tolerance, 1e-12) &&
+              std::fabs(st_.pos_err) < p_.target_tolerance;
+    target_cycles_ = in ? std::min(target_cycles_ + 1, p_.target_time_cycles + 1) : 0;
+    st_.at_target = in && target_cycles_ > p_.target_time_cycles;
+    // Maximum velocity: stop after time.trajectory cycles, disable time.drive cycles later.
+    if (p_.velocity_enable && p_.velocity_max > 0 && st_.enabled &&
+        (std::fabs(st_.act_vel) > p_.velocity_max || std::fabs(st_.set_vel) > p_.velocity_max * (1 + 1e-9))) {
+        if (++overspeed_cycles_ >= p_.velocity_time_traj_cycles) {
+            st_.last_interlock = Interlock::MaxSpeed;
+            fault(error_id::kMaxVelocity, false);
+            if (++overspeed_drive_cycles_ >= p_.velocity_time_drive_cycles) fault(error_id::kMaxVelocity, true);
+        }
+    } else if (st_.error_id != error_id::kMaxVelocity) {
+        overspeed_cycles_ = overspeed_drive_cycles_ = 0;
+    }
+    // Stall: after a move, not at target within max(15 s, 10 x the move's duration): disable.
+    if (st_.busy) {
+        move_time_ += dt;
+    } else if (stall_wait_ >= 0 && p_.stall_enable && p_.target_enable && st_.enabled) {
+        if (st_.at_target) {
+            stall_wait_ = -1;
+        } else if ((stall_wait_ -= dt) < 0) {
+            st_.last_interlock = Interlock::Stall;
+            fault(error_id::kStall, true);
+        }
+    }
+}
+
+void Axis::run(double dt) noexcept {
+    ++st_.cycle;
+    bool bus_ok = !io_.bus_status.bound() || io_.bus_status.get() != 0;
+    read_inputs();
+    if (!p_.virtual_axis) enc_.update(dt);
+    bool enabled = p_.virtual_axis ? enable_req_ : drive_.enabled();
+    if (!p_.virtual_axis) {
+        if (!bus_ok) {
+            st_.last_interlock = Interlock::BusNotOk;
+            fault(error_id::kBusNotOk, true); // every cycle while not OK
+        } else if (!bus_was_ok_ && p_.enable_at_startup) {
+            AxisCommand on{CommandType::Power};
+            on.on = true;
+            (void)command(on);
+        }
+        bus_was_ok_ = bus_ok;
+        if (drive_.error()) {
+            uint32_t id = p_.drive.type == DriveParams::Type::Ds402
+                              ? error_id::kDs402Fault
+                              : error_id::kDriveAlarm0 + uint32_t(std::max(drive_.error_input(), 0));
+            fault(id, true);
+        } else if (drive_.timed_out()) {
+            fault(p_.drive.type == DriveParams::Type::Ds402 ? error_id::kDs402Timeout : error_id::kDriveTimeout, true);
+        } else if (was_enabled_ && enable_req_ && !enabled) {
+            st_.warning_id = error_id::kEnableLost; // the drive dropped out: enable is cleared
+            enable_req_ = false;
+            st_.enable_cmd = false;
+        }
+    }
+    was_enabled_ = enabled;
+    st_.enabled = enabled;
+    st_.act_pos = p_.virtual_axis ? traj_.state().position : enc_.position();
+    st_.act_vel = p_.virtual_axis ? traj_.state().velocity : enc_.velocity();
+
+    // Sequencer and trajectory.
+    if (seq_ == Seq::Homing) homing_step(dt);
+    bool was_busy = seq_ != Seq::Idle;
+    TrajectoryResult r = traj_.step(dt);
+    if (r == TrajectoryResult::Finished && (seq_ == Seq::Moving || seq_ == Seq::Stopping)) {
+        seq_ = Seq::Idle;
+        finish(tag_);
+    }
+    if (!enabled && seq_ != Seq::Idle) { // a disabled axis does not move: the command ends
+        seq_ = Seq::Idle;
+        finish(tag_);
+    }
+    if (!enabled) {
+        traj_.reset({st_.act_pos, 0, 0}); // the setpoint follows the actual position
+        ctrl_.reset();
+    }
+    st_.set_pos = traj_.state().position;
+    st_.set_vel = traj_.state().velocity;
+    if (p_.virtual_axis) {
+        st_.act_pos = st_.set_pos;
+        st_.act_vel = st_.set_vel;
+    }
+    st_.pos_err = st_.set_pos - st_.act_pos;
+    st_.busy = seq_ != Seq::Idle;
+    if (was_busy && !st_.busy && st_.command != CommandType::Home)
+        stall_wait_ = std::max(15.0, 10 * move_time_); // the stall check starts when busy ends
+    if (!st_.busy && !enabled) st_.target_pos = st_.act_pos;
+    st_.moving = st_.busy && std::fabs(st_.act_vel) > 0;
+    monitor(dt);
+    st_.busy = seq_ != Seq::Idle;
+    last_home_ = st_.home_sensor;
+    last_lim_fwd_ = st_.limit_fwd;
+    last_lim_bwd_ = st_.limit_bwd;
+
+    // Controller and drive.
+    double out = 0;
+    if (enabled && !p_.virtual_axis) out = ctrl_.step(st_.pos_err, st_.set_vel, dt);
+    st_.drive_output = out;
+    if (!p_.virtual_axis) drive_.step(enable_req_, out, !st_.busy, dt);
+}
+
+} // namespace beamctl::motion

@@ -1,0 +1,204 @@
+// A motion axis as ECMC runs it, once per RT cycle between bus receive and bus send:
+//   inputs    limit switches, home sensor, external interlock (polarity applied), bus status
+//   encoder   raw counter -> actual position and velocity
+//   sequencer the command being executed: positioning, velocity, homing, stopping
+//   trajectory setpoint (trapezoid or S-curve) from the sequencer's target
+//   monitor   hard and soft limits, lag, at-target, max velocity, interlocks; faults latch an
+//             ECMC error id, stop the axis with the emergency deceleration and, for some, disable it
+//   control   CSV: velocity = Kff * trajectory velocity + PID(setpoint - actual)
+//   drive     enable sequence, control word, velocity setpoint
+// Commands (AxisCommand) come through Axis::command(), called on the RT thread (the axis group
+// drains a queue filled by non-RT code). Everything is noexcept and allocation-free once built.
+#pragma once
+
+#include "motion/controller.hpp"
+#include "motion/drive.hpp"
+#include "motion/encoder.hpp"
+#include "motion/trajectory.hpp"
+#include "registry/signal.hpp"
+
+#include <cstdint>
+#include <string>
+
+namespace beamctl::motion {
+
+// ECMC error and warning ids the axis raises (ecmc main/ecmcErrorsList.h; specs/ecmc.md §5).
+// Errors (0x1xxxx) latch and stop the axis; warnings (0x11xxxx) refuse or stop a move only.
+namespace error_id {
+constexpr uint32_t kNone = 0;
+constexpr uint32_t kBusNotOk = 0x14315;        // ERROR_AXIS_HARDWARE_STATUS_NOT_OK: disabled
+constexpr uint32_t kNotEnabled = 0x14316;      // ERROR_AXIS_NOT_ENABLED: motion command refused
+constexpr uint32_t kBusy = 0x1431C;            // ERROR_AXIS_BUSY: homing while busy
+constexpr uint32_t kDriveAlarm0 = 0x1460E;     // ERROR_DRV_HW_ALARM_0..2: drive error input n
+constexpr uint32_t kDriveTimeout = 0x14613;    // ERROR_DRV_STATE_MACHINE_TIME_OUT (stepper)
+constexpr uint32_t kDs402Timeout = 0x14652;    // ERROR_DRV_DS402_STATE_MACHINE_TIME_OUT
+constexpr uint32_t kDs402Fault = 0x14655;      // ERROR_DRV_DS402_FAULT_STATE
+constexpr uint32_t kMaxVelocity = 0x14C07;     // ERROR_MON_MAX_VELOCITY_EXCEEDED
+constexpr uint32_t kLag = 0x14C08;             // ERROR_MON_MAX_POSITION_LAG_EXCEEDED
+constexpr uint32_t kExternalInterlock = 0x14C09; // ERROR_MON_EXTERNAL_HARDWARE_INTERLOCK
+constexpr uint32_t kBothLimits = 0x14C10;      // ERROR_MON_BOTH_LIMIT_INTERLOCK
+constexpr uint32_t kStall = 0x14C19;           // ERROR_MON_STALL
+constexpr uint32_t kSeqFailed = 0x14D04;       // ERROR_SEQ_SEQ_FAILED: unexpected limit while homing
+constexpr uint32_t kSeqCmdData = 0x14D0A;      // ERROR_SEQ_CMD_DATA_UNDEFINED: unknown homing sequence
+constexpr uint32_t kNoHomeFlank = 0x14D0C;     // ERROR_SEQ_NO_HOME_SWITCH_FLANK
+constexpr uint32_t kNoSecondHomeFlank = 0x14D0D; // ERROR_SEQ_NO_SECOND_HOME_SWITCH_FLANK
+constexpr uint32_t kVelocityZero = 0x14D12;    // ERROR_SEQ_VELOCITY_ZERO (also bad parameters)
+constexpr uint32_t kHomeNotAllowed = 0x14D1A;  // ERROR_SEQ_HOME_NOT_ALLOWED (sequence 0)
+// warnings
+constexpr uint32_t kEnableLost = 0x114601;     // WARNING_DRV_ENABLED_LOST
+constexpr uint32_t kHardLimitFwd = 0x114C02;   // WARNING_MON_HARD_LIMIT_FWD_INTERLOCK
+constexpr uint32_t kHardLimitBwd = 0x114C03;   // WARNING_MON_HARD_LIMIT_BWD_INTERLOCK
+constexpr uint32_t kSoftLimitFwd = 0x114D00;   // WARNING_SEQ_SETPOINT_SOFTLIM_FWD_VILOATION
+constexpr uint32_t kSoftLimitBwd = 0x114D01;   // ..._BWD_...
+const char* text(uint32_t id) noexcept;
+inline bool is_warning(uint32_t id) noexcept { return id >= 0x100000; }
+} // namespace error_id
+
+// ECMC's last-interlock codes (status bits 27-31).
+enum class Interlock : uint8_t {
+    None = 0, SoftBwd = 1, SoftFwd = 2, HardBwd = 3, HardFwd = 4, NoExecute = 5, Lag = 6,
+    BothLimits = 7, External = 8, MaxSpeed = 10, AxisError = 13, UnexpectedLimit = 14,
+    BusNotOk = 16, Stall = 23,
+};
+
+struct AxisParams {
+    int id = 1;
+    std::string name;
+    bool virtual_axis = false; // no drive, no encoder: actual = setpoint
+    EncoderParams encoder;
+    DriveParams drive;
+    ControllerParams controller;
+    TrajectoryLimits trajectory;      // velocity, acceleration, deceleration, jerk (0 = trapezoid)
+    double emergency_deceleration = 0; // [units/s^2]; 0 = 3 x deceleration (as ECMC)
+    double jog_velocity = 0;          // [units/s]; 0 = trajectory velocity
+    double modulo_range = 0;          // [units]; 0 = linear axis
+    int modulo_type = 0;
+    // limits and inputs: polarity 0 = the signal reads 1 while OK (normally closed), 1 = inverted
+    int limit_fwd_polarity = 0, limit_bwd_polarity = 0, home_polarity = 0, interlock_polarity = 0;
+    bool soft_fwd_enable = false, soft_bwd_enable = false;
+    double soft_fwd = 0, soft_bwd = 0; // [units]
+    // monitoring; times in cycles, as ECMC
+    bool lag_enable = false;
+    double lag_tolerance = 0;
+    int lag_time_cycles = 0;
+    bool target_enable = false;
+    double target_tolerance = 0;
+    int target_time_cycles = 0;
+    bool velocity_enable = false;
+    double velocity_max = 0;
+    int velocity_time_traj_cycles = 200, velocity_time_drive_cycles = 400;
+    bool stall_enable = true; // needs target monitoring
+    bool enable_at_startup = false; // re-enable after a bus outage (ECMC autoEnable.atStartup)
+    // homing defaults (ECMC encoder.homing)
+    int homing_sequence = 0;
+    double homing_position = 0;
+    double homing_velocity_to = 0, homing_velocity_from = 0; // [units/s]; 0 = velocity/10
+    double homing_acceleration = 0;                           // 0 = trajectory acceleration
+    bool homing_post_move_enable = false;
+    double homing_post_move_position = 0;
+};
+
+// Where the axis reads and writes (bound signals; unbound ones are not used).
+struct AxisIo {
+    registry::BoundSignal encoder;                            // raw position
+    registry::BoundSignal drive_control, drive_status, drive_setpoint;
+    registry::BoundSignal limit_fwd, limit_bwd, home, interlock;
+    registry::BoundSignal bus_status; // ec<m>.masterstatus: 1 while the bus is OK
+};
+
+enum class CommandType : uint8_t {
+    None = 0, MoveVelocity = 1, MoveRelative = 2, MoveAbsolute = 3, Home = 10,
+    Halt = 20,       // ramp down with the command's (or configured) deceleration
+    Stop = 21,       // ramp down with the emergency deceleration
+    Power = 22,      // enable (on) or disable
+    Reset = 23,      // clear errors whose cause is gone; reset the drive
+    SetPosition = 24, // the actual position reads `position` (no motion)
+};
+
+struct AxisCommand {
+    CommandType type = CommandType::None;
+    double position = 0;     // target [units] (absolute), distance (relative), new position
+    double velocity = 0;     // [units/s]; 0 = configured (MoveVelocity: signed, required)
+    double acceleration = 0, deceleration = 0; // [units/s^2]; 0 = configured
+    int homing_sequence = 0; // Home: 0 = configured
+    bool on = false;         // Power
+    uint64_t tag = 0;        // echoed as AxisStatus::done_tag when this command has finished
+};
+
+struct AxisStatus {
+    double act_pos = 0, act_vel = 0;       // [units], [units/s]
+    double set_pos = 0, set_vel = 0;       // trajectory setpoint
+    double pos_err = 0;                    // setpoint - actual
+    double target_pos = 0;                 // of the current/last move
+    double drive_output = 0;               // velocity sent to the drive [units/s]
+    bool enable_cmd = false, enabled = false;
+    bool busy = false, at_target = false, moving = false;
+    bool limit_fwd = false, limit_bwd = false; // switch ACTIVE (at the limit)
+    bool home_sensor = false, homed = false;
+    bool soft_limit_fwd = false, soft_limit_bwd = false; // at/beyond an enabled soft limit
+    bool soft_fwd_enabled = false, soft_bwd_enabled = false;
+    bool ilock_fwd = false, ilock_bwd = false;           // motion in that direction blocked
+    uint32_t error_id = 0, warning_id = 0;
+    Interlock last_interlock = Interlock::None;
+    int sequence_state = 0;
+    CommandType command = CommandType::None;
+    uint64_t done_tag = 0;  // tag of the last command that finished (or was refused)
+    uint64_t cycle = 0;
+    // ECMC `Stat` bits: 0 enable, 1 enabled, 2 execute, 3 busy, 4 attarget, 5 moving, 6 limit fwd
+    // OK (1 = not on the switch), 7 limit bwd OK, 8 home switch, 9 homed, 14/15 soft limit fwd/bwd
+    // enabled, 17/18 motion fwd/bwd interlocked, 19/20 soft-limit interlock fwd/bwd, 21 busy,
+    // 24-26 sequence state, 27-31 last interlock
+    uint32_t stat_word() const noexcept;
+};
+
+class Axis {
+public:
+    Axis(const AxisParams& p, const AxisIo& io);
+
+    // RT: one cycle of `dt` seconds. Reads inputs from the image, writes drive outputs.
+    void run(double dt) noexcept;
+    // RT: starts a command. Returns 0 when accepted, else the error/warning id why not (the
+    // command is then finished at once: done_tag = its tag).
+    [[nodiscard]] uint32_t command(const AxisCommand& c) noexcept;
+
+    const AxisStatus& status() const noexcept { return st_; }
+    const AxisParams& params() const noexcept { return p_; }
+    Encoder& encoder() noexcept { return enc_; }
+    Trajectory& trajectory() noexcept { return traj_; }
+
+private:
+    enum class Seq : uint8_t { Idle, Moving, Stopping, Homing };
+    void read_inputs() noexcept;
+    void monitor(double dt) noexcept;
+    void homing_step(double dt) noexcept;
+    void fault(uint32_t id, bool disable) noexcept;
+    void finish(uint64_t tag) noexcept;
+    void start_stop(double decel) noexcept;
+    uint32_t check_target(double target) const noexcept;
+    double decel() const noexcept;
+    double emergency_decel() const noexcept;
+
+    AxisParams p_;
+    AxisIo io_;
+    Encoder enc_;
+    Drive drive_;
+    Controller ctrl_;
+    Trajectory traj_;
+    AxisStatus st_;
+
+    Seq seq_ = Seq::Idle;
+    uint64_t tag_ = 0;       // of the running command
+    bool enable_req_ = false;
+    bool was_enabled_ = false;
+    bool disable_after_stop_ = false;
+    int lag_cycles_ = 0, target_cycles_ = 0, overspeed_cycles_ = 0, overspeed_drive_cycles_ = 0;
+    double move_time_ = 0;     // duration of the current/last busy period [s]
+    double stall_wait_ = -1;   // after a move: time left to reach the target [s] (< 0: not armed)
+    bool bus_was_ok_ = true;
+    // homing
+    int home_seq_ = 0, home_step_ = 0;
+    bool last_home_ = false, last_lim_fwd_ = false, last_lim_bwd_ = false;
+    double home_edge_pos_ = 0, home_edge2_pos_ = 0;
+};
+
+} // namespace beamctl::motion

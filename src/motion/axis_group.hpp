@@ -1,0 +1,53 @@
+// The axes of one IOC in the RT cycle (stage Axes) and their face to non-RT code: commands go
+// in through a bounded SPSC queue, statuses come out through a triple buffer.
+// Threading: run() on the RT thread; send() and snapshot() on ONE non-RT thread (the IOC loop).
+#pragma once
+
+#include "core/spsc_queue.hpp"
+#include "core/triple_buffer.hpp"
+#include "motion/axis.hpp"
+#include "rt/engine.hpp"
+
+#include <atomic>
+#include <memory>
+#include <vector>
+
+namespace beamctl::motion {
+
+class AxisGroup : public rt::Stage {
+public:
+    explicit AxisGroup(std::vector<std::unique_ptr<Axis>> axes, std::size_t queue = 1024);
+
+    const char* name() const noexcept override { return "axes"; }
+    // RT: applies queued commands, runs every axis for the cycle's period, publishes statuses.
+    void run(const rt::CycleInfo& c) noexcept override;
+
+    // Non-RT: queues a command for axis `index` (position in the group). False if the queue is
+    // full (counted in commands_dropped()).
+    bool send(std::size_t index, const AxisCommand& c) noexcept;
+    // Non-RT: the latest statuses, one per axis, and the result of each command as it was taken
+    // by the cycle (tag, 0 or the refusal id), newest last.
+    struct Result {
+        uint64_t tag = 0;
+        uint32_t code = 0;
+    };
+    const std::vector<AxisStatus>& snapshot() noexcept;
+    bool pop_result(Result& r) noexcept { return results_.pop(r); }
+    uint64_t commands_dropped() const noexcept { return dropped_.load(); }
+
+    std::size_t size() const noexcept { return axes_.size(); }
+    Axis& axis(std::size_t i) noexcept { return *axes_[i]; } // RT side (tests in virtual time)
+
+private:
+    struct Queued {
+        std::size_t index = 0;
+        AxisCommand cmd;
+    };
+    std::vector<std::unique_ptr<Axis>> axes_;
+    SpscQueue<Queued> commands_;
+    SpscQueue<Result> results_;
+    TripleBuffer<std::vector<AxisStatus>> statuses_;
+    std::atomic<uint64_t> dropped_{0};
+};
+
+} // namespace beamctl::motion

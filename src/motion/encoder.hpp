@@ -1,0 +1,56 @@
+// An axis encoder (ECMC `encoder:`): the raw counter entry turned into a position.
+//   incremental  the counter (`bits` wide) wraps; wraps are tracked into a 64-bit count
+//   absolute     `absBits` valid bits after `mask`; `absOffset` [units] added; wraps tracked too
+//   scaling      position [units] = counts * numerator / denominator (+ offset set by homing)
+// Velocity is the filtered difference of positions (moving average over `filter_size` cycles).
+// Threading: RT thread; all calls noexcept, no allocation.
+#pragma once
+
+#include "registry/signal.hpp"
+
+#include <array>
+#include <cstdint>
+
+namespace beamctl::motion {
+
+struct EncoderParams {
+    double numerator = 1, denominator = 1; // [units] per `denominator` counts
+    bool absolute = false;
+    int bits = 16;            // width of the raw counter [bits] (wrap at 2^bits)
+    int abs_bits = 0;         // absolute: valid bits (0 = bits)
+    uint64_t mask = ~uint64_t(0); // applied to the raw value first
+    double abs_offset = 0;    // absolute: added to the position [units]
+    int filter_size = 10;     // velocity moving average [cycles], 1..kMaxFilter
+    static constexpr int kMaxFilter = 100;
+};
+
+class Encoder {
+public:
+    Encoder() = default;
+    Encoder(const EncoderParams& p, registry::BoundSignal raw) : p_(p), raw_(raw) {}
+    // Reads the counter; `dt` [s] is the cycle period. The first call only initialises.
+    void update(double dt) noexcept;
+    double position() const noexcept { return position_; } // [units]
+    double velocity() const noexcept { return velocity_; } // [units/s]
+    int64_t counts() const noexcept { return counts_; }
+    bool valid() const noexcept { return started_; }
+    // Homing / set position: from now on position() reads `pos` here.
+    void set_position(double pos) noexcept;
+    bool homed() const noexcept { return homed_ || p_.absolute; }
+    void set_homed(bool h) noexcept { homed_ = h; }
+    const EncoderParams& params() const noexcept { return p_; }
+
+private:
+    EncoderParams p_;
+    registry::BoundSignal raw_;
+    bool started_ = false, homed_ = false;
+    uint64_t last_raw_ = 0;
+    int64_t counts_ = 0;
+    double offset_ = 0; // [units], from set_position
+    double position_ = 0, velocity_ = 0;
+    std::array<double, EncoderParams::kMaxFilter> vbuf_{};
+    int vhead_ = 0, vcount_ = 0;
+    double vsum_ = 0;
+};
+
+} // namespace beamctl::motion
