@@ -85,11 +85,11 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
     if (!root || root.IsNull()) throw Error(SB() << path << ":1:1: empty configuration (needs at least ioc:)");
     for (auto kv : root) {
         std::string k = kv.first.as<std::string>();
-        if (k == "axes" || k == "plcs" || k == "bridges" || k == "web")
+        if (k == "plcs" || k == "bridges" || k == "web")
             throw Error(SB() << c.at(kv.first) << ": '" << k
                              << "' is not supported by this version of beamctl yet");
     }
-    only_keys(c, root, "the IOC file", {"ioc", "engine", "buses", "db", "ca"});
+    only_keys(c, root, "the IOC file", {"ioc", "engine", "buses", "axes", "db", "ca"});
     if (!root["ioc"]) throw Error(SB() << path << ":1:1: missing required key 'ioc' ({name: ..., prefix: ...})");
     {
         auto n = root["ioc"];
@@ -178,6 +178,36 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
                 bc.slaves.push_back(se);
             }
             cfg.buses.push_back(bc);
+        }
+    }
+    auto macros = [&](const YAML::Node& m, const std::string& where) {
+        MacroMap mm;
+        if (!m) return mm;
+        if (!m.IsMap()) throw Error(SB() << c.at(m) << ": " << where << ".macros should be a mapping");
+        for (auto kv : m) mm[kv.first.as<std::string>()] = get<std::string>(c, kv.second, where + ".macros");
+        return mm;
+    };
+    if (auto axes = root["axes"]) {
+        if (!axes.IsSequence()) throw Error(SB() << c.at(axes) << ": axes should be a list of {file, macros}");
+        for (std::size_t i = 0; i < axes.size(); ++i) {
+            auto a = axes[i];
+            std::string where = SB() << "axes[" << i << "]";
+            only_keys(c, a, where, {"file", "macros", "encoders"});
+            if (!a["file"]) throw Error(SB() << c.at(a) << ": " << where << ": missing 'file' (an ECMC axis YAML file)");
+            AxisEntry e;
+            e.file = c.resolve(get<std::string>(c, a["file"], where + ".file"));
+            e.macros = macros(a["macros"], where);
+            e.where = c.at(a);
+            if (auto encs = a["encoders"]) {
+                if (!encs.IsSequence()) throw Error(SB() << c.at(encs) << ": " << where << ".encoders should be a list of {file, macros}");
+                for (std::size_t k = 0; k < encs.size(); ++k) {
+                    std::string ew = SB() << where << ".encoders[" << k << "]";
+                    only_keys(c, encs[k], ew, {"file", "macros"});
+                    if (!encs[k]["file"]) throw Error(SB() << c.at(encs[k]) << ": " << ew << ": missing 'file'");
+                    e.encoders.push_back({c.resolve(get<std::string>(c, encs[k]["file"], ew + ".file")), macros(encs[k]["macros"], ew)});
+                }
+            }
+            cfg.axes.push_back(std::move(e));
         }
     }
     if (auto dbs = root["db"]) {

@@ -45,6 +45,19 @@ struct DbConfig {
     MacroMap macros;
 };
 
+// An ECMC axis file with its macros (ecmccfg loadYamlAxis.cmd), and extra encoder files
+// (loadYamlEnc.cmd).
+struct AxisEntry {
+    std::string file; // resolved path
+    MacroMap macros;
+    struct Encoder {
+        std::string file;
+        MacroMap macros;
+    };
+    std::vector<Encoder> encoders;
+    std::string where; // file:line:col of the entry in the IOC file
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -53,6 +66,7 @@ struct IocConfig {
     int cpu = -1;
     int priority = 80;
     std::vector<BusConfig> buses;
+    std::vector<AxisEntry> axes;
     std::vector<DbConfig> db;
     std::optional<uint16_t> ca_port; // default: EPICS_CAS_SERVER_PORT / 5064
     std::string acf;                 // resolved path

@@ -1,5 +1,7 @@
 #include "ioc/ioc.hpp"
 
+#include "ioc/pv_util.hpp"
+
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "core/signals.hpp"
@@ -26,16 +28,6 @@ struct SimTimeStage : rt::Stage {
     void run(const rt::CycleInfo& c) noexcept override { seg.set_time(c.t_ns); }
 };
 
-pv::DbRecord record(const std::string& type, const std::string& name,
-                    std::vector<std::pair<std::string, std::string>> fields) {
-    pv::DbRecord r;
-    r.type = type;
-    r.name = name;
-    r.loc = SourceLoc{"<generated>", 1, 1};
-    for (auto& [k, v] : fields) r.fields.push_back(pv::DbField{k, v, r.loc});
-    return r;
-}
-
 bool is_signed(const std::string& datatype) {
     return datatype.rfind("INT", 0) == 0 || datatype.rfind("SINT", 0) == 0 ||
            datatype.rfind("DINT", 0) == 0 || datatype.rfind("LINT", 0) == 0;
@@ -45,16 +37,6 @@ double to_double(uint64_t raw, uint8_t bits, bool sign) {
     if (sign && bits > 0 && bits < 64 && (raw >> (bits - 1) & 1)) return double(int64_t(raw | (~uint64_t(0) << bits)));
     if (sign && bits == 64) return double(int64_t(raw));
     return double(raw);
-}
-
-// Sets a record's VAL from the owner of the value (bypasses the client put hook) and processes.
-void set_value(pv::Database& db, pv::Record& r, double v, bool comm_alarm) {
-    const pv::FieldDesc* f = r.type().find("VAL");
-    pv::Elements e = r.elements(*f);
-    pv::put_element(r, *f, e, 0, pv::Prim::Double, &v);
-    r.udf = 0;
-    if (comm_alarm) r.set_sevr(pv::kStatComm, pv::kInvalid);
-    db.process(r);
 }
 
 } // namespace
@@ -130,7 +112,30 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
         make_bus_pvs(b, bc);
         buses_.push_back(std::move(b));
     }
+    axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, known_signals(), cfg_.rate_hz, db_);
     for (const auto& d : cfg_.db) db_.load(pv::load_db_file(d.file, d.macros));
+}
+
+std::set<std::string> Ioc::known_signals() const {
+    // The names the masters will register: default-assignment entries, ONE/ZERO, masterstatus.
+    std::set<std::string> names;
+    for (const auto& bc : cfg_.buses) {
+        names.insert(SB() << "ec" << bc.id << ".masterstatus");
+        for (const auto& s : bc.slaves) {
+            std::string pre = SB() << "ec" << bc.id << ".s" << s.position << ".";
+            names.insert(pre + "ONE");
+            names.insert(pre + "ZERO");
+            const ethercat::DeviceDesc* d = catalog_.find(s.type);
+            if (!d) continue;
+            for (const auto& pd : d->rx_pdos)
+                for (const auto& e : pd.entries)
+                    if (!e.name.empty()) names.insert(pre + e.name);
+            for (const auto& pd : d->tx_pdos)
+                for (const auto& e : pd.entries)
+                    if (!e.name.empty()) names.insert(pre + e.name);
+        }
+    }
+    return names;
 }
 
 Ioc::~Ioc() {
@@ -256,11 +261,27 @@ void Ioc::bring_up() {
         make_entry_pvs(b);
         set_value(db_, *b.slave_count, double(b.bus->master().slaves().size()), false);
     }
+    axes_->bind(
+        [this](const motion::SignalRef& r) {
+            for (auto& b : buses_) {
+                if (b.bus->id() != r.bus) continue;
+                std::string name = r.entry == "masterstatus" ? std::string(SB() << "ec" << r.bus << ".masterstatus")
+                                                             : std::string(SB() << "ec" << r.bus << ".s" << r.slave << "." << r.entry);
+                registry::BoundSignal s = b.bus->master().bind(name, r.bit);
+                if (!s.bound())
+                    throw Error(SB() << r.where.file << ":" << r.where.line << ":" << r.where.col << ": no signal '" << name
+                                     << (r.bit >= 0 ? std::string(SB() << "." << r.bit) : std::string()) << "' after bring-up");
+                return s;
+            }
+            throw Error(SB() << r.where.file << ":" << r.where.line << ":" << r.where.col << ": no bus ec" << r.bus);
+        },
+        *engine_);
     db_.init_records();
     brought_up_ = true;
 }
 
 void Ioc::publish() {
+    axes_->publish();
     rt::EngineStats es = engine_->stats();
     for (auto& b : buses_) {
         const ethercat::BusSnapshot& s = b.bus->snapshot();

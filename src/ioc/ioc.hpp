@@ -9,12 +9,15 @@
 #include "core/event_loop.hpp"
 #include "ethercat/bus.hpp"
 #include "ethercat/catalog.hpp"
+#include "ioc/axes.hpp"
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "pv/database.hpp"
 #include "rt/engine.hpp"
 
 #include <memory>
+#include <set>
+#include <string>
 #include <vector>
 
 namespace beamctl::ioc {
@@ -37,6 +40,7 @@ public:
     ethercat::sim::Segment* segment(std::size_t i) { return buses_.at(i).segment.get(); }
     ethercat::sim::Plant* plant(std::size_t i) { return buses_.at(i).plant.get(); }
     const config::IocConfig& config() const { return cfg_; }
+    IocAxes& axes() { return *axes_; }
 
     // Runs the IOC: engine on its RT thread, CA server and publisher on the calling thread,
     // until SIGINT/SIGTERM. Prints the ready line.
@@ -62,6 +66,7 @@ private:
     };
     void make_bus_pvs(BusRt& b, const config::BusConfig& bc);
     void make_entry_pvs(BusRt& b);
+    std::set<std::string> known_signals() const; // every signal name the buses will have
 
     config::IocConfig cfg_;
     rt::Clock& clock_;
@@ -69,6 +74,7 @@ private:
     pv::Database db_;
     std::unique_ptr<rt::Engine> engine_;
     std::vector<BusRt> buses_;
+    std::unique_ptr<IocAxes> axes_;
     bool brought_up_ = false;
 };
 

@@ -133,9 +133,12 @@ uint32_t Axis::check_target(double target) const noexcept {
 }
 
 uint32_t Axis::command(const AxisCommand& c) noexcept {
+    // A refused command finishes at once; its reason is the axis warning, or for error ids
+    // (ECMC setErrorID) the latched axis error, which also stops a running move.
     auto refuse = [&](uint32_t id) {
         finish(c.tag);
         if (id && error_id::is_warning(id)) st_.warning_id = id;
+        else if (id && id != st_.error_id) fault(id, false);
         return id;
     };
     switch (c.type) {
@@ -190,7 +193,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     // Motion commands. Homing 15/25 (set position) works without enable.
     if (st_.error_id) return refuse(st_.error_id);
     if (c.type == CommandType::Home) {
-        int seq = c.homing_sequence ? c.homing_sequence : p_.homing_sequence;
+        int seq = c.homing_sequence < 0 || c.homing_sequence == 14 ? p_.homing_sequence : c.homing_sequence;
         if (seq == 25) seq = 15;
         if (seq == 0) return refuse(error_id::kHomeNotAllowed);
         if (seq_ != Seq::Idle) return refuse(error_id::kBusy);
@@ -206,7 +209,8 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     st_.warning_id = 0;
     st_.last_interlock = Interlock::None;
     if (c.type == CommandType::Home) {
-        home_seq_ = c.homing_sequence ? c.homing_sequence : p_.homing_sequence;
+        home_seq_ = c.homing_sequence < 0 || c.homing_sequence == 14 ? p_.homing_sequence : c.homing_sequence;
+        if (home_seq_ == 25) home_seq_ = 15;
         home_step_ = 0;
         tag_ = c.tag;
         seq_ = Seq::Homing;

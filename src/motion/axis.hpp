@@ -120,7 +120,7 @@ struct AxisCommand {
     double position = 0;     // target [units] (absolute), distance (relative), new position
     double velocity = 0;     // [units/s]; 0 = configured (MoveVelocity: signed, required)
     double acceleration = 0, deceleration = 0; // [units/s^2]; 0 = configured
-    int homing_sequence = 0; // Home: 0 = configured
+    int homing_sequence = -1; // Home: -1 or 14 = the configured sequence (ECMC: 14 = encoder's)
     bool on = false;         // Power
     uint64_t tag = 0;        // echoed as AxisStatus::done_tag when this command has finished
 };

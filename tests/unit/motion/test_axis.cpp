@@ -113,6 +113,7 @@ TEST(Axis, MoveAbsoluteTakesTheTrapezoidTimeAndEndsAtTarget) {
     AxisBus a;
     EXPECT_EQ(a.cmd(CommandType::MoveAbsolute, 10, 0, 7), error_id::kNotEnabled);
     EXPECT_EQ(a.ax.status().done_tag, 7u); // a refused command is finished at once
+    EXPECT_EQ(a.ax.status().error_id, error_id::kNotEnabled); // and latched (enabling resets it)
     a.enable();
     ASSERT_TRUE(a.ax.status().enabled);
     ASSERT_EQ(a.cmd(CommandType::MoveAbsolute, 10, 0, 8), 0u);
@@ -355,17 +356,25 @@ TEST(Axis, HomingFailsOnAnUnexpectedLimitAndIsRefusedWhileBusy) {
     a.b.plant->find_stage("x")->set_position(0);
     a.enable();
     ASSERT_EQ(a.cmd(CommandType::MoveAbsolute, 5), 0u);
+    a.cycles(100);
     EXPECT_EQ(a.cmd(CommandType::Home), error_id::kBusy);
+    EXPECT_EQ(a.ax.status().error_id, error_id::kBusy); // an error: it latches and stops the move
     a.until([&] { return !a.ax.status().busy; });
+    EXPECT_LT(a.ax.status().set_pos, 4.0);
+    EXPECT_EQ(a.cmd(CommandType::Reset), 0u);
     ASSERT_EQ(a.cmd(CommandType::Home), 0u);
     a.until([&] { return !a.ax.status().busy; }, 60000);
     EXPECT_EQ(a.ax.status().error_id, error_id::kSeqFailed);
     EXPECT_FALSE(a.ax.status().homed);
     EXPECT_EQ(a.cmd(CommandType::Home, 0, 0, 0), error_id::kSeqFailed); // latched until reset
+    AxisCommand zero{CommandType::Home};
+    zero.homing_sequence = 0;
+    EXPECT_EQ(a.ax.command(zero), error_id::kSeqFailed);
     EXPECT_EQ(a.cmd(CommandType::Reset), 0u);
     AxisCommand bad{CommandType::Home};
     bad.homing_sequence = 13;
     EXPECT_EQ(a.ax.command(bad), error_id::kSeqCmdData);
+    EXPECT_EQ(a.ax.status().error_id, error_id::kSeqCmdData);
 }
 
 TEST(Axis, EnablingResetsErrorsAndExternalInterlockDisables) {

@@ -1,0 +1,252 @@
+#include "ioc/axes.hpp"
+
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "ioc/pv_util.hpp"
+#include "motion/axis_setup.hpp"
+
+#include <cinttypes>
+#include <cmath>
+#include <cstdio>
+
+namespace beamctl::ioc {
+namespace {
+log::Logger lg("ioc.axes");
+
+std::string at(const SourceLoc& w) { return SB() << w.file << ":" << w.line << ":" << w.col; }
+
+// "ec0.s3.driveStatus01" of a link (without its bit).
+std::string signal_name(const motion::SignalRef& r) {
+    if (r.entry == "masterstatus") return SB() << "ec" << r.bus << ".masterstatus";
+    return SB() << "ec" << r.bus << ".s" << r.slave << "." << r.entry;
+}
+
+// ECMC MtnCmd codes.
+motion::CommandType command_of(int code) {
+    switch (code) {
+    case 1: return motion::CommandType::MoveVelocity;
+    case 2: return motion::CommandType::MoveRelative;
+    case 3: return motion::CommandType::MoveAbsolute;
+    case 10: return motion::CommandType::Home;
+    default: return motion::CommandType::None;
+    }
+}
+} // namespace
+
+IocAxes::IocAxes(const std::vector<config::AxisEntry>& entries, const std::string& prefix,
+                 const std::set<std::string>& known_signals, double rate_hz, pv::Database& db)
+    : db_(db), prefix_(prefix) {
+    (void)rate_hz;
+    std::set<int> ids;
+    std::set<std::string> names;
+    for (const auto& e : entries) {
+        Axis a;
+        a.cfg = motion::load_axis_config(e.file, e.macros);
+        for (const auto& enc : e.encoders) motion::add_encoder(a.cfg, motion::load_encoder_config(enc.file, enc.macros));
+        for (const auto& w : a.cfg.warnings) LOG_WARN(lg, w);
+        // ECMC numbering: an axis without an id is the previous one + 1
+        int id = a.cfg.axis.id.value_or(axes_.empty() ? 1 : axes_.back().params.id + 1);
+        a.cfg.axis.id = id;
+        if (!ids.insert(id).second) throw Error(SB() << e.where << ": axis id " << id << " is used twice (" << e.file << ")");
+        if (!names.insert(a.cfg.epics.name).second)
+            throw Error(SB() << e.where << ": axis name '" << a.cfg.epics.name << "' is used twice (" << e.file << ")");
+        for (const auto& r : motion::axis_signal_refs(a.cfg)) {
+            if (r.slave < 0) throw Error(SB() << at(r.where) << ": '" << r.text << "': the simulation slave (s-1) is not supported");
+            if (!known_signals.count(signal_name(r)))
+                throw Error(SB() << at(r.where) << ": no signal '" << signal_name(r) << "' on the configured buses (from '" << r.text << "')");
+        }
+        a.params = motion::make_axis_params(a.cfg);
+        a.params.id = id;
+        a.pv = prefix + a.cfg.epics.name;
+        axes_.push_back(std::move(a));
+    }
+    for (std::size_t i = 0; i < axes_.size(); ++i) make_pvs(axes_[i], i);
+}
+
+int IocAxes::find(const std::string& name) const {
+    for (std::size_t i = 0; i < axes_.size(); ++i)
+        if (axes_[i].cfg.epics.name == name) return int(i);
+    return -1;
+}
+
+void IocAxes::make_pvs(Axis& a, std::size_t index) {
+    pv::DbFile f;
+    const std::string& p = a.pv;
+    std::string prec = std::to_string(a.cfg.epics.precision), egu = a.cfg.epics.unit;
+    auto ai = [&](const char* s, const char* desc, const std::string& unit) {
+        f.records.push_back(record("ai", p + s, {{"DESC", desc}, {"PREC", prec}, {"EGU", unit}}));
+    };
+    auto li = [&](const char* s, const char* desc) { f.records.push_back(record("longin", p + s, {{"DESC", desc}})); };
+    auto bi = [&](const char* s, const char* desc, const char* z, const char* o) {
+        f.records.push_back(record("bi", p + s, {{"DESC", desc}, {"ZNAM", z}, {"ONAM", o}}));
+    };
+    auto bo = [&](const char* s, const char* desc, const char* z, const char* o) {
+        f.records.push_back(record("bo", p + s, {{"DESC", desc}, {"ZNAM", z}, {"ONAM", o}}));
+    };
+    ai("-PosAct", "Actual position", egu);
+    ai("-VelAct", "Actual velocity", egu + "/s");
+    ai("-PosSet", "Setpoint position", egu);
+    ai("-PosErr", "Following error", egu);
+    li("-Stat", "Status word");
+    f.records.push_back(record("longin", p + "-ErrId", {{"DESC", "Error id"}, {"HIHI", "1"}, {"HHSV", "MAJOR"}}));
+    f.records.push_back(record("longin", p + "-WrnId", {{"DESC", "Warning id"}, {"HIHI", "1"}, {"HHSV", "MINOR"}}));
+    li("-SeqState", "Homing sequence state");
+    li("-LastIlock", "Last interlock");
+    bi("-EnaAct", "Enabled", "Disabled", "Enabled");
+    bi("-Busy", "Busy", "Idle", "Busy");
+    bi("-AtTarget", "At target", "Not at target", "At target");
+    bi("-Moving", "Moving", "Stopped", "Moving");
+    f.records.push_back(record("bi", p + "-LimFwd", {{"DESC", "Forward limit switch"}, {"ZNAM", "Limit activated"}, {"ONAM", "Limit OK"}, {"ZSV", "MINOR"}}));
+    f.records.push_back(record("bi", p + "-LimBwd", {{"DESC", "Backward limit switch"}, {"ZNAM", "Limit activated"}, {"ONAM", "Limit OK"}, {"ZSV", "MINOR"}}));
+    bi("-HomeSwitch", "Home switch", "Off", "On");
+    bi("-Homed", "Homed", "Not homed", "Homed");
+    f.records.push_back(record("bi", p + "-Err", {{"DESC", "Error"}, {"ZNAM", "No error"}, {"ONAM", "Error"}, {"OSV", "MAJOR"}}));
+    bo("-EnaCmd", "Enable", "Disable", "Enable");
+    bo("-ExeCmd", "Execute MtnCmd (rising edge)", "Stop", "Execute");
+    bo("-StpCmd", "Stop", "0", "Stop");
+    bo("-RstCmd", "Reset errors", "0", "Reset");
+    f.records.push_back(record("ao", p + "-TgtPosCmd", {{"DESC", "Target position"}, {"PREC", prec}, {"EGU", egu}}));
+    f.records.push_back(record("ao", p + "-TgtVelCmd", {{"DESC", "Target velocity"}, {"PREC", prec}, {"EGU", egu + "/s"},
+                                                          {"VAL", std::to_string(a.params.trajectory.velocity)}}));
+    f.records.push_back(record("longout", p + "-MtnCmd", {{"DESC", "1 VEL 2 REL 3 ABS 10 HOME"}, {"VAL", "3"}}));
+    f.records.push_back(record("longout", p + "-MtnCmdData", {{"DESC", "Homing sequence; 14 = configured"}, {"VAL", "14"}}));
+    f.records.push_back(record("stringin", p + "-MsgTxt", {{"DESC", "Error message"}}));
+    db_.load(f);
+    auto rec = [&](const char* s) { return db_.find(p + s); };
+    a.pos_act = rec("-PosAct");
+    a.vel_act = rec("-VelAct");
+    a.pos_set = rec("-PosSet");
+    a.pos_err = rec("-PosErr");
+    a.stat = rec("-Stat");
+    a.err_id = rec("-ErrId");
+    a.wrn_id = rec("-WrnId");
+    a.seq_state = rec("-SeqState");
+    a.last_ilock = rec("-LastIlock");
+    a.ena_act = rec("-EnaAct");
+    a.busy = rec("-Busy");
+    a.at_target = rec("-AtTarget");
+    a.moving = rec("-Moving");
+    a.lim_fwd = rec("-LimFwd");
+    a.lim_bwd = rec("-LimBwd");
+    a.home_switch = rec("-HomeSwitch");
+    a.homed = rec("-Homed");
+    a.err = rec("-Err");
+    a.ena_cmd = rec("-EnaCmd");
+    a.exe_cmd = rec("-ExeCmd");
+    a.tgt_pos = rec("-TgtPosCmd");
+    a.tgt_vel = rec("-TgtVelCmd");
+    a.mtn_cmd = rec("-MtnCmd");
+    a.mtn_data = rec("-MtnCmdData");
+    a.msg = rec("-MsgTxt");
+    for (pv::Record* r : {a.pos_act, a.vel_act, a.pos_set, a.pos_err, a.stat, a.err_id, a.wrn_id, a.seq_state, a.last_ilock,
+                          a.ena_act, a.busy, a.at_target, a.moving, a.lim_fwd, a.lim_bwd, a.home_switch, a.homed, a.err, a.msg})
+        r->val_read_only = true;
+    hook(index);
+}
+
+bool IocAxes::send(std::size_t i, const motion::AxisCommand& c) {
+    if (!group_) return false;
+    return group_->send(i, c);
+}
+
+// PV writes become axis commands (ECMC control-word semantics).
+void IocAxes::hook(std::size_t i) {
+    Axis& a = axes_[i];
+    auto on_val = [](auto fn) {
+        return [fn](pv::Record& r, const pv::FieldDesc& f) {
+            if (std::string_view(f.name) != "VAL") return pv::PutStatus::Ok;
+            return fn(get_value(r)) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
+        };
+    };
+    a.ena_cmd->put_hook = on_val([this, i](double v) {
+        motion::AxisCommand c{motion::CommandType::Power};
+        c.on = v != 0;
+        c.tag = next_tag_++;
+        return send(i, c);
+    });
+    a.exe_cmd->put_hook = [this, i](pv::Record& r, const pv::FieldDesc& f) {
+        if (std::string_view(f.name) != "VAL") return pv::PutStatus::Ok;
+        Axis& ax = axes_[i];
+        double v = get_value(r);
+        motion::AxisCommand c;
+        c.tag = next_tag_++;
+        if (v == 0) { // falling edge: stop with the normal deceleration
+            c.type = motion::CommandType::Halt;
+        } else {
+            c.type = command_of(int(get_value(*ax.mtn_cmd)));
+            if (c.type == motion::CommandType::None) return pv::PutStatus::Failed;
+            c.position = get_value(*ax.tgt_pos);
+            c.velocity = get_value(*ax.tgt_vel);
+            if (c.type == motion::CommandType::MoveVelocity && c.position < 0) c.velocity = -std::fabs(c.velocity);
+            c.homing_sequence = int(get_value(*ax.mtn_data));
+        }
+        return send(i, c) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
+    };
+    db_.find(a.pv + "-StpCmd")->put_hook = on_val([this, i](double v) {
+        if (v == 0) return true;
+        motion::AxisCommand c{motion::CommandType::Halt};
+        c.tag = next_tag_++;
+        return send(i, c);
+    });
+    db_.find(a.pv + "-RstCmd")->put_hook = on_val([this, i](double v) {
+        if (v == 0) return true;
+        motion::AxisCommand c{motion::CommandType::Reset};
+        c.tag = next_tag_++;
+        return send(i, c);
+    });
+}
+
+void IocAxes::bind(const Resolver& resolve, rt::Engine& engine) {
+    if (axes_.empty()) return;
+    std::vector<std::unique_ptr<motion::Axis>> rt_axes;
+    for (auto& a : axes_) rt_axes.push_back(std::make_unique<motion::Axis>(a.params, motion::bind_axis_io(a.cfg, resolve)));
+    group_ = std::make_unique<motion::AxisGroup>(std::move(rt_axes));
+    engine.add_stage(rt::StageOrder::Axes, *group_);
+}
+
+void IocAxes::publish_one(Axis& a, const motion::AxisStatus& s) {
+    const double values[] = {s.act_pos, s.act_vel, s.set_pos, s.pos_err, double(s.stat_word()), double(s.error_id),
+                             double(s.warning_id), double(s.sequence_state), double(uint8_t(s.last_interlock)),
+                             double(s.enabled), double(s.busy), double(s.at_target), double(s.moving),
+                             double(!s.limit_fwd), double(!s.limit_bwd), double(s.home_sensor), double(s.homed),
+                             double(s.error_id != 0)};
+    pv::Record* recs[] = {a.pos_act, a.vel_act, a.pos_set, a.pos_err, a.stat, a.err_id, a.wrn_id, a.seq_state,
+                          a.last_ilock, a.ena_act, a.busy, a.at_target, a.moving, a.lim_fwd, a.lim_bwd,
+                          a.home_switch, a.homed, a.err};
+    constexpr std::size_t n = sizeof recs / sizeof recs[0];
+    if (a.last.size() != n) a.last.assign(n, NAN);
+    for (std::size_t k = 0; k < n; ++k) {
+        if (values[k] == a.last[k] && !recs[k]->udf) continue;
+        a.last[k] = values[k];
+        set_value(db_, *recs[k], values[k], false);
+    }
+    // EnaCmd follows changes the axis makes itself (an error that disables clears it); a
+    // processed record does not call its put hook, so this sends no command.
+    if (s.enable_cmd != a.last_enable_cmd) {
+        a.last_enable_cmd = s.enable_cmd;
+        if (get_value(*a.ena_cmd) != double(s.enable_cmd)) set_value(db_, *a.ena_cmd, double(s.enable_cmd), false);
+    }
+    if (s.error_id != a.last_error) {
+        a.last_error = s.error_id;
+        char text[64] = "";
+        if (s.error_id) std::snprintf(text, sizeof text, "E: %.24s (0x%" PRIx32 ")", motion::error_id::text(s.error_id), s.error_id);
+        text[pv::kStringSize - 1] = 0; // a DBR_STRING holds 39 characters
+        const pv::FieldDesc* f = a.msg->type().find("VAL");
+        pv::Elements e = a.msg->elements(*f);
+        pv::put_element(*a.msg, *f, e, 0, pv::Prim::String, text);
+        a.msg->udf = 0;
+        db_.process(*a.msg);
+    }
+}
+
+void IocAxes::publish() {
+    if (!group_) return;
+    const auto& st = group_->snapshot();
+    for (std::size_t i = 0; i < axes_.size() && i < st.size(); ++i) publish_one(axes_[i], st[i]);
+    motion::AxisGroup::Result r;
+    while (group_->pop_result(r)) {
+        if (r.code) LOG_INFO(lg, "command " << r.tag << " refused: " << motion::error_id::text(r.code) << " (0x" << std::hex << r.code << ")");
+    }
+}
+
+} // namespace beamctl::ioc

@@ -1,0 +1,76 @@
+// The IOC's motion axes: ECMC axis files loaded and checked when the IOC is built (their signal
+// links against the configured buses, every error with file:line:col) together with their PVs;
+// bound to the buses' process images at bring-up and run in the RT cycle by one AxisGroup
+// stage; published into the PVs and commanded from them by the IOC loop.
+//
+// PVs, as ecmccfg's ecmcAxis.db names them ($(P) = the IOC prefix, AX = epics.name):
+//   $(P)AX-PosAct -VelAct -PosSet -PosErr (ai), -Stat -ErrId -WrnId -SeqState -LastIlock
+//   (longin), -EnaAct -Busy -AtTarget -Moving -LimFwd -LimBwd -HomeSwitch -Homed -Err (bi),
+//   -EnaCmd -ExeCmd -StpCmd -RstCmd (bo), -TgtPosCmd -TgtVelCmd (ao), -MtnCmd -MtnCmdData
+//   (longout), -MsgTxt (stringin).
+// Threading: everything here runs on the IOC loop thread except the AxisGroup's RT stage.
+#pragma once
+
+#include "config/ioc_config.hpp"
+#include "motion/axis_config.hpp"
+#include "motion/axis_group.hpp"
+#include "pv/database.hpp"
+#include "rt/engine.hpp"
+
+#include <functional>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+namespace beamctl::ioc {
+
+class IocAxes {
+public:
+    // Loads the axis files and creates their PVs. `known_signals` holds every signal name the
+    // buses will have ("ec0.s3.driveStatus01", "ec0.s3.ONE", "ec0.masterstatus"). Throws Error.
+    IocAxes(const std::vector<config::AxisEntry>& entries, const std::string& prefix,
+            const std::set<std::string>& known_signals, double rate_hz, pv::Database& db);
+
+    // Bring-up: binds every axis to the process images and adds the axis stage to the engine.
+    using Resolver = std::function<registry::BoundSignal(const motion::SignalRef&)>;
+    void bind(const Resolver& resolve, rt::Engine& engine);
+    // IOC loop: statuses into PVs (on change), command results.
+    void publish();
+
+    std::size_t size() const { return axes_.size(); }
+    motion::AxisGroup* group() { return group_.get(); }
+    const motion::AxisConfig& config(std::size_t i) const { return axes_.at(i).cfg; }
+    // Index of the axis with this epics.name, or -1.
+    int find(const std::string& name) const;
+    // Sends a command to axis i (non-RT); false if the queue is full.
+    bool send(std::size_t i, const motion::AxisCommand& c);
+
+private:
+    struct Axis {
+        motion::AxisConfig cfg;
+        motion::AxisParams params;
+        std::string pv; // "$(P)AX"
+        pv::Record *pos_act = nullptr, *vel_act = nullptr, *pos_set = nullptr, *pos_err = nullptr,
+                   *stat = nullptr, *err_id = nullptr, *wrn_id = nullptr, *seq_state = nullptr,
+                   *last_ilock = nullptr, *ena_act = nullptr, *busy = nullptr, *at_target = nullptr,
+                   *moving = nullptr, *lim_fwd = nullptr, *lim_bwd = nullptr, *home_switch = nullptr,
+                   *homed = nullptr, *err = nullptr, *ena_cmd = nullptr, *exe_cmd = nullptr,
+                   *tgt_pos = nullptr, *tgt_vel = nullptr, *mtn_cmd = nullptr, *mtn_data = nullptr,
+                   *msg = nullptr;
+        std::vector<double> last;   // published values, by record order in `published`
+        uint32_t last_error = ~0u;
+        bool last_enable_cmd = false;
+    };
+    void make_pvs(Axis& a, std::size_t index);
+    void hook(std::size_t index);
+    void publish_one(Axis& a, const motion::AxisStatus& s);
+
+    pv::Database& db_;
+    std::string prefix_;
+    std::vector<Axis> axes_;
+    std::unique_ptr<motion::AxisGroup> group_;
+    uint64_t next_tag_ = 1;
+};
+
+} // namespace beamctl::ioc

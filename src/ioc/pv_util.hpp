@@ -1,0 +1,44 @@
+// Small helpers the IOC uses to generate records and to publish values into them (IOC loop).
+#pragma once
+
+#include "pv/convert.hpp"
+#include "pv/database.hpp"
+#include "pv/db_file.hpp"
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace beamctl::ioc {
+
+// A generated record definition.
+inline pv::DbRecord record(const std::string& type, const std::string& name,
+                           std::vector<std::pair<std::string, std::string>> fields) {
+    pv::DbRecord r;
+    r.type = type;
+    r.name = name;
+    r.loc = SourceLoc{"<generated>", 1, 1};
+    for (auto& [k, v] : fields) r.fields.push_back(pv::DbField{k, v, r.loc});
+    return r;
+}
+
+// Sets a record's VAL from the owner of the value (bypasses the client put hook) and processes.
+inline void set_value(pv::Database& db, pv::Record& r, double v, bool comm_alarm) {
+    const pv::FieldDesc* f = r.type().find("VAL");
+    pv::Elements e = r.elements(*f);
+    pv::put_element(r, *f, e, 0, pv::Prim::Double, &v);
+    r.udf = 0;
+    if (comm_alarm) r.set_sevr(pv::kStatComm, pv::kInvalid);
+    db.process(r);
+}
+
+// A record's VAL as a double.
+inline double get_value(const pv::Record& r) {
+    const pv::FieldDesc* f = r.type().find("VAL");
+    double v = 0;
+    pv::Elements e = const_cast<pv::Record&>(r).elements(*f);
+    pv::get_element(r, *f, e, 0, pv::Prim::Double, &v);
+    return v;
+}
+
+} // namespace beamctl::ioc

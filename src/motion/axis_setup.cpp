@@ -1,0 +1,160 @@
+#include "motion/axis_setup.hpp"
+
+#include "core/error.hpp"
+
+#include <cstdlib>
+
+namespace beamctl::motion {
+
+namespace {
+std::string at(const SourceLoc& w) { return SB() << w.file << ":" << w.line << ":" << w.col; }
+
+const EncoderConfig* primary(const AxisConfig& c) {
+    return c.encoders.empty() ? nullptr : &c.encoders[c.primary_encoder()];
+}
+
+// A drive error input: a bit of the status word (the common case) -> its bit number.
+int status_bit(const DriveConfig& d, const SignalRef& e) {
+    if (e.bus == d.status.bus && e.slave == d.status.slave && e.entry == d.status.entry && e.bit >= 0) return e.bit;
+    throw Error(SB() << at(e.where) << ": drive error input '" << e.text
+                     << "' is not a bit of drive.status; only status-word bits are supported");
+}
+} // namespace
+
+AxisParams make_axis_params(const AxisConfig& c) {
+    AxisParams p;
+    p.id = c.axis.id.value_or(1);
+    p.name = c.epics.name;
+    p.virtual_axis = c.is_virtual();
+    if (c.drive && c.axis.mode != DriveMode::CSV)
+        throw Error(SB() << c.file << ": axis.mode CSP/CSP_PC is not supported yet (use CSV)");
+    if (c.trajectory.source != TrajectorySource::Internal)
+        throw Error(SB() << c.file << ": trajectory.source 1 (PLC) needs the soft PLC, which is not there yet");
+    if (const EncoderConfig* e = primary(c)) {
+        if (e->source != EncoderSource::EtherCAT && !p.virtual_axis)
+            throw Error(SB() << at(e->where) << ": encoder.source 1 (PLC) needs the soft PLC, which is not there yet");
+        p.encoder.numerator = e->numerator;
+        p.encoder.denominator = double(e->denominator);
+        p.encoder.absolute = e->type == EncoderType::Absolute;
+        p.encoder.bits = e->bits;
+        p.encoder.abs_bits = e->type == EncoderType::Absolute ? e->abs_bits : 0;
+        p.encoder.abs_offset = e->abs_offset;
+        if (!e->mask.empty()) p.encoder.mask = std::strtoull(e->mask.c_str(), nullptr, 0);
+        if (e->velocity_filter && e->velocity_filter->enable)
+            p.encoder.filter_size = int(std::min<int64_t>(e->velocity_filter->size, EncoderParams::kMaxFilter));
+        if (const auto& h = e->homing) {
+            p.homing_sequence = h->type;
+            p.homing_position = h->position.value_or(0);
+            p.homing_velocity_to = h->velocity_to.value_or(0);
+            p.homing_velocity_from = h->velocity_from.value_or(p.homing_velocity_to);
+            p.homing_acceleration = h->acceleration.value_or(0);
+            p.homing_post_move_enable = h->post_move_enable;
+            p.homing_post_move_position = h->post_move_position;
+        }
+    }
+    if (const auto& d = c.drive) {
+        p.drive.type = d->type == DriveType::DS402 ? DriveParams::Type::Ds402 : DriveParams::Type::Stepper;
+        p.drive.numerator = d->numerator;
+        p.drive.denominator = double(d->denominator);
+        p.drive.enable_bit = d->enable_bit;
+        p.drive.enabled_bit = d->enabled_bit;
+        p.drive.reset_bit = d->reset_bit.value_or(-1);
+        p.drive.warning_bit = d->warning_bit.value_or(-1);
+        p.drive.reduce_torque_bit = d->reduce_torque_enable ? d->reduce_torque_bit.value_or(-1) : -1;
+        for (std::size_t i = 0; i < d->errors.size() && i < 3; ++i) p.drive.error_bits[i] = status_bit(*d, d->errors[i]);
+    }
+    const auto& k = c.controller;
+    p.controller.kp = k.kp;
+    p.controller.ki = k.ki;
+    p.controller.kd = k.kd;
+    p.controller.kff = k.kff;
+    if (k.limits.max_output > k.limits.min_output) {
+        p.controller.min_output = k.limits.min_output;
+        p.controller.max_output = k.limits.max_output;
+    }
+    if (k.limits.max_integral > k.limits.min_integral) {
+        p.controller.min_integral = k.limits.min_integral;
+        p.controller.max_integral = k.limits.max_integral;
+    }
+    if (k.deadband) {
+        p.controller.deadband = k.deadband->tol;
+        p.controller.deadband_cycles = int(k.deadband->time_cycles);
+    }
+    const auto& t = c.trajectory;
+    p.trajectory.velocity = t.axis.velocity;
+    p.trajectory.acceleration = t.axis.acceleration;
+    p.trajectory.deceleration = t.axis.deceleration > 0 ? t.axis.deceleration : t.axis.acceleration;
+    p.trajectory.jerk = t.type == TrajectoryType::SCurve ? t.axis.jerk : 0;
+    p.emergency_deceleration = t.axis.emergency_deceleration;
+    p.jog_velocity = t.jog.velocity;
+    if (t.modulo) {
+        p.modulo_range = t.modulo->range;
+        p.modulo_type = int(t.modulo->type);
+    }
+    p.limit_fwd_polarity = c.input.limit_forward_polarity;
+    p.limit_bwd_polarity = c.input.limit_backward_polarity;
+    p.home_polarity = c.input.home_polarity;
+    p.interlock_polarity = c.input.interlock_polarity;
+    p.soft_fwd_enable = c.softlimits.enable && c.softlimits.forward_enable;
+    p.soft_bwd_enable = c.softlimits.enable && c.softlimits.backward_enable;
+    p.soft_fwd = c.softlimits.forward;
+    p.soft_bwd = c.softlimits.backward;
+    const auto& m = c.monitoring;
+    p.lag_enable = m.lag.enable;
+    p.lag_tolerance = m.lag.tolerance;
+    p.lag_time_cycles = int(m.lag.time_cycles);
+    p.target_enable = m.target.enable;
+    p.target_tolerance = m.target.tolerance;
+    p.target_time_cycles = int(m.target.time_cycles);
+    p.velocity_enable = m.velocity.enable;
+    p.velocity_max = m.velocity.max;
+    if (m.velocity.trajectory_cycles > 0) p.velocity_time_traj_cycles = int(m.velocity.trajectory_cycles);
+    if (m.velocity.drive_cycles) p.velocity_time_drive_cycles = int(*m.velocity.drive_cycles);
+    p.stall_enable = !m.stall || m.stall->enable;
+    p.enable_at_startup = c.axis.auto_enable && c.axis.auto_enable->at_startup;
+    return p;
+}
+
+std::vector<SignalRef> axis_signal_refs(const AxisConfig& c) {
+    std::vector<SignalRef> v;
+    if (const EncoderConfig* e = primary(c))
+        if (e->position && e->source == EncoderSource::EtherCAT) v.push_back(*e->position);
+    if (c.drive) {
+        v.push_back(c.drive->control);
+        v.push_back(c.drive->status);
+        v.push_back(c.drive->setpoint);
+    }
+    if (!c.input.limit_forward.plc_override && !c.input.limit_forward.signal.text.empty()) v.push_back(c.input.limit_forward.signal);
+    if (!c.input.limit_backward.plc_override && !c.input.limit_backward.signal.text.empty()) v.push_back(c.input.limit_backward.signal);
+    if (c.input.home && !c.input.home->plc_override && !c.input.home->signal.text.empty()) v.push_back(c.input.home->signal);
+    if (c.input.interlock && !c.input.interlock->text.empty()) v.push_back(*c.input.interlock);
+    return v;
+}
+
+AxisIo bind_axis_io(const AxisConfig& c, const SignalResolver& resolve) {
+    AxisIo io;
+    if (c.is_virtual()) return io;
+    const EncoderConfig* e = primary(c);
+    if (e && e->position) io.encoder = resolve(*e->position);
+    if (c.drive) {
+        io.drive_control = resolve(c.drive->control);
+        io.drive_status = resolve(c.drive->status);
+        io.drive_setpoint = resolve(c.drive->setpoint);
+    }
+    auto sw = [&](const SwitchInput& s) {
+        return s.plc_override || s.signal.text.empty() ? registry::BoundSignal{} : resolve(s.signal);
+    };
+    io.limit_fwd = sw(c.input.limit_forward);
+    io.limit_bwd = sw(c.input.limit_backward);
+    if (c.input.home) io.home = sw(*c.input.home);
+    if (c.input.interlock && !c.input.interlock->text.empty()) io.interlock = resolve(*c.input.interlock);
+    SignalRef status;
+    status.bus = c.drive ? c.drive->status.bus : (e && e->position ? e->position->bus : 0);
+    status.entry = "masterstatus";
+    status.text = SB() << "ec" << status.bus << ".masterstatus";
+    status.slave = -2; // the master itself
+    io.bus_status = resolve(status);
+    return io;
+}
+
+} // namespace beamctl::motion
