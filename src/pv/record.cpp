@@ -2,6 +2,7 @@
 
 #include "core/error.hpp"
 #include "pv/database.hpp"
+#include "pv/motor_record.hpp"
 
 #include <algorithm>
 #include <cfloat>
@@ -56,6 +57,7 @@ RecordTypes& RecordTypes::global() {
     static RecordTypes* types = [] {
         auto* t = new RecordTypes;
         register_standard_records(*t);
+        register_motor_record(*t);
         return t;
     }();
     return *types;
