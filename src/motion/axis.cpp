@@ -67,6 +67,7 @@ Axis::Axis(const AxisParams& p, const AxisIo& io)
     : p_(p), io_(io), enc_(p.encoder, io.encoder), drive_(p.drive, io.drive_control, io.drive_status, io.drive_setpoint),
       ctrl_(p.controller) {
     if (p_.trajectory.deceleration <= 0) p_.trajectory.deceleration = p_.trajectory.acceleration;
+    st_.homed = p_.encoder.absolute && !p_.virtual_axis; // an absolute encoder is referenced
     st_.soft_fwd_enabled = p_.soft_fwd_enable;
     st_.soft_bwd_enabled = p_.soft_bwd_enable;
     traj_.reset({});
