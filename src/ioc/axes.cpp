@@ -4,6 +4,7 @@
 #include "core/log.hpp"
 #include "ioc/pv_util.hpp"
 #include "motion/axis_setup.hpp"
+#include "pv/motor_record.hpp"
 
 #include <cinttypes>
 #include <cmath>
@@ -30,6 +31,97 @@ motion::CommandType command_of(int code) {
     case 10: return motion::CommandType::Home;
     default: return motion::CommandType::None;
     }
+}
+// The motor record's driver for one axis (ECMC's ecmcMotorRecordAxis): commands become axis
+// commands; status comes from the axis group's latest snapshot. Done follows ECMC: the command
+// was taken and finished (tags), the axis is not busy, and it is at target (or target monitoring
+// is off, the axis is disabled or in error, or the command was refused).
+class AxisMotorDriver : public pv::MotorDriver {
+public:
+    AxisMotorDriver(IocAxes& axes, std::size_t index) : axes_(axes), i_(index) {}
+    void move(double target, double velocity, double acceleration) override {
+        motion::AxisCommand c{motion::CommandType::MoveAbsolute, target, velocity};
+        c.acceleration = c.deceleration = acceleration;
+        sent(axes_.send(i_, c));
+    }
+    void move_velocity(double velocity, double acceleration) override {
+        motion::AxisCommand c{motion::CommandType::MoveVelocity, 0, velocity};
+        c.acceleration = c.deceleration = acceleration;
+        sent(axes_.send(i_, c));
+    }
+    void home(bool, double, double) override { // ECMC: the configured sequence; direction and HVEL unused
+        motion::AxisCommand c{motion::CommandType::Home};
+        sent(axes_.send(i_, c));
+    }
+    void stop(double acceleration) override {
+        motion::AxisCommand c{motion::CommandType::Halt};
+        c.deceleration = acceleration;
+        axes_.send(i_, c);
+    }
+    void set_position(double position) override {
+        sent(axes_.send(i_, motion::AxisCommand{motion::CommandType::SetPosition, position}));
+    }
+    void set_closed_loop(bool on) override {
+        motion::AxisCommand c{motion::CommandType::Power};
+        c.on = on;
+        axes_.send(i_, c);
+    }
+    Status status() override {
+        const motion::AxisStatus& s = axes_.status(i_);
+        const motion::AxisParams& p = axes_.params(i_);
+        Status r;
+        r.position = s.act_pos;
+        r.encoder = s.act_pos;
+        r.has_encoder = !p.virtual_axis;
+        r.velocity = s.act_vel;
+        bool taken = s.done_tag >= last_tag_ && !s.busy;
+        bool settled = s.at_target || !p.target_enable || s.error_id != 0 || !s.enabled || s.refused_tag == last_tag_;
+        r.done = last_tag_ == 0 ? !s.busy : taken && settled;
+        r.moving = !r.done;
+        r.direction_positive = s.act_vel > 0 || (s.act_vel == 0 && last_dir_);
+        if (s.act_vel != 0) last_dir_ = s.act_vel > 0;
+        r.high_limit = s.limit_fwd;
+        r.low_limit = s.limit_bwd;
+        r.home_switch = s.home_sensor;
+        r.homed = s.homed;
+        // ECMC: PROBLEM on an axis error or a soft-limit interlock
+        r.problem = s.error_id != 0 || s.warning_id == motion::error_id::kSoftLimitFwd ||
+                    s.warning_id == motion::error_id::kSoftLimitBwd;
+        r.enabled = s.enabled;
+        r.slip_stall = s.error_id == motion::error_id::kStall;
+        return r;
+    }
+
+private:
+    void sent(uint64_t tag) {
+        if (tag) last_tag_ = tag;
+    }
+    IocAxes& axes_;
+    std::size_t i_;
+    uint64_t last_tag_ = 0;
+    bool last_dir_ = true;
+};
+
+// fieldInit "RTRY=0,FOFF=Frozen" -> {RTRY, 0}, {FOFF, Frozen}
+std::vector<std::pair<std::string, std::string>> field_init(const std::string& s) {
+    std::vector<std::pair<std::string, std::string>> v;
+    std::size_t at = 0;
+    while (at < s.size()) {
+        std::size_t end = s.find(',', at);
+        std::string item = s.substr(at, end == std::string::npos ? std::string::npos : end - at);
+        std::size_t eq = item.find('=');
+        if (eq != std::string::npos) {
+            auto trim = [](std::string x) {
+                x.erase(0, x.find_first_not_of(" \t"));
+                x.erase(x.find_last_not_of(" \t") + 1);
+                return x;
+            };
+            v.emplace_back(trim(item.substr(0, eq)), trim(item.substr(eq + 1)));
+        }
+        if (end == std::string::npos) break;
+        at = end + 1;
+    }
+    return v;
 }
 } // namespace
 
@@ -111,7 +203,10 @@ void IocAxes::make_pvs(Axis& a, std::size_t index) {
     f.records.push_back(record("longout", p + "-MtnCmd", {{"DESC", "1 VEL 2 REL 3 ABS 10 HOME"}, {"VAL", "3"}}));
     f.records.push_back(record("longout", p + "-MtnCmdData", {{"DESC", "Homing sequence; 14 = configured"}, {"VAL", "14"}}));
     f.records.push_back(record("stringin", p + "-MsgTxt", {{"DESC", "Error message"}}));
+    if (a.cfg.epics.motor_record.enable) make_motor_record(a, f);
     db_.load(f);
+    if (a.cfg.epics.motor_record.enable)
+        if (pv::MotorRecord* m = pv::MotorRecord::from(db_.find(p))) m->set_driver(std::make_shared<AxisMotorDriver>(*this, index));
     auto rec = [&](const char* s) { return db_.find(p + s); };
     a.pos_act = rec("-PosAct");
     a.vel_act = rec("-VelAct");
@@ -144,9 +239,55 @@ void IocAxes::make_pvs(Axis& a, std::size_t index) {
     hook(index);
 }
 
-bool IocAxes::send(std::size_t i, const motion::AxisCommand& c) {
-    if (!group_) return false;
-    return group_->send(i, c);
+uint64_t IocAxes::send(std::size_t i, motion::AxisCommand c) {
+    if (!group_) return 0;
+    c.tag = next_tag_++;
+    return group_->send(i, c) ? c.tag : 0;
+}
+
+const motion::AxisStatus& IocAxes::status(std::size_t i) {
+    if (!group_) return idle_;
+    const auto& st = group_->snapshot();
+    return i < st.size() ? st[i] : idle_;
+}
+
+
+void IocAxes::make_motor_record(Axis& a, pv::DbFile& f) {
+    const motion::AxisParams& p = a.params;
+    auto num = [](double v) {
+        char b[40];
+        std::snprintf(b, sizeof b, "%.12g", v);
+        return std::string(b);
+    };
+    // one step = one encoder count (the readback resolution); virtual axes: 10^-PREC
+    double mres = p.virtual_axis ? std::pow(10.0, -a.cfg.epics.precision) : std::fabs(p.encoder.numerator / p.encoder.denominator);
+    std::vector<std::pair<std::string, std::string>> fields = {
+        {"DTYP", "asynMotor"},
+        {"OUT", SB() << "@asyn(MCU1," << p.id << ")"},
+        {"DESC", a.cfg.epics.motor_record.description.substr(0, 40)},
+        {"EGU", a.cfg.epics.unit},
+        {"PREC", std::to_string(a.cfg.epics.precision)},
+        {"MRES", num(mres)},
+        {"VELO", num(p.trajectory.velocity)},
+        {"ACCL", num(p.trajectory.acceleration > 0 ? p.trajectory.velocity / p.trajectory.acceleration : 0.2)},
+        {"JVEL", num(p.jog_velocity > 0 ? p.jog_velocity : p.trajectory.velocity)},
+        {"HVEL", num(p.homing_velocity_to > 0 ? p.homing_velocity_to : p.trajectory.velocity / 10)},
+        {"TWV", num(a.cfg.axis.tweak_dist)},
+        {"RDBD", num(p.target_enable && p.target_tolerance > 0 ? p.target_tolerance : mres)},
+        {"RTRY", "0"},
+    };
+    if (p.velocity_enable && p.velocity_max > 0) fields.push_back({"VMAX", num(p.velocity_max)});
+    if (p.soft_fwd_enable && p.soft_bwd_enable) {
+        fields.push_back({"DHLM", num(p.soft_fwd)});
+        fields.push_back({"DLLM", num(p.soft_bwd)});
+    }
+    for (auto& kv : field_init(a.cfg.epics.motor_record.field_init)) {
+        bool replaced = false;
+        for (auto& f2 : fields)
+            if (f2.first == kv.first) f2.second = kv.second, replaced = true;
+        if (!replaced) fields.push_back(kv);
+    }
+    f.records.push_back(record("motor", a.pv, fields));
 }
 
 // PV writes become axis commands (ECMC control-word semantics).
@@ -161,15 +302,13 @@ void IocAxes::hook(std::size_t i) {
     a.ena_cmd->put_hook = on_val([this, i](double v) {
         motion::AxisCommand c{motion::CommandType::Power};
         c.on = v != 0;
-        c.tag = next_tag_++;
-        return send(i, c);
+        return send(i, c) != 0;
     });
     a.exe_cmd->put_hook = [this, i](pv::Record& r, const pv::FieldDesc& f) {
         if (std::string_view(f.name) != "VAL") return pv::PutStatus::Ok;
         Axis& ax = axes_[i];
         double v = get_value(r);
         motion::AxisCommand c;
-        c.tag = next_tag_++;
         if (v == 0) { // falling edge: stop with the normal deceleration
             c.type = motion::CommandType::Halt;
         } else {
@@ -185,14 +324,12 @@ void IocAxes::hook(std::size_t i) {
     db_.find(a.pv + "-StpCmd")->put_hook = on_val([this, i](double v) {
         if (v == 0) return true;
         motion::AxisCommand c{motion::CommandType::Halt};
-        c.tag = next_tag_++;
-        return send(i, c);
+        return send(i, c) != 0;
     });
     db_.find(a.pv + "-RstCmd")->put_hook = on_val([this, i](double v) {
         if (v == 0) return true;
         motion::AxisCommand c{motion::CommandType::Reset};
-        c.tag = next_tag_++;
-        return send(i, c);
+        return send(i, c) != 0;
     });
 }
 

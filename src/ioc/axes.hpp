@@ -7,7 +7,8 @@
 //   $(P)AX-PosAct -VelAct -PosSet -PosErr (ai), -Stat -ErrId -WrnId -SeqState -LastIlock
 //   (longin), -EnaAct -Busy -AtTarget -Moving -LimFwd -LimBwd -HomeSwitch -Homed -Err (bi),
 //   -EnaCmd -ExeCmd -StpCmd -RstCmd (bo), -TgtPosCmd -TgtVelCmd (ao), -MtnCmd -MtnCmdData
-//   (longout), -MsgTxt (stringin).
+//   (longout), -MsgTxt (stringin); and the motor record $(P)AX (epics.motorRecord.enable, as
+//   ecmccfg), driven through AxisMotorDriver.
 // Threading: everything here runs on the IOC loop thread except the AxisGroup's RT stage.
 #pragma once
 
@@ -43,8 +44,11 @@ public:
     const motion::AxisConfig& config(std::size_t i) const { return axes_.at(i).cfg; }
     // Index of the axis with this epics.name, or -1.
     int find(const std::string& name) const;
-    // Sends a command to axis i (non-RT); false if the queue is full.
-    bool send(std::size_t i, const motion::AxisCommand& c);
+    // Sends a command to axis i (non-RT) with a new tag (returned; 0 if the queue is full).
+    uint64_t send(std::size_t i, motion::AxisCommand c);
+    // The latest status of axis i (default before bring-up).
+    const motion::AxisStatus& status(std::size_t i);
+    const motion::AxisParams& params(std::size_t i) const { return axes_.at(i).params; }
 
 private:
     struct Axis {
@@ -63,6 +67,7 @@ private:
         bool last_enable_cmd = false;
     };
     void make_pvs(Axis& a, std::size_t index);
+    void make_motor_record(Axis& a, pv::DbFile& f);
     void hook(std::size_t index);
     void publish_one(Axis& a, const motion::AxisStatus& s);
 
@@ -71,6 +76,7 @@ private:
     std::vector<Axis> axes_;
     std::unique_ptr<motion::AxisGroup> group_;
     uint64_t next_tag_ = 1;
+    motion::AxisStatus idle_; // status before bring-up
 };
 
 } // namespace beamctl::ioc

@@ -88,6 +88,7 @@ void Axis::start_stop(double d) noexcept {
     if (seq_ == Seq::Homing) seq_ = Seq::Stopping;
     if (!traj_.busy()) {
         if (seq_ != Seq::Idle) {
+            st_.target_pos = traj_.state().position;
             seq_ = Seq::Idle;
             finish(tag_);
         }
@@ -138,6 +139,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     // (ECMC setErrorID) the latched axis error, which also stops a running move.
     auto refuse = [&](uint32_t id) {
         finish(c.tag);
+        if (id && c.tag) st_.refused_tag = c.tag;
         if (id && error_id::is_warning(id)) st_.warning_id = id;
         else if (id && id != st_.error_id) fault(id, false);
         return id;
@@ -554,6 +556,7 @@ void Axis::run(double dt) noexcept {
     bool was_busy = seq_ != Seq::Idle;
     TrajectoryResult r = traj_.step(dt);
     if (r == TrajectoryResult::Finished && (seq_ == Seq::Moving || seq_ == Seq::Stopping)) {
+        if (seq_ == Seq::Stopping) st_.target_pos = traj_.state().position; // as ECMC after a stop
         seq_ = Seq::Idle;
         finish(tag_);
     }

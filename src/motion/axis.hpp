@@ -143,6 +143,7 @@ struct AxisStatus {
     int sequence_state = 0;
     CommandType command = CommandType::None;
     uint64_t done_tag = 0;  // tag of the last command that finished (or was refused)
+    uint64_t refused_tag = 0; // tag of the last command refused
     uint64_t cycle = 0;
     // ECMC `Stat` bits: 0 enable, 1 enabled, 2 execute, 3 busy, 4 attarget, 5 moving, 6 limit fwd
     // OK (1 = not on the switch), 7 limit bwd OK, 8 home switch, 9 homed, 14/15 soft limit fwd/bwd

@@ -1,0 +1,129 @@
+"""The motor record of an axis ($(P)X), driven by pyepics' epics.Motor and by the sequence
+ophyd's EpicsMotor uses: moves with wait, soft limits refusing a move, set_position, tweak, stop,
+homing, and the DMOV 1->0->1 edge with RBV at NO_ALARM after a good move."""
+
+import shutil
+import time
+
+import epics
+import pytest
+from epics import ca
+
+from conftest import RunServer, acquire_port, connect, forget_pvs, release_port, wait_for
+from test_axes import DATA
+
+IOC = """
+ioc: {{name: {name}, prefix: "{prefix}"}}
+engine: {{rate_hz: 1000}}
+buses:
+  - id: 0
+    link: {{type: sim, plant: plant.yaml}}
+    slaves:
+      - {{position: 0, type: EK1100}}
+      - {{position: 1, type: EL1008}}
+      - {{position: 2, type: EL7041}}
+axes:
+  - {{file: stepper.yaml, macros: {{AX_NAME: X, DRV_SLAVE: 2, SOFT: "true"}}}}
+"""
+
+# ophyd EpicsMotor's 19 components (all non-lazy)
+OPHYD_FIELDS = ["RBV", "VAL", "OFF", "DIR", "FOFF", "SET", "VELO", "ACCL", "EGU", "MOVN", "DMOV", "HLS", "LLS",
+                "HLM", "LLM", "TDIR", "STOP", "HOMF", "HOMR"]
+
+
+@pytest.fixture
+def motor(tmp_path, prefix):
+    shutil.copy(DATA / "stepper.yaml", tmp_path / "stepper.yaml")
+    shutil.copy(DATA / "plant.yaml", tmp_path / "plant.yaml")
+    cfg = tmp_path / "ioc.yaml"
+    cfg.write_text(IOC.format(name=prefix.rstrip(":"), prefix=prefix))
+    port = acquire_port()
+    srv = RunServer(tmp_path, cfg, port).start()
+    try:
+        assert wait_for(lambda: ca.get(connect(prefix + "m0-Stat-OK")) == 1)
+        m = epics.Motor(prefix + "X", timeout=5)
+        m.put("CNEN", 1, wait=True)
+        assert wait_for(lambda: ca.get(connect(prefix + "X-EnaAct")) == 1, timeout=5)
+        yield m, prefix
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)
+
+
+def test_move_with_wait_and_limits(motor):
+    m, p = motor
+    assert m.get("RTYP") == "motor"
+    assert (m.get("HLM"), m.get("LLM")) == (45, -45)  # the axis's soft limits
+    t0 = time.monotonic()
+    assert m.move(5, wait=True, timeout=20) == 0
+    assert time.monotonic() - t0 > 0.9  # 5 mm at 5 mm/s takes more than a second
+    assert m.get("DMOV") == 1
+    assert abs(m.get("RBV") - 5) < 0.01
+    assert abs(ca.get(connect(p + "X-PosAct")) - 5) < 0.01
+    assert m.move(50, wait=True) == -12  # beyond HLM: refused by pyepics, nothing written
+    assert m.move(2, relative=True, wait=True, timeout=20) == 0
+    assert abs(m.get("RBV") - 7) < 0.01
+    assert m.move(-3, dial=True, wait=True, timeout=20) == 0
+    assert abs(m.get("DRBV") + 3) < 0.01
+
+
+def test_soft_limit_violation_sets_lvio_and_moves_nothing(motor):
+    m, _p = motor
+    assert m.move(60, wait=True, ignore_limits=True, timeout=10) == -4  # LVIO after the put
+    assert m.get("LVIO") == 1
+    assert abs(m.get("RBV")) < 0.01
+
+
+def test_set_position_tweak_stop(motor):
+    m, p = motor
+    m.set_position(10)  # SET=1, VAL=10, SET=0 (plain puts in order)
+    assert wait_for(lambda: abs(m.get("RBV") - 10) < 0.01, timeout=5)
+    m.put("TWV", 0.5)
+    m.tweak(direction="forward", wait=True)
+    assert abs(m.get("RBV") - 10.5) < 0.01
+    m.move(30, wait=False)
+    assert wait_for(lambda: m.get("MOVN") == 1, timeout=5)
+    time.sleep(0.5)
+    m.stop()
+    assert wait_for(lambda: m.get("DMOV") == 1, timeout=10)
+    rbv = m.get("RBV")
+    assert 11 < rbv < 29  # stopped on the way
+    assert abs(m.get("VAL") - rbv) < 0.01  # after a stop VAL = RBV
+
+
+def test_homing_from_the_motor_record(motor):
+    m, p = motor
+    m.put("HOMR", 1)
+    assert wait_for(lambda: m.get("DMOV") == 0, timeout=5)
+    assert wait_for(lambda: m.get("DMOV") == 1, timeout=40)
+    assert ca.get(connect(p + "X-Homed")) == 1
+    assert int(m.get("MSTA")) & (1 << 14)  # HOMED
+    assert -30.1 < m.get("DRBV") < -29  # the home cam's edge reads -30
+
+
+def test_ophyd_epics_motor_sequence(motor):
+    """What ophyd's EpicsMotor.move does: all 19 fields connect; VAL's ctrl limits; a put to VAL
+    without callback; the move is done on the DMOV 1->0->1 edge; RBV severity must be NO_ALARM."""
+    m, p = motor
+    pvs = {f: epics.PV(f"{p}X.{f}", form="ctrl") for f in OPHYD_FIELDS}
+    assert all(pv.wait_for_connection(timeout=5) for pv in pvs.values())
+    val = pvs["VAL"]
+    ctrl = val.get_ctrlvars()
+    assert (ctrl["lower_ctrl_limit"], ctrl["upper_ctrl_limit"]) == (-45, 45)
+    assert pvs["DMOV"].get() == 1
+    dmov = []
+    pvs["DMOV"].add_callback(lambda value=None, **kw: dmov.append(value))
+    val.put(3.0, wait=False)
+    assert wait_for(lambda: dmov[-2:] == [0, 1], timeout=20), dmov
+    rbv = epics.PV(f"{p}X.RBV", form="time")
+    assert rbv.wait_for_connection(timeout=5)
+    rbv.get()
+    assert rbv.severity == 0
+    assert abs(rbv.value - 3) < 0.01
+    assert pvs["TDIR"].get() == 1 and pvs["HLS"].get() == 0 and pvs["LLS"].get() == 0
+    # a null move still pulses DMOV
+    n = len(dmov)
+    val.put(3.0, wait=False)
+    assert wait_for(lambda: len(dmov) >= n + 2 and dmov[-2:] == [0, 1], timeout=10), dmov
