@@ -1,0 +1,54 @@
+"""The demo beamline (examples/demo/ioc.yaml, what `bash build.sh demo` runs): it loads, reaches
+OP with all 20 terminals, and its six axes work through their motor records: a slit blade homes and
+moves, the absolute-encoder sample axis is referenced at start, the soft records are served."""
+
+
+import epics
+import pytest
+from epics import ca
+
+from conftest import REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port, wait_for
+
+AXES = ["SlitTop", "SlitBottom", "SlitLeft", "SlitRight", "SampleX", "SampleY"]
+
+
+@pytest.fixture
+def demo(tmp_path):
+    port = acquire_port()
+    srv = RunServer(tmp_path, REPO_ROOT / "examples" / "demo" / "ioc.yaml", port).start()
+    try:
+        assert wait_for(lambda: ca.get(connect("DEMO:m0-Stat-OK")) == 1, timeout=10)
+        yield srv
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs("DEMO:")
+        release_port(port)
+
+
+def test_demo_runs_twenty_terminals_and_six_axes(demo):
+    assert ca.get(connect("DEMO:m0-SlvCntr")) == 20
+    for pos in range(20):
+        assert wait_for(lambda: ca.get(connect(f"DEMO:m0s{pos:03d}-Operational")) == 1, timeout=5)
+    for ax in AXES:
+        assert ca.get(connect(f"DEMO:{ax}.RTYP")) == "motor"
+        assert ca.get(connect(f"DEMO:{ax}-ErrId")) == 0
+    assert ca.get(connect("DEMO:SampleX-Homed")) == 1  # absolute encoder
+    assert ca.get(connect("DEMO:SlitTop-Homed")) == 0
+    assert abs(ca.get(connect("DEMO:SampleX-PosAct")) - 1.5) < 0.01  # the stage starts at 1.5 mm
+
+
+def test_demo_slit_blade_homes_and_moves(demo):
+    m = epics.Motor("DEMO:SlitTop", timeout=5)
+    m.put("CNEN", 1, wait=True)
+    assert wait_for(lambda: ca.get(connect("DEMO:SlitTop-EnaAct")) == 1, timeout=5)
+    m.put("HOMF", 1)
+    assert wait_for(lambda: m.get("DMOV") == 0, timeout=5)
+    assert wait_for(lambda: m.get("DMOV") == 1, timeout=60)
+    assert ca.get(connect("DEMO:SlitTop-Homed")) == 1
+    assert m.move(4.0, wait=True, timeout=30) == 0
+    assert abs(m.get("RBV") - 4.0) < 0.01
+    # the LVDT on the top blade reads 0.1 V/mm of the blade's real position
+    lvdt = ca.get(connect("DEMO:m0s005-AI02")) / 3276.7
+    assert abs(lvdt - 0.4) < 0.01
+    assert m.move(40.0, wait=True) == -12  # beyond the soft limit (17 mm)
