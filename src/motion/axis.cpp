@@ -208,7 +208,16 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
         if (!((seq >= 1 && seq <= 4) || (seq >= 7 && seq <= 10))) return refuse(error_id::kSeqCmdData);
     }
     bool enabled = p_.virtual_axis ? enable_req_ : drive_.enabled();
+    if (!enabled && enable_req_ && !p_.virtual_axis) { // still enabling: run it once enabled
+        if (has_pending_) finish(pending_.tag);
+        pending_ = c;
+        has_pending_ = true;
+        st_.busy = true;
+        st_.at_target = false;
+        return 0;
+    }
     if (!enabled) return refuse(error_id::kNotEnabled);
+    has_pending_ = false;
     st_.warning_id = 0;
     st_.last_interlock = Interlock::None;
     if (c.type == CommandType::Home) {
@@ -548,6 +557,16 @@ void Axis::run(double dt) noexcept {
     }
     was_enabled_ = enabled;
     st_.enabled = enabled;
+    if (has_pending_) {
+        if (enabled) {
+            has_pending_ = false;
+            (void)command(pending_);
+        } else if (!enable_req_ || st_.error_id) { // the enable failed or was withdrawn
+            has_pending_ = false;
+            finish(pending_.tag);
+            st_.refused_tag = pending_.tag;
+        }
+    }
     st_.act_pos = p_.virtual_axis ? traj_.state().position : enc_.position();
     st_.act_vel = p_.virtual_axis ? traj_.state().velocity : enc_.velocity();
 
@@ -575,13 +594,13 @@ void Axis::run(double dt) noexcept {
         st_.act_vel = st_.set_vel;
     }
     st_.pos_err = st_.set_pos - st_.act_pos;
-    st_.busy = seq_ != Seq::Idle;
+    st_.busy = seq_ != Seq::Idle || has_pending_;
     if (was_busy && !st_.busy && st_.command != CommandType::Home)
         stall_wait_ = std::max(15.0, 10 * move_time_); // the stall check starts when busy ends
     if (!st_.busy && !enabled) st_.target_pos = st_.act_pos;
     st_.moving = st_.busy && std::fabs(st_.act_vel) > 0;
     monitor(dt);
-    st_.busy = seq_ != Seq::Idle;
+    st_.busy = seq_ != Seq::Idle || has_pending_;
     last_home_ = st_.home_sensor;
     last_lim_fwd_ = st_.limit_fwd;
     last_lim_bwd_ = st_.limit_bwd;

@@ -196,6 +196,10 @@ private:
     double move_time_ = 0;     // duration of the current/last busy period [s]
     double stall_wait_ = -1;   // after a move: time left to reach the target [s] (< 0: not armed)
     bool bus_was_ok_ = true;
+    // A motion command that arrived while the drive was being enabled runs once it is (ECMC's
+    // auto-enable path: the axis reports busy meanwhile).
+    AxisCommand pending_{};
+    bool has_pending_ = false;
     // homing
     int home_seq_ = 0, home_step_ = 0;
     bool last_home_ = false, last_lim_fwd_ = false, last_lim_bwd_ = false;

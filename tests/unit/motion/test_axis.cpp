@@ -497,3 +497,18 @@ stages:
     EXPECT_TRUE(ax.status().at_target);
     EXPECT_NEAR(b.plant->find_stage("r")->position(), 180, 0.05);
 }
+
+TEST(Axis, AMoveRightAfterEnableWaitsForTheDrive) {
+    AxisBus a;
+    AxisCommand on{CommandType::Power};
+    on.on = true;
+    (void)a.ax.command(on);
+    ASSERT_FALSE(a.ax.status().enabled);
+    ASSERT_EQ(a.cmd(CommandType::MoveAbsolute, 2, 0, 5), 0u); // taken, runs once enabled
+    EXPECT_TRUE(a.ax.status().busy);
+    EXPECT_NE(a.ax.status().done_tag, 5u);
+    a.until([&] { return !a.ax.status().busy; }, 5000);
+    EXPECT_EQ(a.ax.status().done_tag, 5u);
+    EXPECT_EQ(a.ax.status().error_id, 0u);
+    EXPECT_DOUBLE_EQ(a.ax.status().set_pos, 2.0);
+}
