@@ -532,6 +532,26 @@ void Axis::run(double dt) noexcept {
     read_inputs();
     if (!p_.virtual_axis) enc_.update(dt);
     bool enabled = p_.virtual_axis ? enable_req_ : drive_.enabled();
+    bool drive_enable = enable_req_;
+    if (io_.brake.bound() && !p_.virtual_axis) {
+        // The brake opens openDelay cycles after the drive is enabled, and the axis counts as
+        // enabled only then; on disable it closes at once while the drive stays enabled
+        // closeAhead cycles more (holding the load at zero velocity).
+        if (enable_req_ && enabled) {
+            if (brake_cycles_ < p_.brake_open_delay_cycles) ++brake_cycles_;
+            else st_.brake_open = true;
+            close_ahead_left_ = p_.brake_close_ahead_cycles;
+        } else {
+            st_.brake_open = false;
+            brake_cycles_ = 0;
+            if (!enable_req_ && close_ahead_left_ > 0 && enabled) {
+                --close_ahead_left_;
+                drive_enable = true;
+            }
+        }
+        io_.brake.set(st_.brake_open ? 1 : 0);
+        enabled = enabled && enable_req_ && st_.brake_open;
+    }
     if (!p_.virtual_axis) {
         if (!bus_ok) {
             st_.last_interlock = Interlock::BusNotOk;
@@ -549,7 +569,7 @@ void Axis::run(double dt) noexcept {
             fault(id, true);
         } else if (drive_.timed_out()) {
             fault(p_.drive.type == DriveParams::Type::Ds402 ? error_id::kDs402Timeout : error_id::kDriveTimeout, true);
-        } else if (was_enabled_ && enable_req_ && !enabled) {
+        } else if (was_enabled_ && enable_req_ && !enabled && !drive_.enabled()) {
             st_.warning_id = error_id::kEnableLost; // the drive dropped out: enable is cleared
             enable_req_ = false;
             st_.enable_cmd = false;
@@ -609,7 +629,7 @@ void Axis::run(double dt) noexcept {
     double out = 0;
     if (enabled && !p_.virtual_axis) out = ctrl_.step(st_.pos_err, st_.set_vel, dt);
     st_.drive_output = out;
-    if (!p_.virtual_axis) drive_.step(enable_req_, out, !st_.busy, dt);
+    if (!p_.virtual_axis) drive_.step(drive_enable, out, !st_.busy, dt);
 }
 
 } // namespace beamctl::motion

@@ -88,6 +88,9 @@ struct AxisParams {
     double velocity_max = 0;
     int velocity_time_traj_cycles = 200, velocity_time_drive_cycles = 400;
     bool stall_enable = true; // needs target monitoring
+    // motor brake (drive.brake): opened this many cycles after the drive is enabled; closed this
+    // many cycles before the drive is disabled (ECMC openDelay / closeAhead)
+    int brake_open_delay_cycles = 0, brake_close_ahead_cycles = 0;
     bool enable_at_startup = false; // re-enable after a bus outage (ECMC autoEnable.atStartup)
     // homing defaults (ECMC encoder.homing)
     int homing_sequence = 0;
@@ -104,6 +107,7 @@ struct AxisIo {
     registry::BoundSignal drive_control, drive_status, drive_setpoint;
     registry::BoundSignal limit_fwd, limit_bwd, home, interlock;
     registry::BoundSignal bus_status; // ec<m>.masterstatus: 1 while the bus is OK
+    registry::BoundSignal brake;      // output: 1 = brake open (released); unbound: no brake
 };
 
 enum class CommandType : uint8_t {
@@ -137,6 +141,7 @@ struct AxisStatus {
     bool home_sensor = false, homed = false;
     bool soft_limit_fwd = false, soft_limit_bwd = false; // at/beyond an enabled soft limit
     bool soft_fwd_enabled = false, soft_bwd_enabled = false;
+    bool brake_open = false;
     bool ilock_fwd = false, ilock_bwd = false;           // motion in that direction blocked
     uint32_t error_id = 0, warning_id = 0;
     Interlock last_interlock = Interlock::None;
@@ -198,6 +203,7 @@ private:
     bool bus_was_ok_ = true;
     // A motion command that arrived while the drive was being enabled runs once it is (ECMC's
     // auto-enable path: the axis reports busy meanwhile).
+    int brake_cycles_ = 0, close_ahead_left_ = 0;
     AxisCommand pending_{};
     bool has_pending_ = false;
     // homing

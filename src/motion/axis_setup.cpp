@@ -62,6 +62,10 @@ AxisParams make_axis_params(const AxisConfig& c) {
         p.drive.warning_bit = d->warning_bit.value_or(-1);
         p.drive.reduce_torque_bit = d->reduce_torque_enable ? d->reduce_torque_bit.value_or(-1) : -1;
         for (std::size_t i = 0; i < d->errors.size() && i < 3; ++i) p.drive.error_bits[i] = status_bit(*d, d->errors[i]);
+        if (d->brake && d->brake->enable) {
+            p.brake_open_delay_cycles = int(d->brake->open_delay_cycles);
+            p.brake_close_ahead_cycles = int(d->brake->close_ahead_cycles);
+        }
     }
     const auto& k = c.controller;
     p.controller.kp = k.kp;
@@ -123,6 +127,7 @@ std::vector<SignalRef> axis_signal_refs(const AxisConfig& c) {
         v.push_back(c.drive->control);
         v.push_back(c.drive->status);
         v.push_back(c.drive->setpoint);
+        if (c.drive->brake && c.drive->brake->enable) v.push_back(c.drive->brake->output);
     }
     if (!c.input.limit_forward.plc_override && !c.input.limit_forward.signal.text.empty()) v.push_back(c.input.limit_forward.signal);
     if (!c.input.limit_backward.plc_override && !c.input.limit_backward.signal.text.empty()) v.push_back(c.input.limit_backward.signal);
@@ -140,6 +145,7 @@ AxisIo bind_axis_io(const AxisConfig& c, const SignalResolver& resolve) {
         io.drive_control = resolve(c.drive->control);
         io.drive_status = resolve(c.drive->status);
         io.drive_setpoint = resolve(c.drive->setpoint);
+        if (c.drive->brake && c.drive->brake->enable) io.brake = resolve(c.drive->brake->output);
     }
     auto sw = [&](const SwitchInput& s) {
         return s.plc_override || s.signal.text.empty() ? registry::BoundSignal{} : resolve(s.signal);

@@ -65,15 +65,33 @@ AxisParams stepper_params() {
     return p;
 }
 
+// The signals of a stepper/servo axis on drive slave `drv` (its own encoder input), plus the
+// bus status; switches and interlock are set by the caller.
+AxisIo drive_io(SimBus& b, int drv) {
+    std::string s = "ec0.s" + std::to_string(drv) + ".";
+    AxisIo io;
+    io.encoder = b.m->bind(s + "positionActual01");
+    io.drive_control = b.m->bind(s + "driveControl01");
+    io.drive_status = b.m->bind(s + "driveStatus01");
+    io.drive_setpoint = b.m->bind(s + "velocitySetpoint01");
+    io.bus_status = b.m->bind("ec0.masterstatus");
+    return io;
+}
+
+AxisIo switch_io(SimBus& b) {
+    AxisIo io = drive_io(b, 2);
+    io.limit_fwd = b.m->bind("ec0.s1.binaryInput01");
+    io.limit_bwd = b.m->bind("ec0.s1.binaryInput02");
+    io.home = b.m->bind("ec0.s1.binaryInput03");
+    return io;
+}
+
 struct AxisBus {
     SimBus b{kPlant};
     Axis ax;
     double dt = 0.001;
     explicit AxisBus(AxisParams p = stepper_params())
-        : ax(p, AxisIo{b.m->bind("ec0.s2.positionActual01"), b.m->bind("ec0.s2.driveControl01"),
-                       b.m->bind("ec0.s2.driveStatus01"), b.m->bind("ec0.s2.velocitySetpoint01"),
-                       b.m->bind("ec0.s1.binaryInput01"), b.m->bind("ec0.s1.binaryInput02"),
-                       b.m->bind("ec0.s1.binaryInput03"), {}, b.m->bind("ec0.masterstatus")}) {
+        : ax(p, switch_io(b)) {
         cycles(3);
     }
     void cycles(int n) {
@@ -157,9 +175,7 @@ slaves:
 stages:
   - {name: x, drive: s1, friction: 400, max_force: 100}
 )");
-    Axis ax(stepper_params(), AxisIo{b.m->bind("ec0.s1.positionActual01"), b.m->bind("ec0.s1.driveControl01"),
-                                     b.m->bind("ec0.s1.driveStatus01"), b.m->bind("ec0.s1.velocitySetpoint01"),
-                                     {}, {}, {}, {}, b.m->bind("ec0.masterstatus")});
+    Axis ax(stepper_params(), drive_io(b, 1));
     AxisCommand on{CommandType::Power};
     on.on = true;
     (void)ax.command(on);
@@ -388,9 +404,9 @@ slaves:
 wiring:
   - {from: s1.binaryOutput01, to: s2.binaryInput01}
 )");
-    Axis ax(p, AxisIo{b.m->bind("ec0.s3.positionActual01"), b.m->bind("ec0.s3.driveControl01"),
-                      b.m->bind("ec0.s3.driveStatus01"), b.m->bind("ec0.s3.velocitySetpoint01"), {}, {}, {},
-                      b.m->bind("ec0.s2.binaryInput01"), b.m->bind("ec0.masterstatus")});
+    AxisIo io = drive_io(b, 3);
+    io.interlock = b.m->bind("ec0.s2.binaryInput01");
+    Axis ax(p, io);
     registry::BoundSignal ok = b.m->bind("ec0.s1.binaryOutput01");
     auto cycles = [&](int n) {
         for (int i = 0; i < n; ++i) b.cycle([&] { ax.run(0.001); });
@@ -432,9 +448,7 @@ stages:
 )");
     AxisParams p = stepper_params();
     p.lag_enable = false;
-    Axis ax(p, AxisIo{b.m->bind("ec0.s1.positionActual01"), b.m->bind("ec0.s1.driveControl01"),
-                      b.m->bind("ec0.s1.driveStatus01"), b.m->bind("ec0.s1.velocitySetpoint01"), {}, {}, {}, {},
-                      b.m->bind("ec0.masterstatus")});
+    Axis ax(p, drive_io(b, 1));
     AxisCommand on{CommandType::Power};
     on.on = true;
     (void)ax.command(on);
@@ -474,9 +488,7 @@ stages:
     p.lag_enable = true;
     p.lag_tolerance = 1;
     p.lag_time_cycles = 20;
-    Axis ax(p, AxisIo{b.m->bind("ec0.s1.positionActual01"), b.m->bind("ec0.s1.driveControl01"),
-                      b.m->bind("ec0.s1.driveStatus01"), b.m->bind("ec0.s1.velocitySetpoint01"), {}, {}, {}, {},
-                      b.m->bind("ec0.masterstatus")});
+    Axis ax(p, drive_io(b, 1));
     AxisCommand on{CommandType::Power};
     on.on = true;
     (void)ax.command(on);
@@ -511,4 +523,93 @@ TEST(Axis, AMoveRightAfterEnableWaitsForTheDrive) {
     EXPECT_EQ(a.ax.status().done_tag, 5u);
     EXPECT_EQ(a.ax.status().error_id, 0u);
     EXPECT_DOUBLE_EQ(a.ax.status().set_pos, 2.0);
+}
+
+TEST(Axis, BrakeOpensAfterEnableAndClosesAheadOfDisable) {
+    // ECMC drive.brake: open openDelay cycles after the drive is enabled (the axis is enabled only
+    // then); on disable the brake closes at once and the drive stays enabled closeAhead cycles.
+    SimBus b(R"(
+slaves:
+  - {position: 0, type: EK1100}
+  - {position: 1, type: EL2008}
+  - {position: 2, type: EL7041}
+)");
+    AxisParams p = stepper_params();
+    p.brake_open_delay_cycles = 20;
+    p.brake_close_ahead_cycles = 15;
+    AxisIo io = drive_io(b, 2);
+    io.brake = b.m->bind("ec0.s1.binaryOutput01");
+    Axis ax(p, io);
+    registry::BoundSignal control = b.m->bind("ec0.s2.driveControl01");
+    auto brake_out = [&] { return b.m->get(*b.m->find_signal("ec0.s1.binaryOutput01")); };
+    AxisCommand on{CommandType::Power};
+    on.on = true;
+    (void)ax.command(on);
+    int drive_on = -1, brake_on = -1, axis_on = -1;
+    for (int i = 0; i < 60; ++i) {
+        b.cycle([&] { ax.run(0.001); });
+        if (drive_on < 0 && ax.status().enable_cmd && (b.m->get(*b.m->find_signal("ec0.s2.driveStatus01")) & 2)) drive_on = i;
+        if (brake_on < 0 && brake_out()) brake_on = i;
+        if (axis_on < 0 && ax.status().enabled) axis_on = i;
+    }
+    ASSERT_GE(drive_on, 0);
+    EXPECT_GE(brake_on - drive_on, 19);
+    EXPECT_LE(brake_on - drive_on, 22);
+    EXPECT_GE(axis_on, brake_on - 1);
+    // disable: brake closes now, the drive's enable bit stays 15 more cycles
+    AxisCommand off{CommandType::Power};
+    (void)ax.command(off);
+    int brake_off = -1, enable_off = -1;
+    for (int i = 0; i < 40; ++i) {
+        b.cycle([&] { ax.run(0.001); });
+        if (brake_off < 0 && !brake_out()) brake_off = i;
+        if (enable_off < 0 && !(control.get() & 1)) enable_off = i;
+    }
+    EXPECT_LE(brake_off, 1);
+    EXPECT_GE(enable_off - brake_off, 14);
+    EXPECT_LE(enable_off - brake_off, 16);
+    EXPECT_FALSE(ax.status().enabled);
+}
+
+TEST(Axis, NegativeSoftLimitRangeIsValid) {
+    // ECMC acceptance 6: limits (-227, -192) are a valid range
+    AxisParams p = stepper_params();
+    p.soft_fwd_enable = p.soft_bwd_enable = true;
+    p.soft_fwd = -192;
+    p.soft_bwd = -227;
+    AxisBus a(p);
+    a.enable();
+    ASSERT_EQ(a.cmd(CommandType::SetPosition, -200), 0u);
+    EXPECT_EQ(a.cmd(CommandType::MoveAbsolute, -190), error_id::kSoftLimitFwd);
+    EXPECT_EQ(a.cmd(CommandType::MoveAbsolute, -230), error_id::kSoftLimitBwd);
+    ASSERT_EQ(a.cmd(CommandType::MoveAbsolute, -195), 0u);
+    a.until([&] { return !a.ax.status().busy; });
+    EXPECT_DOUBLE_EQ(a.ax.status().set_pos, -195.0);
+}
+
+TEST(Axis, Ds402NotEnabledInTimeIsError14652) {
+    // ECMC acceptance 13: a DS402 drive that never reaches OPERATION ENABLED (a status word that
+    // stays SWITCH ON DISABLED) -> 0x14652 after 15 s, enable withdrawn.
+    uint8_t image[16] = {};
+    AxisParams p;
+    p.drive.type = DriveParams::Type::Ds402;
+    p.trajectory = {1, 1, 1, 0};
+    AxisIo io;
+    io.drive_control = registry::BoundSignal{image, 0, 16, false, -1};
+    io.drive_status = registry::BoundSignal{image, 16, 16, false, -1};
+    io.drive_setpoint = registry::BoundSignal{image, 32, 32, true, -1};
+    io.encoder = registry::BoundSignal{image, 64, 32, false, -1};
+    io.drive_status.set(0x40);
+    Axis ax(p, io);
+    AxisCommand on{CommandType::Power};
+    on.on = true;
+    (void)ax.command(on);
+    int n = 0;
+    while (ax.status().error_id == 0 && n < 20000) {
+        ax.run(0.001);
+        ++n;
+    }
+    EXPECT_EQ(ax.status().error_id, error_id::kDs402Timeout);
+    EXPECT_NEAR(n, 15000, 2);
+    EXPECT_FALSE(ax.status().enable_cmd);
 }
