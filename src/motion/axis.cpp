@@ -24,6 +24,7 @@ const char* error_id::text(uint32_t id) noexcept {
     case kStall: return "Axis stalled: not at target in time";
     case kSeqFailed: return "Homing failed: unexpected limit switch";
     case kSeqCmdData: return "Unknown homing sequence";
+    case kLatchCount: return "Homing: no encoder latch or latch count < 1";
     case kNoHomeFlank: return "Homing failed: no home switch edge";
     case kNoSecondHomeFlank: return "Homing failed: no second home switch edge";
     case kVelocityZero: return "Velocity, acceleration or target not valid";
@@ -205,7 +206,10 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
             (void)command(set);
             return refuse(0);
         }
-        if (!((seq >= 1 && seq <= 4) || (seq >= 7 && seq <= 10))) return refuse(error_id::kSeqCmdData);
+        if (!((seq >= 1 && seq <= 4) || (seq >= 7 && seq <= 12))) return refuse(error_id::kSeqCmdData);
+        if ((seq == 11 || seq == 12) && (!io_.latch_arm.bound() || !io_.latch_valid.bound() || !io_.latch_position.bound() ||
+                                         p_.homing_latch_count < 1))
+            return refuse(error_id::kLatchCount);
     }
     bool enabled = p_.virtual_axis ? enable_req_ : drive_.enabled();
     if (!enabled && enable_req_ && !p_.virtual_axis) { // still enabling: run it once enabled
@@ -302,7 +306,7 @@ void Axis::homing_step(double) noexcept {
     //   9/10  backward/forward at "from" through the cam (both edges), back to its rising edge:
     //         the reference is the middle of the two latches
     const int s = home_seq_;
-    const bool bwd = s == 1 || s == 3 || s == 7 || s == 9; // first direction backward
+    const bool bwd = s == 1 || s == 3 || s == 7 || s == 9 || s == 11; // first direction backward
     const double v_to = p_.homing_velocity_to > 0 ? p_.homing_velocity_to : p_.trajectory.velocity / 10;
     const double v_from = p_.homing_velocity_from > 0 ? p_.homing_velocity_from : v_to / 2;
     TrajectoryLimits l = p_.trajectory;
@@ -324,7 +328,64 @@ void Axis::homing_step(double) noexcept {
     bool near_last = bwd ? last_lim_bwd_ : last_lim_fwd_;
     bool home_changed = st_.home_sensor != last_home_;
     bool home_rising = st_.home_sensor && !last_home_;
-    if (s <= 4) {
+    bool latch_valid = io_.latch_valid.get() != 0;
+    bool latch_new = latch_valid && !last_latch_valid_;
+    last_latch_valid_ = latch_valid;
+    if (s == 11 || s == 12) { // limit, then the latchCount-th index mark (encoder latch)
+        switch (home_step_) {
+        case 0:
+            io_.latch_arm.set(0);
+            if (near_limit) {
+                home_step_ = 2;
+            } else {
+                go(dir * v_to);
+                home_step_ = 1;
+            }
+            break;
+        case 1:
+            if (near_limit) {
+                halt();
+                home_step_ = 2;
+            }
+            break;
+        case 2:
+            if (far_limit) return fail(error_id::kSeqFailed);
+            if (!traj_.busy()) {
+                go(-dir * v_from);
+                home_step_ = 3;
+            }
+            break;
+        case 3:
+            if (far_limit) return fail(error_id::kSeqFailed);
+            if (near_limit != near_last) { // left the switch: arm the latch
+                io_.latch_arm.set(1);
+                latch_count_ = 0;
+                home_step_ = 4;
+            }
+            break;
+        case 4:
+            if (far_limit) return fail(error_id::kNoHomeFlank);
+            if (latch_new) {
+                io_.latch_arm.set(0); // disarm; re-armed next cycle for the next mark
+                if (++latch_count_ >= p_.homing_latch_count) {
+                    home_edge_pos_ = enc_.position_at_raw(uint64_t(io_.latch_position.get_raw()));
+                    halt();
+                    home_step_ = 10;
+                } else {
+                    home_step_ = 5;
+                }
+            }
+            break;
+        case 5:
+            if (far_limit) return fail(error_id::kNoHomeFlank);
+            if (!latch_valid) { // the terminal saw the disarm: arm again
+                io_.latch_arm.set(1);
+                home_step_ = 4;
+            }
+            break;
+        default: break;
+        }
+    } else if (s <= 4) {
         switch (home_step_) {
         case 0: // towards the limit at "to" (or already on it)
             if (near_limit) {
@@ -421,6 +482,7 @@ void Axis::homing_step(double) noexcept {
         traj_.reset({traj_.state().position + delta, 0, 0});
         ctrl_.reset();
         st_.set_pos = traj_.state().position;
+        st_.act_pos = enc_.position(); // this cycle's status already shows the new reference
         st_.homed = true;
         enc_.set_homed(true);
         st_.target_pos = traj_.state().position;

@@ -42,6 +42,7 @@ constexpr uint32_t kSeqFailed = 0x14D04;       // ERROR_SEQ_SEQ_FAILED: unexpect
 constexpr uint32_t kSeqCmdData = 0x14D0A;      // ERROR_SEQ_CMD_DATA_UNDEFINED: unknown homing sequence
 constexpr uint32_t kNoHomeFlank = 0x14D0C;     // ERROR_SEQ_NO_HOME_SWITCH_FLANK
 constexpr uint32_t kNoSecondHomeFlank = 0x14D0D; // ERROR_SEQ_NO_SECOND_HOME_SWITCH_FLANK
+constexpr uint32_t kLatchCount = 0x14D14;     // ERROR_SEQ_LATCH_COUNT_OUT_OF_RANGE (or no latch)
 constexpr uint32_t kVelocityZero = 0x14D12;    // ERROR_SEQ_VELOCITY_ZERO (also bad parameters)
 constexpr uint32_t kHomeNotAllowed = 0x14D1A;  // ERROR_SEQ_HOME_NOT_ALLOWED (sequence 0)
 // warnings
@@ -97,6 +98,7 @@ struct AxisParams {
     double homing_position = 0;
     double homing_velocity_to = 0, homing_velocity_from = 0; // [units/s]; 0 = velocity/10
     double homing_acceleration = 0;                           // 0 = trajectory acceleration
+    int homing_latch_count = 1; // sequences 11/12: reference on this index latch
     bool homing_post_move_enable = false;
     double homing_post_move_position = 0;
 };
@@ -108,6 +110,8 @@ struct AxisIo {
     registry::BoundSignal limit_fwd, limit_bwd, home, interlock;
     registry::BoundSignal bus_status; // ec<m>.masterstatus: 1 while the bus is OK
     registry::BoundSignal brake;      // output: 1 = brake open (released); unbound: no brake
+    // encoder latch (index homing 11/12): latched counter, arm bit (encoder control), valid bit
+    registry::BoundSignal latch_position, latch_arm, latch_valid;
 };
 
 enum class CommandType : uint8_t {
@@ -196,7 +200,6 @@ private:
     uint64_t tag_ = 0;       // of the running command
     bool enable_req_ = false;
     bool was_enabled_ = false;
-    bool disable_after_stop_ = false;
     int lag_cycles_ = 0, target_cycles_ = 0, overspeed_cycles_ = 0, overspeed_drive_cycles_ = 0;
     double move_time_ = 0;     // duration of the current/last busy period [s]
     double stall_wait_ = -1;   // after a move: time left to reach the target [s] (< 0: not armed)
@@ -210,6 +213,8 @@ private:
     int home_seq_ = 0, home_step_ = 0;
     bool last_home_ = false, last_lim_fwd_ = false, last_lim_bwd_ = false;
     double home_edge_pos_ = 0, home_edge2_pos_ = 0;
+    int latch_count_ = 0;
+    bool last_latch_valid_ = false;
 };
 
 } // namespace beamctl::motion

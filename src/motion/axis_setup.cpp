@@ -49,6 +49,7 @@ AxisParams make_axis_params(const AxisConfig& c) {
             p.homing_velocity_from = h->velocity_from.value_or(p.homing_velocity_to);
             p.homing_acceleration = h->acceleration.value_or(0);
             p.homing_post_move_enable = h->post_move_enable;
+            p.homing_latch_count = int(h->latch_count.value_or(1));
             p.homing_post_move_position = h->post_move_position;
         }
     }
@@ -121,8 +122,14 @@ AxisParams make_axis_params(const AxisConfig& c) {
 
 std::vector<SignalRef> axis_signal_refs(const AxisConfig& c) {
     std::vector<SignalRef> v;
-    if (const EncoderConfig* e = primary(c))
+    if (const EncoderConfig* e = primary(c)) {
         if (e->position && e->source == EncoderSource::EtherCAT) v.push_back(*e->position);
+        if (e->latch && e->control && e->status) {
+            v.push_back(e->latch->position);
+            v.push_back(*e->control);
+            v.push_back(*e->status);
+        }
+    }
     if (c.drive) {
         v.push_back(c.drive->control);
         v.push_back(c.drive->status);
@@ -141,6 +148,11 @@ AxisIo bind_axis_io(const AxisConfig& c, const SignalResolver& resolve) {
     if (c.is_virtual()) return io;
     const EncoderConfig* e = primary(c);
     if (e && e->position) io.encoder = resolve(*e->position);
+    if (e && e->latch && e->control && e->status) {
+        io.latch_position = resolve(e->latch->position);
+        io.latch_arm = resolve(e->control->with_bit(e->latch->control_bit));
+        io.latch_valid = resolve(e->status->with_bit(e->latch->status_bit));
+    }
     if (c.drive) {
         io.drive_control = resolve(c.drive->control);
         io.drive_status = resolve(c.drive->status);

@@ -33,6 +33,15 @@ void Encoder::update(double dt) noexcept {
     position_ = pos;
 }
 
+double Encoder::position_at_raw(uint64_t raw) const noexcept {
+    int width = std::clamp(p_.absolute && p_.abs_bits > 0 ? p_.abs_bits : p_.bits, 1, 64);
+    uint64_t wmask = width >= 64 ? ~uint64_t(0) : (uint64_t(1) << width) - 1;
+    uint64_t d = ((raw & p_.mask & wmask) - last_raw_) & wmask;
+    bool negative = width < 64 && (d >> (width - 1) & 1);
+    int64_t counts = counts_ + (negative ? int64_t(d | ~wmask) : int64_t(d));
+    return double(counts) * p_.numerator / p_.denominator + offset_ + (p_.absolute ? p_.abs_offset : 0);
+}
+
 void Encoder::set_position(double pos) noexcept {
     offset_ += pos - position_;
     position_ = pos;

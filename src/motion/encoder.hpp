@@ -34,6 +34,9 @@ public:
     double velocity() const noexcept { return velocity_; } // [units/s]
     int64_t counts() const noexcept { return counts_; }
     bool valid() const noexcept { return started_; }
+    // The position [units] at which the counter read `raw` (a latched value): the difference to
+    // the last reading in the counter's width, so wraps in between are fine.
+    double position_at_raw(uint64_t raw) const noexcept;
     // Homing / set position: from now on position() reads `pos` here.
     void set_position(double pos) noexcept;
     bool homed() const noexcept { return homed_ || p_.absolute; }

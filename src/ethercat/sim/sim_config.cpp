@@ -146,7 +146,7 @@ StageConfig parse_stage(const Reader& rd, const YAML::Node& n) {
     if (auto es = n["encoders"]) {
         if (!es.IsSequence()) rd.fail(es, "encoders should be a list");
         for (auto e : es) {
-            rd.only_keys(e, {"entry", "counts_per_unit", "absolute", "zero"}, "an encoder");
+            rd.only_keys(e, {"entry", "counts_per_unit", "absolute", "zero", "index_every", "index_offset"}, "an encoder");
             if (!e["entry"]) rd.fail(e, "an encoder needs entry: (e.g. s9.positionActual01)");
             StageConfig::Encoder enc;
             enc.entry = rd.ref(e["entry"], true);
@@ -154,6 +154,8 @@ StageConfig parse_stage(const Reader& rd, const YAML::Node& n) {
             if (enc.counts_per_unit == 0) rd.fail(e["counts_per_unit"], "counts_per_unit should not be 0");
             enc.absolute = rd.flag(e, "absolute", false);
             enc.zero = rd.num(e, "zero", 0);
+            enc.index_every = rd.non_negative(e, "index_every", 0);
+            enc.index_offset = rd.num(e, "index_offset", 0);
             c.encoders.push_back(enc);
         }
     }
@@ -349,7 +351,8 @@ std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog) co
         for (const auto& e : sc.encoders) {
             b.input(e.entry, "an encoder");
             try {
-                st->encoders.emplace_back(seg, e.entry.slave, e.entry.entry, e.counts_per_unit, e.absolute, e.zero, sc.stage.start);
+                st->encoders.emplace_back(seg, e.entry.slave, e.entry.entry, e.counts_per_unit, e.absolute, e.zero, sc.stage.start,
+                                          e.index_every, e.index_offset);
             } catch (const Error& err) {
                 throw Error(SB() << e.entry.where << ": " << err.what());
             }

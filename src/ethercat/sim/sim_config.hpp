@@ -40,6 +40,7 @@ struct StageConfig {
         double counts_per_unit = 1000;
         bool absolute = false;
         double zero = 0; // absolute: position that reads 0 [units]
+        double index_every = 0, index_offset = 0; // index marks (latch C) [units]; 0 = none
     };
     std::vector<Encoder> encoders;
     struct Switch {

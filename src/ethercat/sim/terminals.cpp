@@ -193,17 +193,41 @@ void Cia402Terminal::report(Segment& seg, const DriveFeedback& fb) noexcept {
 // ---- encoders -------------------------------------------------------------------------------
 
 EncoderChannel::EncoderChannel(Segment& seg, int slave, const std::string& entry, double counts_per_unit,
-                               bool absolute, double zero, double start_position)
-    : value_(bind_io(seg, slave, entry)), counts_per_unit_(counts_per_unit), zero_(absolute ? zero : start_position) {
+                               bool absolute, double zero, double start_position, double index_every,
+                               double index_offset)
+    : value_(bind_io(seg, slave, entry)), counts_per_unit_(counts_per_unit), zero_(absolute ? zero : start_position),
+      index_every_(index_every), index_offset_(index_offset), last_position_(start_position) {
     std::string ch = channel_of(entry);
     control_ = bind_optional(seg, slave, "encoderControl" + ch);
     setval_ = bind_optional(seg, slave, "encoderValue" + ch);
     status_ = bind_optional(seg, slave, "encoderStatus" + ch);
+    latch_ = bind_optional(seg, slave, "encoderLatchPostion" + ch);
+    if (!latch_.bound()) latch_ = bind_optional(seg, slave, "encoderLatchPosition" + ch);
     update(seg, start_position);
 }
 
 void EncoderChannel::update(Segment& seg, double position) noexcept {
     int64_t raw = std::llround((position - zero_) * counts_per_unit_);
+    // latch C: armed by the rising edge of control bit 0, taken at the next index mark crossed
+    bool arm = control_.bit(seg, 0);
+    if (arm && !last_arm_) {
+        armed_ = true;
+        latched_ = false;
+    }
+    if (!arm) armed_ = latched_ = false;
+    last_arm_ = arm;
+    if (armed_ && index_every_ > 0 && latch_.bound() && position != last_position_) {
+        double lo = std::min(position, last_position_), hi = std::max(position, last_position_);
+        double k = std::ceil((lo - index_offset_) / index_every_); // first mark at or above lo
+        double mark = index_offset_ + k * index_every_;
+        if (mark <= hi && !(mark == last_position_)) {
+            int64_t at = std::llround((mark - zero_) * counts_per_unit_) + offset_;
+            latch_.set(seg, uint64_t(at));
+            armed_ = false;
+            latched_ = true;
+        }
+    }
+    last_position_ = position;
     bool set = control_.bit(seg, 2);
     if (set && !last_set_ && setval_.bound()) {
         offset_ = int64_t(setval_.get(seg)) - raw; // the counter continues from the set value
@@ -214,8 +238,8 @@ void EncoderChannel::update(Segment& seg, double position) noexcept {
     counts_ = raw + offset_;
     value_.set(seg, uint64_t(counts_));
     if (status_.bound()) {
-        uint64_t st = status_.get(seg) & ~uint64_t(1u << 2);
-        status_.set(seg, st | (set_done_ ? 1u << 2 : 0u));
+        uint64_t st = status_.get(seg) & ~uint64_t((1u << 2) | 1u);
+        status_.set(seg, st | (set_done_ ? 1u << 2 : 0u) | (latched_ ? 1u : 0u));
     }
 }
 

@@ -119,18 +119,26 @@ private:
 // (counts from where the stage stood); absolute ones read (position - zero) * counts_per_unit.
 // Where the terminal has encoderControlNN/encoderValueNN/encoderStatusNN, control bit 2 (set
 // counter) loads encoderValueNN and status bit 2 reports it done.
+// Index marks (reference pulses, the "C" track) every `index_every` units from `index_offset`:
+// where the terminal has encoderLatchPostionNN (EL5101; the spelling is ecmccfg's), control bit 0
+// arms latch C on its rising edge; the next index mark crossed latches the counter there, sets
+// status bit 0 (latch C valid) until the bit is cleared.
 class EncoderChannel {
 public:
     EncoderChannel(Segment& seg, int slave, const std::string& entry, double counts_per_unit,
-                   bool absolute, double zero, double start_position);
+                   bool absolute, double zero, double start_position, double index_every = 0,
+                   double index_offset = 0);
     void update(Segment& seg, double position) noexcept;
     int64_t counts() const { return counts_; }
 
 private:
-    IoPoint value_, control_, setval_, status_;
+    IoPoint value_, control_, setval_, status_, latch_;
     double counts_per_unit_, zero_;
+    double index_every_, index_offset_;
+    double last_position_;
     int64_t offset_ = 0, counts_ = 0;
     bool last_set_ = false, set_done_ = false;
+    bool last_arm_ = false, armed_ = false, latched_ = false;
 };
 
 // An analog input channel: analogInputNN (and its statusNN word where the terminal has one:

@@ -613,3 +613,62 @@ TEST(Axis, Ds402NotEnabledInTimeIsError14652) {
     EXPECT_NEAR(n, 15000, 2);
     EXPECT_FALSE(ax.status().enable_cmd);
 }
+
+TEST(Axis, IndexHomingUsesTheLatchCountthMark) {
+    // ECMC acceptance 8 (sequence 11, latchCount 2): to the low limit, back off it, and the second
+    // index mark latched by the EL5101 (marks every 1 mm at x.25) is the reference.
+    SimBus b(R"(
+slaves:
+  - {position: 0, type: EK1100}
+  - {position: 1, type: EL1008}
+  - {position: 2, type: EL7041}
+  - {position: 3, type: EL5101}
+stages:
+  - name: x
+    drive: s2
+    travel: [-60, 60]
+    start: -40
+    limits:
+      forward: {input: s1.binaryInput01, at: 50}
+      backward: {input: s1.binaryInput02, at: -50}
+    encoders:
+      - {entry: s3.positionActual01, counts_per_unit: 1000, index_every: 1, index_offset: 0.25}
+)");
+    AxisParams p = stepper_params();
+    p.encoder.numerator = 1;
+    p.encoder.denominator = 1000;
+    p.encoder.bits = 16;
+    p.homing_sequence = 11;
+    p.homing_latch_count = 2;
+    p.homing_position = 0;
+    p.homing_velocity_from = 1;
+    AxisIo io = drive_io(b, 2);
+    io.encoder = b.m->bind("ec0.s3.positionActual01");
+    io.limit_fwd = b.m->bind("ec0.s1.binaryInput01");
+    io.limit_bwd = b.m->bind("ec0.s1.binaryInput02");
+    io.latch_position = b.m->bind("ec0.s3.encoderLatchPostion01");
+    io.latch_arm = b.m->bind("ec0.s3.encoderControl01", 0);
+    io.latch_valid = b.m->bind("ec0.s3.encoderStatus01", 0);
+    Axis ax(p, io);
+    AxisCommand on{CommandType::Power};
+    on.on = true;
+    (void)ax.command(on);
+    for (int i = 0; i < 10; ++i) b.cycle([&] { ax.run(0.001); });
+    ASSERT_TRUE(ax.status().enabled);
+    ASSERT_EQ(ax.command(AxisCommand{CommandType::Home}), 0u);
+    int n = 0;
+    while (ax.status().busy && n < 60000) {
+        b.cycle([&] { ax.run(0.001); });
+        ++n;
+    }
+    ASSERT_EQ(ax.status().error_id, 0u) << std::hex << ax.status().error_id;
+    EXPECT_TRUE(ax.status().homed);
+    // the second mark after leaving the switch (at -50) is -48.75: it now reads 0
+    double stage = b.plant->find_stage("x")->position();
+    EXPECT_NEAR(ax.status().act_pos - stage, 0 - (-48.75), 0.002);
+    // without a latch the sequence is refused
+    Axis plain(p, drive_io(b, 2));
+    (void)plain.command(on);
+    for (int i = 0; i < 10; ++i) b.cycle([&] { plain.run(0.001); });
+    EXPECT_EQ(plain.command(AxisCommand{CommandType::Home}), error_id::kLatchCount);
+}
