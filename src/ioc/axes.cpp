@@ -203,8 +203,19 @@ void IocAxes::make_pvs(Axis& a, std::size_t index) {
     f.records.push_back(record("longout", p + "-MtnCmd", {{"DESC", "1 VEL 2 REL 3 ABS 10 HOME"}, {"VAL", "3"}}));
     f.records.push_back(record("longout", p + "-MtnCmdData", {{"DESC", "Homing sequence; 14 = configured"}, {"VAL", "14"}}));
     f.records.push_back(record("stringin", p + "-MsgTxt", {{"DESC", "Error message"}}));
+    for (std::size_t k = 0; k < a.cfg.encoders.size() && k < motion::AxisStatus::kMaxEncoders; ++k) {
+        char n[24];
+        std::snprintf(n, sizeof n, "-Enc%02zu-PosAct", k + 1);
+        f.records.push_back(record("ai", p + n, {{"DESC", (SB() << "Encoder " << k + 1 << " position").str()}, {"PREC", prec}, {"EGU", egu}}));
+    }
     if (a.cfg.epics.motor_record.enable) make_motor_record(a, f);
     db_.load(f);
+    for (std::size_t k = 0; k < a.cfg.encoders.size() && k < motion::AxisStatus::kMaxEncoders; ++k) {
+        char n[24];
+        std::snprintf(n, sizeof n, "-Enc%02zu-PosAct", k + 1);
+        a.enc.push_back(db_.find(p + n));
+        a.enc.back()->val_read_only = true;
+    }
     if (a.cfg.epics.motor_record.enable)
         if (pv::MotorRecord* m = pv::MotorRecord::from(db_.find(p))) m->set_driver(std::make_shared<AxisMotorDriver>(*this, index));
     auto rec = [&](const char* s) { return db_.find(p + s); };
@@ -356,6 +367,13 @@ void IocAxes::publish_one(Axis& a, const motion::AxisStatus& s) {
         if (values[k] == a.last[k] && !recs[k]->udf) continue;
         a.last[k] = values[k];
         set_value(db_, *recs[k], values[k], false);
+    }
+    if (a.enc_last.size() != a.enc.size()) a.enc_last.assign(a.enc.size(), NAN);
+    for (std::size_t k = 0; k < a.enc.size() && int(k) < s.enc_count; ++k) {
+        double v = s.enc_pos[k];
+        if (v == a.enc_last[k] && !a.enc[k]->udf) continue;
+        a.enc_last[k] = v;
+        set_value(db_, *a.enc[k], v, false);
     }
     // EnaCmd follows changes the axis makes itself (an error that disables clears it); a
     // processed record does not call its put hook, so this sends no command.

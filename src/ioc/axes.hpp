@@ -7,7 +7,7 @@
 //   $(P)AX-PosAct -VelAct -PosSet -PosErr (ai), -Stat -ErrId -WrnId -SeqState -LastIlock
 //   (longin), -EnaAct -Busy -AtTarget -Moving -LimFwd -LimBwd -HomeSwitch -Homed -Err (bi),
 //   -EnaCmd -ExeCmd -StpCmd -RstCmd (bo), -TgtPosCmd -TgtVelCmd (ao), -MtnCmd -MtnCmdData
-//   (longout), -MsgTxt (stringin); and the motor record $(P)AX (epics.motorRecord.enable, as
+//   (longout), -MsgTxt (stringin), -Enc0N-PosAct (ai, every encoder); and the motor record $(P)AX (epics.motorRecord.enable, as
 //   ecmccfg), driven through AxisMotorDriver.
 // Threading: everything here runs on the IOC loop thread except the AxisGroup's RT stage.
 #pragma once
@@ -62,6 +62,8 @@ private:
                    *homed = nullptr, *err = nullptr, *ena_cmd = nullptr, *exe_cmd = nullptr,
                    *tgt_pos = nullptr, *tgt_vel = nullptr, *mtn_cmd = nullptr, *mtn_data = nullptr,
                    *msg = nullptr;
+        std::vector<pv::Record*> enc; // -Enc01-PosAct ... (every encoder)
+        std::vector<double> enc_last;
         std::vector<double> last;   // published values, by record order in `published`
         uint32_t last_error = ~0u;
         bool last_enable_cmd = false;

@@ -69,6 +69,9 @@ Axis::Axis(const AxisParams& p, const AxisIo& io)
       ctrl_(p.controller) {
     if (p_.trajectory.deceleration <= 0) p_.trajectory.deceleration = p_.trajectory.acceleration;
     st_.homed = p_.encoder.absolute && !p_.virtual_axis; // an absolute encoder is referenced
+    for (std::size_t k = 0; k < p_.encoders.size() && k < io_.encoders.size() && k < AxisStatus::kMaxEncoders; ++k)
+        if (int(k) != p_.primary_encoder) others_.emplace_back(p_.encoders[k], io_.encoders[k]);
+    st_.enc_count = int(std::min<std::size_t>(p_.encoders.size(), AxisStatus::kMaxEncoders));
     st_.soft_fwd_enabled = p_.soft_fwd_enable;
     st_.soft_bwd_enabled = p_.soft_bwd_enable;
     traj_.reset({});
@@ -592,7 +595,18 @@ void Axis::run(double dt) noexcept {
     ++st_.cycle;
     bool bus_ok = !io_.bus_status.bound() || io_.bus_status.get() != 0;
     read_inputs();
-    if (!p_.virtual_axis) enc_.update(dt);
+    if (!p_.virtual_axis) {
+        enc_.update(dt);
+        std::size_t o = 0;
+        for (int k = 0; k < st_.enc_count; ++k) {
+            if (k == p_.primary_encoder) {
+                st_.enc_pos[std::size_t(k)] = enc_.position();
+            } else if (o < others_.size()) {
+                others_[o].update(dt);
+                st_.enc_pos[std::size_t(k)] = others_[o++].position();
+            }
+        }
+    }
     bool enabled = p_.virtual_axis ? enable_req_ : drive_.enabled();
     bool drive_enable = enable_req_;
     if (io_.brake.bound() && !p_.virtual_axis) {

@@ -17,8 +17,10 @@
 #include "motion/trajectory.hpp"
 #include "registry/signal.hpp"
 
+#include <array>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace beamctl::motion {
 
@@ -99,6 +101,10 @@ struct AxisParams {
     double homing_velocity_to = 0, homing_velocity_from = 0; // [units/s]; 0 = velocity/10
     double homing_acceleration = 0;                           // 0 = trajectory acceleration
     int homing_latch_count = 1; // sequences 11/12: reference on this index latch
+    // All encoders of the axis in file order (ECMC Enc01..); `encoder` above is the primary one,
+    // at index `primary_encoder` here. The others are read for their PVs only.
+    std::vector<EncoderParams> encoders;
+    int primary_encoder = 0;
     bool homing_post_move_enable = false;
     double homing_post_move_position = 0;
 };
@@ -112,6 +118,7 @@ struct AxisIo {
     registry::BoundSignal brake;      // output: 1 = brake open (released); unbound: no brake
     // encoder latch (index homing 11/12): latched counter, arm bit (encoder control), valid bit
     registry::BoundSignal latch_position, latch_arm, latch_valid;
+    std::vector<registry::BoundSignal> encoders; // raw counters of AxisParams::encoders
 };
 
 enum class CommandType : uint8_t {
@@ -146,6 +153,9 @@ struct AxisStatus {
     bool soft_limit_fwd = false, soft_limit_bwd = false; // at/beyond an enabled soft limit
     bool soft_fwd_enabled = false, soft_bwd_enabled = false;
     bool brake_open = false;
+    static constexpr int kMaxEncoders = 8;
+    std::array<double, kMaxEncoders> enc_pos{}; // every encoder's position (Enc01..) [units]
+    int enc_count = 0;
     bool ilock_fwd = false, ilock_bwd = false;           // motion in that direction blocked
     uint32_t error_id = 0, warning_id = 0;
     Interlock last_interlock = Interlock::None;
@@ -191,6 +201,7 @@ private:
     AxisParams p_;
     AxisIo io_;
     Encoder enc_;
+    std::vector<Encoder> others_; // the non-primary encoders (PV readout)
     Drive drive_;
     Controller ctrl_;
     Trajectory traj_;

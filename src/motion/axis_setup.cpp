@@ -30,18 +30,25 @@ AxisParams make_axis_params(const AxisConfig& c) {
         throw Error(SB() << c.file << ": axis.mode CSP/CSP_PC is not supported yet (use CSV)");
     if (c.trajectory.source != TrajectorySource::Internal)
         throw Error(SB() << c.file << ": trajectory.source 1 (PLC) needs the soft PLC, which is not there yet");
+    auto enc_params = [](const EncoderConfig& e) {
+        EncoderParams q;
+        q.numerator = e.numerator;
+        q.denominator = double(e.denominator);
+        q.absolute = e.type == EncoderType::Absolute;
+        q.bits = e.bits;
+        q.abs_bits = e.type == EncoderType::Absolute ? e.abs_bits : 0;
+        q.abs_offset = e.abs_offset;
+        if (!e.mask.empty()) q.mask = std::strtoull(e.mask.c_str(), nullptr, 0);
+        if (e.velocity_filter && e.velocity_filter->enable)
+            q.filter_size = int(std::min<int64_t>(e.velocity_filter->size, EncoderParams::kMaxFilter));
+        return q;
+    };
+    for (const auto& e : c.encoders) p.encoders.push_back(enc_params(e));
+    p.primary_encoder = int(c.primary_encoder());
     if (const EncoderConfig* e = primary(c)) {
         if (e->source != EncoderSource::EtherCAT && !p.virtual_axis)
             throw Error(SB() << at(e->where) << ": encoder.source 1 (PLC) needs the soft PLC, which is not there yet");
-        p.encoder.numerator = e->numerator;
-        p.encoder.denominator = double(e->denominator);
-        p.encoder.absolute = e->type == EncoderType::Absolute;
-        p.encoder.bits = e->bits;
-        p.encoder.abs_bits = e->type == EncoderType::Absolute ? e->abs_bits : 0;
-        p.encoder.abs_offset = e->abs_offset;
-        if (!e->mask.empty()) p.encoder.mask = std::strtoull(e->mask.c_str(), nullptr, 0);
-        if (e->velocity_filter && e->velocity_filter->enable)
-            p.encoder.filter_size = int(std::min<int64_t>(e->velocity_filter->size, EncoderParams::kMaxFilter));
+        p.encoder = enc_params(*e);
         if (const auto& h = e->homing) {
             p.homing_sequence = h->type;
             p.homing_position = h->position.value_or(0);
@@ -122,6 +129,8 @@ AxisParams make_axis_params(const AxisConfig& c) {
 
 std::vector<SignalRef> axis_signal_refs(const AxisConfig& c) {
     std::vector<SignalRef> v;
+    for (const auto& other : c.encoders)
+        if (&other != primary(c) && other.position && other.source == EncoderSource::EtherCAT) v.push_back(*other.position);
     if (const EncoderConfig* e = primary(c)) {
         if (e->position && e->source == EncoderSource::EtherCAT) v.push_back(*e->position);
         if (e->latch && e->control && e->status) {
@@ -148,6 +157,9 @@ AxisIo bind_axis_io(const AxisConfig& c, const SignalResolver& resolve) {
     if (c.is_virtual()) return io;
     const EncoderConfig* e = primary(c);
     if (e && e->position) io.encoder = resolve(*e->position);
+    for (const auto& other : c.encoders)
+        io.encoders.push_back(other.position && other.source == EncoderSource::EtherCAT ? resolve(*other.position)
+                                                                                      : registry::BoundSignal{});
     if (e && e->latch && e->control && e->status) {
         io.latch_position = resolve(e->latch->position);
         io.latch_arm = resolve(e->control->with_bit(e->latch->control_bit));

@@ -52,3 +52,14 @@ def test_demo_slit_blade_homes_and_moves(demo):
     lvdt = ca.get(connect("DEMO:m0s005-AI02")) / 3276.7
     assert abs(lvdt - 0.4) < 0.01
     assert m.move(40.0, wait=True) == -12  # beyond the soft limit (17 mm)
+
+
+def test_demo_sample_y_reads_both_encoders(demo):
+    m = epics.Motor("DEMO:SampleY", timeout=5)
+    m.put("CNEN", 1, wait=True)
+    assert m.move(2.0, wait=True, timeout=20) == 0
+    enc1 = ca.get(connect("DEMO:SampleY-Enc01-PosAct"))  # EL5101 scale (primary)
+    enc2 = ca.get(connect("DEMO:SampleY-Enc02-PosAct"))  # the stepper's encoder input
+    assert abs(enc1 - 2.0) < 0.01
+    assert abs(enc2 - 2.0) < 0.01
+    assert ca.get(connect("DEMO:SampleY-PosAct")) == enc1

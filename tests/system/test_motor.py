@@ -127,3 +127,16 @@ def test_ophyd_epics_motor_sequence(motor):
     n = len(dmov)
     val.put(3.0, wait=False)
     assert wait_for(lambda: len(dmov) >= n + 2 and dmov[-2:] == [0, 1], timeout=10), dmov
+
+
+def test_soft_limit_interlock_from_ecmc_pvs_sets_problem(motor):
+    """ECMC acceptance 14: a move commanded past the soft limit (through the axis PVs, which the
+    motor record does not see) is refused with warning 0x114D00 and the record shows PROBLEM."""
+    m, p = motor
+    for name, value in [("X-MtnCmd", 3), ("X-TgtPosCmd", 60), ("X-ExeCmd", 1)]:
+        assert ca.put(connect(p + name), value, wait=True) == 1
+    assert wait_for(lambda: ca.get(connect(p + "X-WrnId")) == 0x114D00, timeout=5)
+    assert wait_for(lambda: int(m.get("MSTA")) & (1 << 9), timeout=5)  # PROBLEM
+    assert abs(m.get("RBV")) < 0.01
+    assert m.move(1.0, wait=True, timeout=20) == 0  # a valid move clears it
+    assert wait_for(lambda: not int(m.get("MSTA")) & (1 << 9), timeout=5)
