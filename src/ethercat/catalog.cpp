@@ -184,10 +184,11 @@ const char* sm_type_name(SmType t) {
 
 DeviceDesc parse_yaml_device(const YamlReader& r, const YAML::Node& root) {
     r.check_map(root, "",
-                {"type", "name", "vendor", "product", "revision", "coe", "dc_assign_activate",
+                {"type", "variant_of", "name", "vendor", "product", "revision", "coe", "dc_assign_activate",
                  "ebus_current_ma", "sync_managers", "rx_pdos", "tx_pdos"});
     DeviceDesc d;
     d.type = r.string_member(root, "", "type", true);
+    d.variant_of = r.string_member(root, "", "variant_of", false);
     if (d.type.empty() ||
         std::any_of(d.type.begin(), d.type.end(), [](unsigned char c) { return std::isspace(c); }))
         r.fail(root["type"], "type",
@@ -633,10 +634,12 @@ struct Catalog::Impl {
     };
     std::vector<std::unique_ptr<Item>> items; // unique_ptr: find() results stay valid
 
+    // The base description of an identity (operating-mode variants share it and are found by
+    // type only).
     Item* find_identity(uint32_t vendor, uint32_t product, uint32_t revision) {
         for (auto& it : items)
             if (it->desc.vendor == vendor && it->desc.product == product &&
-                it->desc.revision == revision)
+                it->desc.revision == revision && it->desc.variant_of.empty())
                 return it.get();
         return nullptr;
     }
@@ -704,6 +707,16 @@ void Catalog::load_yaml(const std::string& path) {
                       e.mark.is_null() ? 0 : e.mark.column + 1};
         throw Error(SB() << loc.str() << ": " << e.msg);
     }
+    if (!d.variant_of.empty()) { // an operating-mode variant: its own type, the base's identity
+        for (auto& it : impl_->items)
+            if (it->desc.type == d.type) {
+                YAML::Mark m = root.Mark();
+                throw Error(SB() << SourceLoc{path, m.line + 1, m.column + 1}.str() << ": type " << d.type
+                                 << " is already defined in " << it->source);
+            }
+        impl_->items.push_back(std::make_unique<Impl::Item>(Impl::Item{std::move(d), path, false}));
+        return;
+    }
     if (Impl::Item* old = impl_->find_identity(d.vendor, d.product, d.revision)) {
         if (!old->from_esi) {
             YAML::Mark m = root.Mark();
@@ -763,7 +776,7 @@ const DeviceDesc* Catalog::find(uint32_t vendor, uint32_t product, uint32_t revi
 const DeviceDesc* Catalog::find_latest(uint32_t vendor, uint32_t product) const {
     const DeviceDesc* best = nullptr;
     for (const auto& it : impl_->items)
-        if (it->desc.vendor == vendor && it->desc.product == product &&
+        if (it->desc.vendor == vendor && it->desc.product == product && it->desc.variant_of.empty() &&
             (!best || it->desc.revision > best->revision))
             best = &it->desc;
     return best;

@@ -39,6 +39,8 @@ struct SyncManagerDesc {
 
 struct DeviceDesc {
     std::string type;         // "EL1008"
+    std::string variant_of;   // an operating-mode variant of this type ("EL7211-0010_CSP" of
+                              // "EL7211"): same identity, other PDOs; "" for a base description
     std::string name;         // "EL1008 8Ch. Dig. Input 24V, 3ms"
     uint32_t vendor = 0;      // 0x00000002 = Beckhoff
     uint32_t product = 0;

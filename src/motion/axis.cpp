@@ -703,7 +703,8 @@ void Axis::run(double dt) noexcept {
 
     // Controller and drive.
     double out = 0;
-    if (enabled && !p_.virtual_axis) out = ctrl_.step(st_.pos_err, st_.set_vel, dt);
+    if (p_.csp) out = st_.set_pos - enc_.frame_offset(); // the drive's loop follows the position
+    else if (enabled && !p_.virtual_axis) out = ctrl_.step(st_.pos_err, st_.set_vel, dt);
     st_.drive_output = out;
     if (!p_.virtual_axis) drive_.step(drive_enable, out, !st_.busy, dt);
 }

@@ -68,6 +68,8 @@ struct AxisParams {
     int id = 1;
     std::string name;
     bool virtual_axis = false; // no drive, no encoder: actual = setpoint
+    bool csp = false;          // cyclic synchronous position: the drive gets the setpoint position
+                               // (in the primary encoder's frame), no axis position loop
     EncoderParams encoder;
     DriveParams drive;
     ControllerParams controller;

@@ -26,8 +26,9 @@ AxisParams make_axis_params(const AxisConfig& c) {
     p.id = c.axis.id.value_or(1);
     p.name = c.epics.name;
     p.virtual_axis = c.is_virtual();
-    if (c.drive && c.axis.mode != DriveMode::CSV)
-        throw Error(SB() << c.file << ": axis.mode CSP/CSP_PC is not supported yet (use CSV)");
+    if (c.drive && c.axis.mode == DriveMode::CSP_PC)
+        throw Error(SB() << c.file << ": axis.mode CSP_PC is not supported yet (use CSV or CSP)");
+    p.csp = c.drive && c.axis.mode == DriveMode::CSP;
     if (c.trajectory.source != TrajectorySource::Internal)
         throw Error(SB() << c.file << ": trajectory.source 1 (PLC) needs the soft PLC, which is not there yet");
     auto enc_params = [](const EncoderConfig& e) {
@@ -62,6 +63,7 @@ AxisParams make_axis_params(const AxisConfig& c) {
     }
     if (const auto& d = c.drive) {
         p.drive.type = d->type == DriveType::DS402 ? DriveParams::Type::Ds402 : DriveParams::Type::Stepper;
+        p.drive.position_mode = p.csp;
         p.drive.numerator = d->numerator;
         p.drive.denominator = double(d->denominator);
         p.drive.enable_bit = d->enable_bit;

@@ -21,7 +21,7 @@ Ds402 ds402_state(uint64_t sw) {
 }
 } // namespace
 
-void Drive::step(bool enable, double velocity, bool standstill, double dt) noexcept {
+void Drive::step(bool enable, double velocity, bool standstill, double dt) noexcept { // velocity: the setpoint
     uint64_t sw = status_.get_raw();
     warning_ = p_.warning_bit >= 0 && (sw >> p_.warning_bit & 1);
     bool reset_now = false;
@@ -81,9 +81,14 @@ void Drive::step(bool enable, double velocity, bool standstill, double dt) noexc
         }
     }
     control_.set(cw_);
+    uint8_t bits = setpoint_.bits ? setpoint_.bits : 32;
+    if (p_.position_mode) { // a position: wraps in the entry's width like the drive's counter
+        raw_ = std::isfinite(velocity) ? int64_t(std::llround(velocity * p_.denominator / p_.numerator)) : raw_;
+        setpoint_.set(raw_);
+        return;
+    }
     // velocity setpoint in the entry's range
     double raw = enabled_ && std::isfinite(velocity) ? velocity * p_.denominator / p_.numerator : 0;
-    uint8_t bits = setpoint_.bits ? setpoint_.bits : 32;
     double hi = setpoint_.is_signed ? std::ldexp(1.0, bits - 1) - 1 : std::ldexp(1.0, bits) - 1;
     double lo = setpoint_.is_signed ? -std::ldexp(1.0, bits - 1) : 0;
     raw_ = int64_t(std::llround(std::clamp(raw, lo, hi)));

@@ -25,6 +25,8 @@ struct DriveParams {
     std::array<int, 3> error_bits{-1, -1, -1}; // status-word bits that mean a drive error
     int reduce_torque_bit = -1;  // control-word bit set while standing still (-1: none)
     double enable_timeout = 15;  // DS402: operation enabled within this [s]
+    bool position_mode = false;  // CSP: the setpoint is a position (raw = position * den / num,
+                                 // wrapping in the entry's width) instead of a velocity
 };
 
 class Drive {
@@ -35,9 +37,10 @@ public:
         : p_(p), control_(control), status_(status), setpoint_(setpoint) {}
 
     // Per cycle, after the status word arrived: walks the enable sequence towards `enable`,
-    // writes the control word and the velocity setpoint (0 unless enabled). `standstill` sets
+    // writes the control word and the setpoint: a velocity (0 unless enabled) or, in position
+    // mode, a position (always written, so that enabling does not jump). `standstill` sets
     // reduce torque where configured.
-    void step(bool enable, double velocity, bool standstill, double dt) noexcept;
+    void step(bool enable, double setpoint, bool standstill, double dt) noexcept;
     // Rising edge of the drive's reset (stepper reset bit, DS402 fault reset) on the next step.
     void reset() noexcept { reset_pending_ = true; }
 

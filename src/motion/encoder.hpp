@@ -40,6 +40,9 @@ public:
     // Homing / set position: from now on position() reads `pos` here.
     void set_position(double pos) noexcept;
     bool homed() const noexcept { return homed_ || p_.absolute; }
+    // position() - counts * scale [units]: the offset between the axis frame and the counter's
+    // own frame (homing, set position, absOffset); CSP setpoints are sent in the counter's frame.
+    double frame_offset() const noexcept { return offset_ + (p_.absolute ? p_.abs_offset : 0); }
     void set_homed(bool h) noexcept { homed_ = h; }
     const EncoderParams& params() const noexcept { return p_; }
 

@@ -139,7 +139,7 @@ void Plant::step(Segment& seg) noexcept {
     for (auto& sp : stages_) {
         Stage& st = *sp;
         DriveTerminal* d = st.drive();
-        DriveCommand c = d ? d->command(seg, dt) : DriveCommand{};
+        DriveCommand c = d ? d->command(seg, dt, st.position()) : DriveCommand{};
         if (dt > 0) {
             int n = int(std::ceil(dt / kMaxSubstep));
             for (int k = 0; k < n; ++k) st.integrate(c, dt / n);

@@ -209,7 +209,8 @@ SignalConfig parse_signal(const Reader& rd, const YAML::Node& n) {
 DriveKind drive_kind(const DeviceDesc& d) {
     const std::string& t = d.type;
     bool family = t.size() >= 4 && (t.rfind("EL", 0) == 0 || t.rfind("EP", 0) == 0);
-    bool entries = has_entry(d, "driveControl01") && has_entry(d, "driveStatus01") && has_entry(d, "velocitySetpoint01");
+    bool entries = has_entry(d, "driveControl01") && has_entry(d, "driveStatus01") &&
+                   (has_entry(d, "velocitySetpoint01") || has_entry(d, "positionSetpoint01"));
     if (!family || !entries) return DriveKind::None;
     if (t.compare(2, 2, "70") == 0) return DriveKind::Stepper;
     if (t.compare(2, 2, "72") == 0) return DriveKind::Cia402;
@@ -314,8 +315,14 @@ std::unique_ptr<Stage> make_stage(Binder& b, const DeviceDesc& d, int slave, con
                                   double feedback_counts_per_rev, const std::string& where) {
     DriveKind kind = drive_kind(d);
     std::unique_ptr<DriveTerminal> drive;
-    if (kind == DriveKind::Stepper) drive = std::make_unique<StepperTerminal>(b.seg, slave, mp);
-    else drive = std::make_unique<Cia402Terminal>(b.seg, slave, mp);
+    if (kind == DriveKind::Stepper) {
+        drive = std::make_unique<StepperTerminal>(b.seg, slave, mp);
+    } else {
+        MotorParams servo = mp; // CSP targets count in the drive's feedback frame
+        if (feedback_counts_per_rev > 0) servo.position_scale = feedback_counts_per_rev;
+        servo.position_start = 0; // the resolver is absolute from position 0
+        drive = std::make_unique<Cia402Terminal>(b.seg, slave, servo);
+    }
     auto st = std::make_unique<Stage>(sp, std::move(drive));
     b.claim(slave, "driveStatus01", where);
     if (has_entry(d, "velocityActual01")) b.claim(slave, "velocityActual01", where);

@@ -35,7 +35,7 @@ void StepperTerminal::entered_op(Segment& seg) {
     }
 }
 
-DriveCommand StepperTerminal::command(Segment& seg, double) noexcept {
+DriveCommand StepperTerminal::command(Segment& seg, double, double) noexcept {
     uint64_t cw = control_.get(seg);
     bool reset = cw >> 1 & 1;
     if (reset && !last_reset_) { // rising edge of reset clears the latched error
@@ -79,8 +79,9 @@ Cia402Terminal::Cia402Terminal(Segment& seg, int slave, const MotorParams& p)
     : DriveTerminal(slave, p),
       control_(bind_io(seg, slave, "driveControl01")),
       status_(bind_io(seg, slave, "driveStatus01")),
-      setpoint_(bind_io(seg, slave, "velocitySetpoint01")),
-      actual_(bind_optional(seg, slave, "velocityActual01")) {}
+      setpoint_(bind_optional(seg, slave, "velocitySetpoint01")),
+      actual_(bind_optional(seg, slave, "velocityActual01")),
+      target_(bind_optional(seg, slave, "positionSetpoint01")) {}
 
 uint16_t Cia402Terminal::statusword(State s) noexcept {
     switch (s) {
@@ -109,7 +110,7 @@ void Cia402Terminal::inject_fault() noexcept {
     ramp_velocity_ = last_velocity_;
 }
 
-DriveCommand Cia402Terminal::command(Segment& seg, double dt) noexcept {
+DriveCommand Cia402Terminal::command(Segment& seg, double dt, double position) noexcept {
     // Control word commands (CiA402 table): masks over bits 0-3 and 7.
     uint16_t cw = uint16_t(control_.get(seg));
     bool fault_reset = cw >> 7 & 1;
@@ -155,7 +156,18 @@ DriveCommand Cia402Terminal::command(Segment& seg, double dt) noexcept {
 
     DriveCommand c;
     c.force_limit = p_.max_force;
-    if (s == State::OperationEnabled) {
+    if (s == State::OperationEnabled && target_.bound()) {
+        // CSP: the target position (32-bit counts, wrapping) relative to where the stage stands,
+        // followed with velocity feed-forward and a 100/s position loop
+        double units_per_count = p_.units_per_rev / p_.position_scale;
+        int64_t actual_counts = std::llround((position - p_.position_start) / units_per_count);
+        int32_t diff = int32_t(uint32_t(target_.get(seg)) - uint32_t(actual_counts));
+        double target = position + double(diff) * units_per_count;
+        double ff = std::isfinite(last_target_) && dt > 0 ? (target - last_target_) / dt : 0;
+        last_target_ = target;
+        c.powered = true;
+        c.velocity = ff + 100.0 * (target - position);
+    } else if (s == State::OperationEnabled) {
         c.powered = true;
         c.velocity = double(int32_t(setpoint_.get(seg))) / p_.velocity_scale * p_.units_per_rev;
     } else if (s == State::QuickStopActive || s == State::FaultReactionActive) {
@@ -170,6 +182,7 @@ DriveCommand Cia402Terminal::command(Segment& seg, double dt) noexcept {
         c.powered = state_ == s;
         c.velocity = ramp_velocity_;
     }
+    if (s != State::OperationEnabled) last_target_ = NAN;
     target_reached_ = false;
     return c;
 }

@@ -11,6 +11,7 @@
 
 #include "ethercat/sim/io_point.hpp"
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 
@@ -40,14 +41,17 @@ struct MotorParams {
     double velocity_scale = 268435.456;  // servo: setpoint digits per rev/s (2^31 = 8000 rev/s)
     double quick_stop_decel = 100;       // servo: quick-stop ramp [units/s^2]
     double overload_time = 1.0;          // servo: force saturated this long -> fault [s]
+    double position_scale = 1048576;     // servo CSP: target position counts per rev (2^20)
+    double position_start = 0;           // servo CSP: stage position where the counts are 0
 };
 
 class DriveTerminal {
 public:
     DriveTerminal(int slave, const MotorParams& p) : slave_(slave), p_(p) {}
     virtual ~DriveTerminal() = default;
-    // Reads the outputs (control word, setpoint) and steps the drive's own state.
-    virtual DriveCommand command(Segment& seg, double dt) noexcept = 0;
+    // Reads the outputs (control word, setpoint) and steps the drive's own state; `position` is
+    // where the stage is [units] (position-mode drives close their loop on it).
+    virtual DriveCommand command(Segment& seg, double dt, double position) noexcept = 0;
     // Writes the status inputs once the plant has moved.
     virtual void report(Segment& seg, const DriveFeedback& fb) noexcept = 0;
     // Latches a drive fault, as a real terminal does on over-temperature or under-voltage;
@@ -71,7 +75,7 @@ protected:
 class StepperTerminal : public DriveTerminal {
 public:
     StepperTerminal(Segment& seg, int slave, const MotorParams& p);
-    DriveCommand command(Segment& seg, double dt) noexcept override;
+    DriveCommand command(Segment& seg, double dt, double position) noexcept override;
     void report(Segment& seg, const DriveFeedback& fb) noexcept override;
     void inject_fault() noexcept override { error_ = true; }
     bool fault() const noexcept override { return error_; }
@@ -87,8 +91,10 @@ private:
     double saturated_s_ = 0;
 };
 
-// EL7201/EL7211/EL7221 in cyclic synchronous velocity mode with the CiA402 state machine
-// (controlword 0x7010:01, statusword 0x6010:01, target velocity 0x7010:06, actual 0x6010:07).
+// EL7201/EL7211/EL7221 with the CiA402 state machine (controlword 0x7010:01, statusword
+// 0x6010:01, actual velocity 0x6010:07) in cyclic synchronous velocity mode (target velocity
+// 0x7010:06) or, where the terminal has positionSetpoint01 (0x7010:05, the _CSP variant), cyclic
+// synchronous position mode: its own position loop follows the target with feed-forward.
 // Quick stop ramps down at quick_stop_decel, then goes to SWITCH ON DISABLED (option code 2).
 class Cia402Terminal : public DriveTerminal {
 public:
@@ -97,7 +103,7 @@ public:
         QuickStopActive, FaultReactionActive, Fault,
     };
     Cia402Terminal(Segment& seg, int slave, const MotorParams& p);
-    DriveCommand command(Segment& seg, double dt) noexcept override;
+    DriveCommand command(Segment& seg, double dt, double position) noexcept override;
     void report(Segment& seg, const DriveFeedback& fb) noexcept override;
     void inject_fault() noexcept override;
     bool fault() const noexcept override { return state_ == State::Fault || state_ == State::FaultReactionActive; }
@@ -106,8 +112,9 @@ public:
     static const char* name(State s) noexcept;
 
 private:
-    IoPoint control_, status_, setpoint_, actual_;
+    IoPoint control_, status_, setpoint_, actual_, target_;
     State state_ = State::NotReadyToSwitchOn;
+    double last_target_ = NAN; // CSP: previous target [units]
     bool last_reset_ = false, voltage_ = false, target_reached_ = false;
     double ramp_velocity_ = 0; // during quick stop / fault reaction [units/s]
     double last_velocity_ = 0; // actual velocity of the last step [units/s]

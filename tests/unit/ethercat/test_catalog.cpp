@@ -148,15 +148,17 @@ TEST(CatalogFiles, EveryFileLoadsOnItsOwn) {
         EXPECT_EQ(entry.path().stem().string(), type) << "one file per terminal, named by type";
         types.insert(type);
     }
-    EXPECT_EQ(files, 16);
+    // the 16 terminals of the spec table, plus operating-mode variants (ecmccfg HW_DESC names)
+    EXPECT_EQ(files, 17);
     std::set<std::string> expected;
     for (const SpecTerminal& t : kSpecTable) expected.insert(t.type);
+    expected.insert("EL7211-0010_CSP");
     EXPECT_EQ(types, expected);
 }
 
 TEST(CatalogFiles, BuiltinHasEveryTerminalOnce) {
-    EXPECT_EQ(builtin().size(), kSpecTable.size());
-    EXPECT_EQ(builtin().types().size(), kSpecTable.size());
+    EXPECT_EQ(builtin().size(), kSpecTable.size() + 1); // + EL7211-0010_CSP (a variant)
+    EXPECT_EQ(builtin().types().size(), kSpecTable.size() + 1);
     for (const std::string& t : builtin().types())
         EXPECT_EQ(builtin().source(builtin().find(t)),
                   (fs::path(Catalog::builtin_dir()) / (t + ".yaml")).string());
@@ -713,4 +715,16 @@ TEST(CatalogBuiltin, FindsTheSourceCatalog) {
         setenv("BEAMCTL_CATALOG", saved.c_str(), 1);
     else
         unsetenv("BEAMCTL_CATALOG");
+}
+
+TEST(CatalogFiles, OperatingModeVariantSharesTheIdentity) {
+    const DeviceDesc* csp = builtin().find("EL7211-0010_CSP");
+    const DeviceDesc* base = builtin().find("EL7211");
+    ASSERT_TRUE(csp && base);
+    EXPECT_EQ(csp->variant_of, "EL7211");
+    EXPECT_EQ(csp->product, base->product);
+    EXPECT_EQ(csp->revision, base->revision);
+    // lookups by identity give the base description
+    EXPECT_EQ(builtin().find(base->vendor, base->product, base->revision), base);
+    EXPECT_EQ(builtin().find_latest(base->vendor, base->product), base);
 }

@@ -672,3 +672,55 @@ stages:
     for (int i = 0; i < 10; ++i) b.cycle([&] { plain.run(0.001); });
     EXPECT_EQ(plain.command(AxisCommand{CommandType::Home}), error_id::kLatchCount);
 }
+
+TEST(Axis, ServoAxisInCyclicSynchronousPosition) {
+    // EL7211-0010_CSP: the axis sends the trajectory's position (in the resolver's frame, after a
+    // set position too) and the drive's own loop follows it; no axis PID.
+    SimBus b(R"(
+slaves:
+  - {position: 0, type: EK1100}
+  - {position: 1, type: EL7211-0010_CSP}
+stages:
+  - {name: r, drive: s1, pitch: 360, mass: 0.2, friction: 0.2, start: 30}
+)");
+    AxisParams p;
+    p.csp = true;
+    p.encoder.numerator = 360;
+    p.encoder.denominator = 1048576;
+    p.encoder.bits = 32;
+    p.encoder.absolute = true;
+    p.encoder.abs_bits = 32;
+    p.drive.type = DriveParams::Type::Ds402;
+    p.drive.position_mode = true;
+    p.drive.numerator = 360; // [deg] per 2^20 counts
+    p.drive.denominator = 1048576;
+    p.trajectory = {90, 360, 360, 3600};
+    p.target_enable = true;
+    p.target_tolerance = 0.05;
+    p.target_time_cycles = 10;
+    p.lag_enable = true;
+    p.lag_tolerance = 1;
+    p.lag_time_cycles = 20;
+    AxisIo io = drive_io(b, 1);
+    io.drive_setpoint = b.m->bind("ec0.s1.positionSetpoint01");
+    ASSERT_TRUE(io.drive_setpoint.bound());
+    Axis ax(p, io);
+    AxisCommand on{CommandType::Power};
+    on.on = true;
+    (void)ax.command(on);
+    for (int i = 0; i < 20; ++i) b.cycle([&] { ax.run(0.001); });
+    ASSERT_TRUE(ax.status().enabled);
+    EXPECT_NEAR(b.plant->find_stage("r")->position(), 30, 0.01); // enabling does not jump
+    EXPECT_NEAR(ax.status().act_pos, 30, 0.01);
+    ASSERT_EQ(ax.command(AxisCommand{CommandType::SetPosition, 100}), 0u); // another frame
+    ASSERT_EQ(ax.command(AxisCommand{CommandType::MoveAbsolute, 190}), 0u);
+    int n = 0;
+    while ((ax.status().busy || !ax.status().at_target) && n < 10000) {
+        b.cycle([&] { ax.run(0.001); });
+        ++n;
+    }
+    EXPECT_EQ(ax.status().error_id, 0u);
+    EXPECT_TRUE(ax.status().at_target);
+    EXPECT_NEAR(b.plant->find_stage("r")->position(), 120, 0.05); // 90 deg further
+    EXPECT_NEAR(n * 0.001, 1.0 + 0.35, 0.2); // S-curve 90 deg at 90 deg/s, 360 deg/s^2
+}
