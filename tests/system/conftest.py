@@ -8,7 +8,9 @@ libca reads EPICS_CA_* when its context is created, so the client environment is
 before anything imports `epics`.
 """
 
+import contextlib
 import os
+import shutil
 import random
 import signal
 import socket
@@ -445,3 +447,28 @@ def module_server(tmp_path_factory, db_text, **kw):
         yield ms
     finally:
         ms.close()
+
+
+@contextlib.contextmanager
+def running_ioc(workdir, prefix, ioc_text, files=None, config_name="ioc.yaml"):
+    """`beamctl run` on a pool port with `ioc_text` as its configuration (`{name}` and `{prefix}`
+    are filled in) and `files` beside it ({file name: text, or a Path to copy}); yields the server
+    once m0-Stat-OK is 1, then stops it and forgets the prefix's PVs."""
+    workdir = Path(workdir)
+    for name, content in (files or {}).items():
+        if isinstance(content, Path):
+            shutil.copy(content, workdir / name)
+        else:
+            (workdir / name).write_text(content)
+    cfg = workdir / config_name
+    cfg.write_text(ioc_text.format(name=prefix.rstrip(":"), prefix=prefix))
+    port = acquire_port()
+    srv = RunServer(workdir, cfg, port).start()
+    try:
+        assert wait_for(lambda: epics.ca.get(connect(prefix + "m0-Stat-OK")) == 1)
+        yield srv
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)

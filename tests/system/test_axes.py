@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from epics import ca
 
-from conftest import BEAMCTL, RunServer, acquire_port, connect, forget_pvs, release_port, require_binary, wait_for
+from conftest import BEAMCTL, connect, require_binary, running_ioc, wait_for
 
 DATA = Path(__file__).parent / "data" / "axes"
 
@@ -39,17 +39,9 @@ def write_config(tmp_path, prefix):
 
 @pytest.fixture
 def axis_ioc(tmp_path, prefix):
-    cfg = write_config(tmp_path, prefix)
-    port = acquire_port()
-    srv = RunServer(tmp_path, cfg, port).start()
-    try:
-        assert wait_for(lambda: ca.get(connect(prefix + "m0-Stat-OK")) == 1)
+    files = {"stepper.yaml": DATA / "stepper.yaml", "plant.yaml": DATA / "plant.yaml"}
+    with running_ioc(tmp_path, prefix, IOC, files) as srv:
         yield srv, prefix + "X-"
-    finally:
-        srv.stop()
-        srv.kill()
-        forget_pvs(prefix)
-        release_port(port)
 
 
 def put(name, value):

@@ -2,14 +2,13 @@
 ophyd's EpicsMotor uses: moves with wait, soft limits refusing a move, set_position, tweak, stop,
 homing, and the DMOV 1->0->1 edge with RBV at NO_ALARM after a good move."""
 
-import shutil
 import time
 
 import epics
 import pytest
 from epics import ca
 
-from conftest import RunServer, acquire_port, connect, forget_pvs, release_port, wait_for
+from conftest import connect, running_ioc, wait_for
 from test_axes import DATA
 
 IOC = """
@@ -33,23 +32,12 @@ OPHYD_FIELDS = ["RBV", "VAL", "OFF", "DIR", "FOFF", "SET", "VELO", "ACCL", "EGU"
 
 @pytest.fixture
 def motor(tmp_path, prefix):
-    shutil.copy(DATA / "stepper.yaml", tmp_path / "stepper.yaml")
-    shutil.copy(DATA / "plant.yaml", tmp_path / "plant.yaml")
-    cfg = tmp_path / "ioc.yaml"
-    cfg.write_text(IOC.format(name=prefix.rstrip(":"), prefix=prefix))
-    port = acquire_port()
-    srv = RunServer(tmp_path, cfg, port).start()
-    try:
-        assert wait_for(lambda: ca.get(connect(prefix + "m0-Stat-OK")) == 1)
+    files = {"stepper.yaml": DATA / "stepper.yaml", "plant.yaml": DATA / "plant.yaml"}
+    with running_ioc(tmp_path, prefix, IOC, files):
         m = epics.Motor(prefix + "X", timeout=5)
         m.put("CNEN", 1, wait=True)
         assert wait_for(lambda: ca.get(connect(prefix + "X-EnaAct")) == 1, timeout=5)
         yield m, prefix
-    finally:
-        srv.stop()
-        srv.kill()
-        forget_pvs(prefix)
-        release_port(port)
 
 
 def test_move_with_wait_and_limits(motor):

@@ -8,7 +8,7 @@ import subprocess
 import pytest
 from epics import ca
 
-from conftest import BEAMCTL, RunServer, acquire_port, connect, forget_pvs, release_port, require_binary, wait_for
+from conftest import BEAMCTL, connect, require_binary, running_ioc, wait_for
 
 IOC = """
 ioc: {{name: {name}, prefix: "{prefix}"}}
@@ -42,19 +42,8 @@ signals:
 
 @pytest.fixture
 def plant_ioc(tmp_path, prefix):
-    (tmp_path / "plant.yaml").write_text(PLANT)
-    cfg = tmp_path / "ioc.yaml"
-    cfg.write_text(IOC.format(name=prefix.rstrip(":"), prefix=prefix))
-    port = acquire_port()
-    srv = RunServer(tmp_path, cfg, port).start()
-    try:
-        assert wait_for(lambda: ca.get(connect(prefix + "m0-Stat-OK")) == 1)
+    with running_ioc(tmp_path, prefix, IOC, {"plant.yaml": PLANT}) as srv:
         yield srv, prefix
-    finally:
-        srv.stop()
-        srv.kill()
-        forget_pvs(prefix)
-        release_port(port)
 
 
 def put(name, value):
