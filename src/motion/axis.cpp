@@ -72,6 +72,21 @@ Axis::Axis(const AxisParams& p, const AxisIo& io)
     for (std::size_t k = 0; k < p_.encoders.size() && k < io_.encoders.size() && k < AxisStatus::kMaxEncoders; ++k)
         if (int(k) != p_.primary_encoder) others_.emplace_back(p_.encoders[k], io_.encoders[k]);
     st_.enc_count = int(std::min<std::size_t>(p_.encoders.size(), AxisStatus::kMaxEncoders));
+    traj_source_ = p_.trajectory_source;
+    enc_source_ = p_.virtual_axis && p_.encoder_source == 0 ? 0 : p_.encoder_source;
+    vars_.traj.source = traj_source_;
+    vars_.enc.source = enc_source_;
+    vars_.mon.lowsoftlim = p_.soft_bwd;
+    vars_.mon.highsoftlim = p_.soft_fwd;
+    vars_.mon.lowsoftlimenable = p_.soft_bwd_enable;
+    vars_.mon.highsoftlimenable = p_.soft_fwd_enable;
+    vars_.ctrl.kp = p_.controller.kp;
+    vars_.ctrl.ki = p_.controller.ki;
+    vars_.ctrl.kd = p_.controller.kd;
+    vars_.ctrl.kff = p_.controller.kff;
+    vars_.traj.targetvel = p_.trajectory.velocity;
+    vars_.traj.targetacc = p_.trajectory.acceleration;
+    seen_ = vars_;
     st_.soft_fwd_enabled = p_.soft_fwd_enable;
     st_.soft_bwd_enabled = p_.soft_bwd_enable;
     traj_.reset({});
@@ -121,9 +136,10 @@ void Axis::read_inputs() noexcept {
         bool v = s.get() != 0;
         return polarity == 0 ? !v : v;
     };
-    st_.limit_fwd = engaged(io_.limit_fwd, p_.limit_fwd_polarity);
-    st_.limit_bwd = engaged(io_.limit_bwd, p_.limit_bwd_polarity);
-    st_.home_sensor = io_.home.bound() && ((io_.home.get() != 0) != (p_.home_polarity != 0));
+    st_.limit_fwd = p_.limit_fwd_plc ? vars_.mon.highlim == 0 : engaged(io_.limit_fwd, p_.limit_fwd_polarity);
+    st_.limit_bwd = p_.limit_bwd_plc ? vars_.mon.lowlim == 0 : engaged(io_.limit_bwd, p_.limit_bwd_polarity);
+    st_.home_sensor = p_.home_plc ? vars_.mon.homesensor != 0
+                                  : io_.home.bound() && ((io_.home.get() != 0) != (p_.home_polarity != 0));
 }
 
 uint32_t Axis::check_target(double target) const noexcept {
@@ -509,6 +525,72 @@ void Axis::homing_step(double) noexcept {
     }
 }
 
+void Axis::take_variables() noexcept {
+    AxisVariables& v = vars_;
+    AxisVariables& was = seen_;
+    if (v.reset != was.reset && v.reset != 0) (void)command(AxisCommand{CommandType::Reset});
+    if (v.drv.enable != was.drv.enable) {
+        AxisCommand c{CommandType::Power};
+        c.on = v.drv.enable != 0;
+        (void)command(c);
+    }
+    // sources: switch only when disabled unless allowed while enabled (ECMC)
+    auto source = [&](double want, int& cur) {
+        int w = want != 0 ? 1 : 0;
+        if (w != cur && (!st_.enabled || p_.allow_source_change)) cur = w;
+    };
+    source(v.traj.source, traj_source_);
+    source(v.enc.source, enc_source_);
+    if (v.traj.execute != was.traj.execute && p_.external_commands && v.allowplccmd != 0) {
+        AxisCommand c;
+        if (v.traj.execute != 0) {
+            int code = int(v.traj.command);
+            c.type = code == 1 ? CommandType::MoveVelocity : code == 2 ? CommandType::MoveRelative
+                   : code == 3 ? CommandType::MoveAbsolute : code == 10 ? CommandType::Home : CommandType::None;
+            c.position = v.traj.targetpos;
+            c.velocity = v.traj.targetvel;
+            c.acceleration = v.traj.targetacc;
+            c.homing_sequence = int(v.traj.cmddata);
+        } else {
+            c.type = CommandType::Halt;
+        }
+        if (c.type != CommandType::None) (void)command(c);
+    }
+    plc_ilock_fwd_ = v.mon.ilock == 0 || v.mon.ilockfwd == 0;
+    plc_ilock_bwd_ = v.mon.ilock == 0 || v.mon.ilockbwd == 0;
+    p_.soft_fwd = v.mon.highsoftlim;
+    p_.soft_bwd = v.mon.lowsoftlim;
+    p_.soft_fwd_enable = v.mon.highsoftlimenable != 0;
+    p_.soft_bwd_enable = v.mon.lowsoftlimenable != 0;
+    st_.soft_fwd_enabled = p_.soft_fwd_enable;
+    st_.soft_bwd_enabled = p_.soft_bwd_enable;
+    ControllerParams& k = ctrl_.params();
+    k.kp = v.ctrl.kp;
+    k.ki = v.ctrl.ki;
+    k.kd = v.ctrl.kd;
+    k.kff = v.ctrl.kff;
+    was = v;
+}
+
+void Axis::publish_variables() noexcept {
+    AxisVariables& v = vars_;
+    v.error = st_.error_id;
+    v.enc.actpos = st_.act_pos;
+    v.enc.actvel = st_.act_vel;
+    v.enc.homed = st_.homed;
+    v.enc.source = enc_source_;
+    v.traj.setpos = st_.set_pos;
+    v.traj.source = traj_source_;
+    v.traj.busy = st_.busy;
+    v.drv.enable = st_.enable_cmd;
+    v.drv.enabled = st_.enabled;
+    v.mon.attarget = st_.at_target;
+    if (!p_.limit_fwd_plc) v.mon.highlim = !st_.limit_fwd;
+    if (!p_.limit_bwd_plc) v.mon.lowlim = !st_.limit_bwd;
+    if (!p_.home_plc) v.mon.homesensor = st_.home_sensor;
+    seen_ = v;
+}
+
 void Axis::monitor(double dt) noexcept {
     const bool homing = seq_ == Seq::Homing;
     const double v = traj_.state().velocity;
@@ -539,6 +621,14 @@ void Axis::monitor(double dt) noexcept {
     if (soft_bwd && v < 0) {
         st_.warning_id = error_id::kSoftLimitBwd;
         st_.last_interlock = Interlock::SoftBwd;
+        start_stop(decel());
+    }
+    if (plc_ilock_fwd_ && v > 0) { // PLC interlocks (mon.ilock*) stop that direction
+        st_.last_interlock = Interlock::PlcFwd;
+        start_stop(decel());
+    }
+    if (plc_ilock_bwd_ && v < 0) {
+        st_.last_interlock = Interlock::PlcBwd;
         start_stop(decel());
     }
     st_.soft_limit_fwd = p_.soft_fwd_enable && st_.set_pos >= p_.soft_fwd;
@@ -593,6 +683,7 @@ void Axis::monitor(double dt) noexcept {
 
 void Axis::run(double dt) noexcept {
     ++st_.cycle;
+    take_variables();
     bool bus_ok = !io_.bus_status.bound() || io_.bus_status.get() != 0;
     read_inputs();
     if (!p_.virtual_axis) {
@@ -665,6 +756,14 @@ void Axis::run(double dt) noexcept {
     }
     st_.act_pos = p_.virtual_axis ? traj_.state().position : enc_.position();
     st_.act_vel = p_.virtual_axis ? traj_.state().velocity : enc_.velocity();
+    if (enc_source_ == 1) { // the PLC computes the actual position (ax<n>.enc.extactpos)
+        double x = vars_.enc.extactpos;
+        st_.act_vel = std::isfinite(last_ext_act_) && dt > 0 ? (x - last_ext_act_) / dt : 0;
+        st_.act_pos = x;
+        last_ext_act_ = x;
+    } else {
+        last_ext_act_ = NAN;
+    }
 
     // Sequencer and trajectory.
     if (seq_ == Seq::Homing) homing_step(dt);
@@ -679,13 +778,26 @@ void Axis::run(double dt) noexcept {
         seq_ = Seq::Idle;
         finish(tag_);
     }
+    if (traj_source_ == 1 && enabled) { // the PLC gives the setpoint (ax<n>.traj.extsetpos)
+        double x = vars_.traj.extsetpos;
+        double v = std::isfinite(last_ext_set_) && dt > 0 ? (x - last_ext_set_) / dt : 0;
+        last_ext_set_ = x;
+        if (seq_ != Seq::Idle) { // an own command ends when the source is external
+            seq_ = Seq::Idle;
+            finish(tag_);
+        }
+        traj_.reset({x, v, 0}); // bumpless when the source switches back
+        st_.target_pos = x;
+    } else {
+        last_ext_set_ = NAN;
+    }
     if (!enabled) {
         traj_.reset({st_.act_pos, 0, 0}); // the setpoint follows the actual position
         ctrl_.reset();
     }
     st_.set_pos = traj_.state().position;
     st_.set_vel = traj_.state().velocity;
-    if (p_.virtual_axis) {
+    if (p_.virtual_axis && enc_source_ == 0) {
         st_.act_pos = st_.set_pos;
         st_.act_vel = st_.set_vel;
     }
@@ -707,6 +819,7 @@ void Axis::run(double dt) noexcept {
     else if (enabled && !p_.virtual_axis) out = ctrl_.step(st_.pos_err, st_.set_vel, dt);
     st_.drive_output = out;
     if (!p_.virtual_axis) drive_.step(drive_enable, out, !st_.busy, dt);
+    publish_variables();
 }
 
 } // namespace beamctl::motion

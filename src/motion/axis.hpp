@@ -11,6 +11,7 @@
 // drains a queue filled by non-RT code). Everything is noexcept and allocation-free once built.
 #pragma once
 
+#include "motion/axis_variables.hpp"
 #include "motion/controller.hpp"
 #include "motion/drive.hpp"
 #include "motion/encoder.hpp"
@@ -18,6 +19,7 @@
 #include "registry/signal.hpp"
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -61,7 +63,7 @@ inline bool is_warning(uint32_t id) noexcept { return id >= 0x100000; }
 enum class Interlock : uint8_t {
     None = 0, SoftBwd = 1, SoftFwd = 2, HardBwd = 3, HardFwd = 4, NoExecute = 5, Lag = 6,
     BothLimits = 7, External = 8, MaxSpeed = 10, AxisError = 13, UnexpectedLimit = 14,
-    BusNotOk = 16, Stall = 23,
+    BusNotOk = 16, Plc = 17, PlcBwd = 18, PlcFwd = 19, Stall = 23,
 };
 
 struct AxisParams {
@@ -97,6 +99,12 @@ struct AxisParams {
     // many cycles before the drive is disabled (ECMC openDelay / closeAhead)
     int brake_open_delay_cycles = 0, brake_close_ahead_cycles = 0;
     bool enable_at_startup = false; // re-enable after a bus outage (ECMC autoEnable.atStartup)
+    // PLC connection (ECMC): initial sources (0 internal/encoder, 1 PLC: traj.extsetpos /
+    // enc.extactpos), commands from PLC variables, switches written by PLC code (plcOverride)
+    int trajectory_source = 0, encoder_source = 0;
+    bool external_commands = false;  // plc.externalCommands: traj.* commands from PLC code
+    bool allow_source_change = true; // features.allowSrcChangeWhenEnabled (else only when disabled)
+    bool limit_fwd_plc = false, limit_bwd_plc = false, home_plc = false;
     // homing defaults (ECMC encoder.homing)
     int homing_sequence = 0;
     double homing_position = 0;
@@ -184,6 +192,8 @@ public:
     [[nodiscard]] uint32_t command(const AxisCommand& c) noexcept;
 
     const AxisStatus& status() const noexcept { return st_; }
+    // ECMC's ax<n>.* variables: PLC code reads and writes them between the axis's cycles.
+    AxisVariables& variables() noexcept { return vars_; }
     const AxisParams& params() const noexcept { return p_; }
     Encoder& encoder() noexcept { return enc_; }
     Trajectory& trajectory() noexcept { return traj_; }
@@ -191,6 +201,8 @@ public:
 private:
     enum class Seq : uint8_t { Idle, Moving, Stopping, Homing };
     void read_inputs() noexcept;
+    void take_variables() noexcept;    // PLC writes -> commands, sources, interlocks
+    void publish_variables() noexcept; // status -> ax<n>.* variables
     void monitor(double dt) noexcept;
     void homing_step(double dt) noexcept;
     void fault(uint32_t id, bool disable) noexcept;
@@ -208,6 +220,10 @@ private:
     Controller ctrl_;
     Trajectory traj_;
     AxisStatus st_;
+    AxisVariables vars_, seen_; // seen_: the values as the axis last published or took them
+    int traj_source_ = 0, enc_source_ = 0;
+    double last_ext_set_ = NAN, last_ext_act_ = NAN;
+    bool plc_ilock_fwd_ = false, plc_ilock_bwd_ = false; // motion blocked by PLC interlocks
 
     Seq seq_ = Seq::Idle;
     uint64_t tag_ = 0;       // of the running command

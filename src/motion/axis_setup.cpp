@@ -29,8 +29,13 @@ AxisParams make_axis_params(const AxisConfig& c) {
     if (c.drive && c.axis.mode == DriveMode::CSP_PC)
         throw Error(SB() << c.file << ": axis.mode CSP_PC is not supported yet (use CSV or CSP)");
     p.csp = c.drive && c.axis.mode == DriveMode::CSP;
-    if (c.trajectory.source != TrajectorySource::Internal)
-        throw Error(SB() << c.file << ": trajectory.source 1 (PLC) needs the soft PLC, which is not there yet");
+    // PLC connection: sources, external commands, switches written by PLC code
+    p.trajectory_source = c.trajectory.source == TrajectorySource::PLC ? 1 : 0;
+    p.external_commands = c.plc && c.plc->external_commands;
+    p.allow_source_change = c.axis.features.allow_src_change_when_enabled;
+    p.limit_fwd_plc = c.input.limit_forward.plc_override;
+    p.limit_bwd_plc = c.input.limit_backward.plc_override;
+    p.home_plc = c.input.home && c.input.home->plc_override;
     auto enc_params = [](const EncoderConfig& e) {
         EncoderParams q;
         q.numerator = e.numerator;
@@ -47,8 +52,7 @@ AxisParams make_axis_params(const AxisConfig& c) {
     for (const auto& e : c.encoders) p.encoders.push_back(enc_params(e));
     p.primary_encoder = int(c.primary_encoder());
     if (const EncoderConfig* e = primary(c)) {
-        if (e->source != EncoderSource::EtherCAT && !p.virtual_axis)
-            throw Error(SB() << at(e->where) << ": encoder.source 1 (PLC) needs the soft PLC, which is not there yet");
+        p.encoder_source = e->source == EncoderSource::PLC ? 1 : 0;
         p.encoder = enc_params(*e);
         if (const auto& h = e->homing) {
             p.homing_sequence = h->type;

@@ -724,3 +724,101 @@ stages:
     EXPECT_NEAR(b.plant->find_stage("r")->position(), 120, 0.05); // 90 deg further
     EXPECT_NEAR(n * 0.001, 1.0 + 0.35, 0.2); // S-curve 90 deg at 90 deg/s, 360 deg/s^2
 }
+
+TEST(AxisVariables, NamesAndWritability) {
+    const AxisVariableInfo* v = find_axis_variable("traj.extsetpos");
+    ASSERT_NE(v, nullptr);
+    EXPECT_TRUE(v->writable);
+    EXPECT_FALSE(find_axis_variable("enc.actpos")->writable);
+    EXPECT_EQ(find_axis_variable("enc.nope"), nullptr);
+    AxisVariables vars;
+    *axis_variable(vars, *v) = 4.5;
+    EXPECT_EQ(vars.traj.extsetpos, 4.5);
+    EXPECT_GE(axis_variables().size(), 30u);
+}
+
+TEST(AxisVariables, PhysicalAxisFollowsExtsetposFromThePlc) {
+    // What a kinematics PLC does for a slit blade: traj.source 1, extsetpos every cycle.
+    AxisBus a;
+    a.enable();
+    AxisVariables& v = a.ax.variables();
+    v.traj.source = 1;
+    for (int i = 0; i < 2000; ++i) { // a 2 mm ramp over 1 s, then hold
+        v.traj.extsetpos = std::min(2.0, i * 0.002);
+        a.cycles(1);
+    }
+    EXPECT_DOUBLE_EQ(a.ax.status().set_pos, 2.0);
+    EXPECT_NEAR(a.stage(), 2.0, 0.01);
+    EXPECT_EQ(a.ax.status().error_id, 0u); // followed within the lag tolerance
+    // back to the internal trajectory: bumpless, and commands work again
+    v.traj.source = 0;
+    a.cycles(2);
+    EXPECT_DOUBLE_EQ(a.ax.status().set_pos, 2.0);
+    ASSERT_EQ(a.cmd(CommandType::MoveAbsolute, 3), 0u);
+    a.until([&] { return !a.ax.status().busy; });
+    EXPECT_DOUBLE_EQ(a.ax.status().set_pos, 3.0);
+}
+
+TEST(AxisVariables, PlcCommandsInterlocksAndEnable) {
+    AxisParams p = stepper_params();
+    p.external_commands = true;
+    AxisBus a(p);
+    AxisVariables& v = a.ax.variables();
+    v.drv.enable = 1; // mc_power from a PLC
+    a.until([&] { return a.ax.status().enabled; }, 100);
+    ASSERT_TRUE(a.ax.status().enabled);
+    EXPECT_EQ(v.drv.enabled, 1.0);
+    v.traj.command = 3;
+    v.traj.targetpos = 4;
+    v.traj.targetvel = 2;
+    v.traj.execute = 1; // rising edge
+    a.cycles(2);
+    EXPECT_EQ(v.traj.busy, 1.0);
+    a.until([&] { return !a.ax.status().busy; });
+    EXPECT_DOUBLE_EQ(a.ax.status().set_pos, 4.0);
+    EXPECT_EQ(v.traj.setpos, 4.0);
+    // PLC interlock forward: a forward move is stopped, backward allowed
+    v.traj.execute = 0;
+    a.cycles(1);
+    v.mon.ilockfwd = 0;
+    v.traj.targetpos = 8;
+    v.traj.execute = 1;
+    a.cycles(200);
+    EXPECT_NEAR(a.ax.status().set_pos, 4.0, 0.05);
+    EXPECT_EQ(a.ax.status().last_interlock, Interlock::PlcFwd);
+    v.traj.execute = 0;
+    a.cycles(1);
+    v.traj.targetpos = 1;
+    v.traj.execute = 1;
+    a.cycles(1); // the axis takes PLC writes at the start of its next cycle
+    a.until([&] { return !a.ax.status().busy; });
+    EXPECT_DOUBLE_EQ(a.ax.status().set_pos, 1.0);
+    // an error that disables shows in drv.enable
+    v.traj.execute = 0;
+    v.mon.ilockfwd = 1;
+    a.b.plant->find_stage("x")->drive()->inject_fault();
+    a.cycles(5);
+    EXPECT_EQ(v.drv.enable, 0.0);
+    EXPECT_NE(v.error, 0.0);
+}
+
+TEST(AxisVariables, VirtualAxisActualFromThePlcAndPlcLimitSwitches) {
+    AxisParams p;
+    p.virtual_axis = true;
+    p.encoder_source = 1;
+    p.limit_fwd_plc = true;
+    p.trajectory = {2, 4, 4, 0};
+    Axis ax(p, AxisIo{});
+    AxisVariables& v = ax.variables();
+    v.drv.enable = 1;
+    v.enc.extactpos = 7.5; // e.g. the slit centre (LO + HI) / 2
+    ax.run(0.001);
+    ax.run(0.001);
+    EXPECT_TRUE(ax.status().enabled);
+    EXPECT_DOUBLE_EQ(ax.status().act_pos, 7.5);
+    EXPECT_EQ(v.enc.actpos, 7.5);
+    v.mon.highlim = 0; // a blade at its high limit blocks the virtual axis forward
+    ax.run(0.001);
+    EXPECT_TRUE(ax.status().limit_fwd);
+    EXPECT_EQ(ax.command(AxisCommand{CommandType::MoveAbsolute, 9}), error_id::kHardLimitFwd);
+}
