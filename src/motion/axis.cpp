@@ -569,7 +569,10 @@ void Axis::take_variables() noexcept {
     k.ki = v.ctrl.ki;
     k.kd = v.ctrl.kd;
     k.kff = v.ctrl.kff;
-    was = v;
+    // remember only what is compared for edges (a whole copy costs more than the axis's work)
+    was.reset = v.reset;
+    was.drv.enable = v.drv.enable;
+    was.traj.execute = v.traj.execute;
 }
 
 void Axis::publish_variables() noexcept {
@@ -588,7 +591,7 @@ void Axis::publish_variables() noexcept {
     if (!p_.limit_fwd_plc) v.mon.highlim = !st_.limit_fwd;
     if (!p_.limit_bwd_plc) v.mon.lowlim = !st_.limit_bwd;
     if (!p_.home_plc) v.mon.homesensor = st_.home_sensor;
-    seen_ = v;
+    seen_.drv.enable = v.drv.enable; // the axis's own change is not a PLC write
 }
 
 void Axis::monitor(double dt) noexcept {
