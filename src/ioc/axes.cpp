@@ -126,9 +126,8 @@ std::vector<std::pair<std::string, std::string>> field_init(const std::string& s
 } // namespace
 
 IocAxes::IocAxes(const std::vector<config::AxisEntry>& entries, const std::string& prefix,
-                 const std::set<std::string>& known_signals, double rate_hz, pv::Database& db)
+                 const std::set<std::string>& known_signals, pv::Database& db)
     : db_(db), prefix_(prefix) {
-    (void)rate_hz;
     std::set<int> ids;
     std::set<std::string> names;
     for (const auto& e : entries) {

@@ -31,7 +31,7 @@ public:
     // Loads the axis files and creates their PVs. `known_signals` holds every signal name the
     // buses will have ("ec0.s3.driveStatus01", "ec0.s3.ONE", "ec0.masterstatus"). Throws Error.
     IocAxes(const std::vector<config::AxisEntry>& entries, const std::string& prefix,
-            const std::set<std::string>& known_signals, double rate_hz, pv::Database& db);
+            const std::set<std::string>& known_signals, pv::Database& db);
 
     // Bring-up: binds every axis to the process images and adds the axis stage to the engine.
     using Resolver = std::function<registry::BoundSignal(const motion::SignalRef&)>;

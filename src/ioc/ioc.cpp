@@ -112,7 +112,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
         make_bus_pvs(b, bc);
         buses_.push_back(std::move(b));
     }
-    axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, known_signals(), cfg_.rate_hz, db_);
+    axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, known_signals(), db_);
     for (const auto& d : cfg_.db) db_.load(pv::load_db_file(d.file, d.macros));
 }
 

@@ -321,6 +321,7 @@ void Axis::homing_step(double) noexcept {
     // once it stands still: position = actual - latched + homing position.
     //   1/2   to the low/high limit at "to", back at "from"; leaving the switch is the edge
     //   3/4   the same, but the first change of the home switch is the edge
+    //   11/12 the same, then the latchCount-th index mark latched by the encoder terminal
     //   7/8   backward/forward at "from" to the home switch's rising edge
     //   9/10  backward/forward at "from" through the cam (both edges), back to its rising edge:
     //         the reference is the middle of the two latches
@@ -350,63 +351,11 @@ void Axis::homing_step(double) noexcept {
     bool latch_valid = io_.latch_valid.get() != 0;
     bool latch_new = latch_valid && !last_latch_valid_;
     last_latch_valid_ = latch_valid;
-    if (s == 11 || s == 12) { // limit, then the latchCount-th index mark (encoder latch)
+    const bool index = s == 11 || s == 12;
+    if (s <= 4 || index) { // to the limit at "to", back off it at "from", then the reference
         switch (home_step_) {
-        case 0:
-            io_.latch_arm.set(0);
-            if (near_limit) {
-                home_step_ = 2;
-            } else {
-                go(dir * v_to);
-                home_step_ = 1;
-            }
-            break;
-        case 1:
-            if (near_limit) {
-                halt();
-                home_step_ = 2;
-            }
-            break;
-        case 2:
-            if (far_limit) return fail(error_id::kSeqFailed);
-            if (!traj_.busy()) {
-                go(-dir * v_from);
-                home_step_ = 3;
-            }
-            break;
-        case 3:
-            if (far_limit) return fail(error_id::kSeqFailed);
-            if (near_limit != near_last) { // left the switch: arm the latch
-                io_.latch_arm.set(1);
-                latch_count_ = 0;
-                home_step_ = 4;
-            }
-            break;
-        case 4:
-            if (far_limit) return fail(error_id::kNoHomeFlank);
-            if (latch_new) {
-                io_.latch_arm.set(0); // disarm; re-armed next cycle for the next mark
-                if (++latch_count_ >= p_.homing_latch_count) {
-                    home_edge_pos_ = enc_.position_at_raw(uint64_t(io_.latch_position.get_raw()));
-                    halt();
-                    home_step_ = 10;
-                } else {
-                    home_step_ = 5;
-                }
-            }
-            break;
-        case 5:
-            if (far_limit) return fail(error_id::kNoHomeFlank);
-            if (!latch_valid) { // the terminal saw the disarm: arm again
-                io_.latch_arm.set(1);
-                home_step_ = 4;
-            }
-            break;
-        default: break;
-        }
-    } else if (s <= 4) {
-        switch (home_step_) {
-        case 0: // towards the limit at "to" (or already on it)
+        case 0: // towards the limit (or already on it)
+            if (index) io_.latch_arm.set(0);
             if (near_limit) {
                 home_step_ = 2;
             } else {
@@ -427,16 +376,40 @@ void Axis::homing_step(double) noexcept {
                 home_step_ = 3;
             }
             break;
-        case 3: {
-            if (far_limit) return fail(s <= 2 ? error_id::kSeqFailed : error_id::kNoHomeFlank);
-            bool edge = s <= 2 ? near_limit != near_last : home_changed;
-            if (edge) {
+        case 3:
+            if (far_limit) return fail(s <= 2 || index ? error_id::kSeqFailed : error_id::kNoHomeFlank);
+            if (index) {
+                if (near_limit != near_last) { // left the switch: arm the latch
+                    io_.latch_arm.set(1);
+                    latch_count_ = 0;
+                    home_step_ = 4;
+                }
+            } else if (s <= 2 ? near_limit != near_last : home_changed) {
                 home_edge_pos_ = enc_.position();
                 halt();
                 home_step_ = 10;
             }
             break;
-        }
+        case 4: // index: count latched marks up to latchCount
+            if (far_limit) return fail(error_id::kNoHomeFlank);
+            if (latch_new) {
+                io_.latch_arm.set(0); // disarm; re-armed once the terminal saw it
+                if (++latch_count_ >= p_.homing_latch_count) {
+                    home_edge_pos_ = enc_.position_at_raw(uint64_t(io_.latch_position.get_raw()));
+                    halt();
+                    home_step_ = 10;
+                } else {
+                    home_step_ = 5;
+                }
+            }
+            break;
+        case 5:
+            if (far_limit) return fail(error_id::kNoHomeFlank);
+            if (!latch_valid) {
+                io_.latch_arm.set(1);
+                home_step_ = 4;
+            }
+            break;
         default: break;
         }
     } else if (s <= 8) {

@@ -48,12 +48,6 @@ void Drive::step(bool enable, double velocity, bool standstill, double dt) noexc
         if (standstill && p_.reduce_torque_bit >= 0) cw |= uint16_t(1u << p_.reduce_torque_bit);
         cw_ = cw;
         enabled_ = enable && (sw >> p_.enabled_bit & 1) && !error_;
-        if (enable && !enabled_ && !error_) { // a generic drive has 15 s to say enabled too
-            enabling_s_ += dt;
-            if (enabling_s_ >= p_.enable_timeout - 1e-9) timed_out_ = true;
-        } else {
-            enabling_s_ = 0;
-        }
     } else {
         Ds402 s = ds402_state(sw);
         error_ = s == Ds402::Fault || s == Ds402::FaultReaction;
@@ -73,12 +67,13 @@ void Drive::step(bool enable, double velocity, bool standstill, double dt) noexc
         }
         cw_ = cw;
         enabled_ = enable && s == Ds402::OperationEnabled;
-        if (enable && !enabled_ && !error_) {
-            enabling_s_ += dt;
-            if (enabling_s_ >= p_.enable_timeout - 1e-9) timed_out_ = true; // (summed cycle times)
-        } else {
-            enabling_s_ = 0;
-        }
+    }
+    // Either kind has enable_timeout to report enabled (summed cycle times: a small tolerance).
+    if (enable && !enabled_ && !error_) {
+        enabling_s_ += dt;
+        if (enabling_s_ >= p_.enable_timeout - 1e-9) timed_out_ = true;
+    } else {
+        enabling_s_ = 0;
     }
     control_.set(cw_);
     uint8_t bits = setpoint_.bits ? setpoint_.bits : 32;

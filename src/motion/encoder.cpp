@@ -5,21 +5,12 @@
 namespace beamctl::motion {
 
 void Encoder::update(double dt) noexcept {
-    int width = std::clamp(p_.absolute && p_.abs_bits > 0 ? p_.abs_bits : p_.bits, 1, 64);
-    uint64_t wmask = width >= 64 ? ~uint64_t(0) : (uint64_t(1) << width) - 1;
-    uint64_t raw = raw_.get_raw() & p_.mask & wmask;
+    uint64_t raw = raw_.get_raw() & p_.mask & width_mask();
     bool first = !started_;
-    if (first) {
-        started_ = true;
-        counts_ = int64_t(raw); // the counter as it reads at start
-    } else {
-        // signed difference in the counter's width: a wrap is a small step, not a jump
-        uint64_t d = (raw - last_raw_) & wmask;
-        bool negative = width < 64 && (d >> (width - 1) & 1);
-        counts_ += negative ? int64_t(d | ~wmask) : int64_t(d);
-    }
+    counts_ = first ? int64_t(raw) : counts_at(raw); // at start: the counter as it reads
+    started_ = true;
     last_raw_ = raw;
-    double pos = double(counts_) * p_.numerator / p_.denominator + offset_ + (p_.absolute ? p_.abs_offset : 0);
+    double pos = double(counts_) * p_.numerator / p_.denominator + frame_offset();
     if (!first && dt > 0) {
         int n = std::clamp(p_.filter_size, 1, EncoderParams::kMaxFilter);
         double v = (pos - position_) / dt;
@@ -33,13 +24,21 @@ void Encoder::update(double dt) noexcept {
     position_ = pos;
 }
 
-double Encoder::position_at_raw(uint64_t raw) const noexcept {
+uint64_t Encoder::width_mask() const noexcept {
     int width = std::clamp(p_.absolute && p_.abs_bits > 0 ? p_.abs_bits : p_.bits, 1, 64);
-    uint64_t wmask = width >= 64 ? ~uint64_t(0) : (uint64_t(1) << width) - 1;
+    return width >= 64 ? ~uint64_t(0) : (uint64_t(1) << width) - 1;
+}
+
+int64_t Encoder::counts_at(uint64_t raw) const noexcept {
+    // signed difference to the last reading in the counter's width: a wrap is a small step
+    uint64_t wmask = width_mask();
     uint64_t d = ((raw & p_.mask & wmask) - last_raw_) & wmask;
-    bool negative = width < 64 && (d >> (width - 1) & 1);
-    int64_t counts = counts_ + (negative ? int64_t(d | ~wmask) : int64_t(d));
-    return double(counts) * p_.numerator / p_.denominator + offset_ + (p_.absolute ? p_.abs_offset : 0);
+    bool negative = wmask != ~uint64_t(0) && (d & ((wmask >> 1) + 1)) != 0; // top bit set
+    return counts_ + (negative ? int64_t(d | ~wmask) : int64_t(d));
+}
+
+double Encoder::position_at_raw(uint64_t raw) const noexcept {
+    return double(counts_at(raw)) * p_.numerator / p_.denominator + frame_offset();
 }
 
 void Encoder::set_position(double pos) noexcept {

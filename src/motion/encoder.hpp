@@ -47,6 +47,8 @@ public:
     const EncoderParams& params() const noexcept { return p_; }
 
 private:
+    uint64_t width_mask() const noexcept;         // the counter's bits (absBits for absolute)
+    int64_t counts_at(uint64_t raw) const noexcept; // counts where the counter reads `raw`
     EncoderParams p_;
     registry::BoundSignal raw_;
     bool started_ = false, homed_ = false;
