@@ -16,6 +16,7 @@
 #include "config/ioc_config.hpp"
 #include "ethercat/catalog.hpp"
 #include "ioc/ioc.hpp"
+#include "plc/runtime.hpp"
 #include "rt/engine.hpp"
 #include "ethercat/sim/raw_server.hpp"
 #include "ethercat/sim/sim_config.hpp"
@@ -23,6 +24,9 @@
 #include <CLI/CLI.hpp>
 
 #include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <cstdio>
 #include <iostream>
 #include <unistd.h>
@@ -50,6 +54,59 @@ void load_databases(pv::Database& db, const DbOptions& o) {
     }
     for (auto& f : o.files) db.load(pv::load_db_file(f, macros, o.include_path));
     db.init_records();
+}
+
+// `beamctl plc check`: compiles PLC files and reports every error; with --ioc, against that
+// IOC's buses, axes and plugins, else accepting every well-formed name of the known namespaces.
+struct PlcCheckOptions {
+    std::vector<std::string> macros, include_path, files;
+    std::string ioc_file;
+    double rate_ms = -1;
+};
+
+int run_plc_check(const PlcCheckOptions& o) {
+    std::unique_ptr<rt::MonotonicClock> clock;
+    std::unique_ptr<ioc::Ioc> ioc;
+    plc::PlcRuntime::Options opt;
+    opt.check_only = true;
+    if (!o.ioc_file.empty()) {
+        clock = std::make_unique<rt::MonotonicClock>();
+        ioc = std::make_unique<ioc::Ioc>(config::IocConfig::load(o.ioc_file), *clock);
+        opt = ioc->plcs().check_options();
+    }
+    MacroMap macros;
+    for (const auto& m : o.macros)
+        for (auto& [k, v] : parse_macro_defs(m)) macros[k] = v;
+    plc::PlcRuntime check(opt);
+    int failed = 0, id = 0;
+    for (const auto& f : o.files) {
+        std::ifstream in(f, std::ios::binary);
+        if (!in) {
+            std::fprintf(stderr, "%s: cannot open: %s\n", f.c_str(), std::strerror(errno));
+            ++failed;
+            continue;
+        }
+        std::stringstream ss;
+        ss << in.rdbuf();
+        plc::PlcSource src;
+        src.id = id++;
+        src.file = f;
+        src.text = ss.str();
+        src.macros = macros;
+        src.include_path = o.include_path;
+        src.rate_ms = o.rate_ms;
+        try {
+            check.add(src);
+            std::printf("%s: OK\n", f.c_str());
+        } catch (const plc::CompileError& e) {
+            for (const auto& err : e.errors()) std::fprintf(stderr, "%s\n", err.c_str());
+            ++failed;
+        } catch (const Error& e) {
+            std::fprintf(stderr, "%s\n", e.what());
+            ++failed;
+        }
+    }
+    return failed ? 1 : 0;
 }
 
 int run_softioc(const DbOptions& o, const std::string& acf_path) {
@@ -141,6 +198,19 @@ int main(int argc, char** argv) {
     auto* checkcmd = app.add_subcommand("check", "Load an IOC configuration and report errors (exit 1 on any)");
     checkcmd->add_option("file", check_file, "IOC configuration")->required();
 
+    PlcCheckOptions plco;
+    auto* plccmd = app.add_subcommand("plc", "Soft PLC tools");
+    plccmd->require_subcommand(1);
+    auto* plccheck = plccmd->add_subcommand("check", "Compile PLC files and report every error (exit 1 on any)");
+    plccheck->add_option("-m,--macros", plco.macros, "Macro definitions, e.g. \"AX=1,M=ec0\"")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    plccheck->add_option("-I,--include", plco.include_path, "Search path for include \"file\"")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    plccheck->add_option("--ioc", plco.ioc_file, "Bind names against this IOC configuration (buses, axes, plugins)");
+    plccheck->add_option("files", plco.files, "PLC files")->required();
+
     std::string sim_file, sim_bind = "127.0.0.1", sim_iface;
     int sim_port = 0x88A4;
     bool sim_busy_poll = false;
@@ -161,6 +231,7 @@ int main(int argc, char** argv) {
     CLI11_PARSE(app, argc, argv);
     try {
         if (*softioc) return run_softioc(soft, acf);
+        if (*plccheck) return run_plc_check(plco);
         if (*simcmd) return run_sim(sim_file, sim_bind, sim_port, sim_iface, sim_busy_poll);
         if (*runcmd) {
             rt::MonotonicClock clock;
@@ -186,6 +257,9 @@ int main(int argc, char** argv) {
             db.write_db(std::cout);
             return 0;
         }
+    } catch (const plc::CompileError& e) {
+        for (const auto& err : e.errors()) std::fprintf(stderr, "%s\n", err.c_str());
+        return 1;
     } catch (const Error& e) {
         std::fprintf(stderr, "%s\n", e.what());
         return 1;

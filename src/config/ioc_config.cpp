@@ -85,11 +85,11 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
     if (!root || root.IsNull()) throw Error(SB() << path << ":1:1: empty configuration (needs at least ioc:)");
     for (auto kv : root) {
         std::string k = kv.first.as<std::string>();
-        if (k == "plcs" || k == "bridges" || k == "web")
+        if (k == "bridges" || k == "web")
             throw Error(SB() << c.at(kv.first) << ": '" << k
                              << "' is not supported by this version of beamctl yet");
     }
-    only_keys(c, root, "the IOC file", {"ioc", "engine", "buses", "axes", "db", "ca"});
+    only_keys(c, root, "the IOC file", {"ioc", "engine", "buses", "axes", "plugins", "plcs", "db", "ca"});
     if (!root["ioc"]) throw Error(SB() << path << ":1:1: missing required key 'ioc' ({name: ..., prefix: ...})");
     {
         auto n = root["ioc"];
@@ -208,6 +208,56 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
                 }
             }
             cfg.axes.push_back(std::move(e));
+        }
+    }
+    if (auto plugins = root["plugins"]) {
+        if (!plugins.IsSequence()) throw Error(SB() << c.at(plugins) << ": plugins should be a list of {file, config}");
+        for (std::size_t i = 0; i < plugins.size(); ++i) {
+            auto p = plugins[i];
+            std::string where = SB() << "plugins[" << i << "]";
+            only_keys(c, p, where, {"file", "config"});
+            if (!p["file"]) throw Error(SB() << c.at(p) << ": " << where << ": missing 'file' (a plugin shared library)");
+            PluginEntry e;
+            e.file = c.resolve(get<std::string>(c, p["file"], where + ".file"));
+            if (p["config"]) e.config = get<std::string>(c, p["config"], where + ".config");
+            e.where = c.at(p);
+            cfg.plugins.push_back(std::move(e));
+        }
+    }
+    if (auto plcs = root["plcs"]) {
+        if (!plcs.IsSequence()) throw Error(SB() << c.at(plcs) << ": plcs should be a list of {id, file, rate_ms, macros}");
+        std::set<int> ids;
+        for (std::size_t i = 0; i < plcs.size(); ++i) {
+            auto p = plcs[i];
+            std::string where = SB() << "plcs[" << i << "]";
+            only_keys(c, p, where, {"id", "file", "rate_ms", "enable", "macros", "include", "libraries"});
+            if (!p["file"]) throw Error(SB() << c.at(p) << ": " << where << ": missing 'file' (a PLC file in ECMC's language)");
+            PlcEntry e;
+            e.id = p["id"] ? int(get_uint(c, p["id"], where + ".id", 99)) : int(i);
+            if (!ids.insert(e.id).second) throw Error(SB() << c.at(p) << ": " << where << ": PLC id " << e.id << " used twice");
+            e.file = c.resolve(get<std::string>(c, p["file"], where + ".file"));
+            if (auto r = p["rate_ms"]) {
+                e.rate_ms = get<double>(c, r, where + ".rate_ms");
+                if (!(e.rate_ms > 0 || e.rate_ms == -1))
+                    throw Error(SB() << c.at(r) << ": " << where << ".rate_ms: " << e.rate_ms << " should be > 0, or -1 (every cycle)");
+            }
+            if (auto en = p["enable"]) {
+                bool v = true;
+                if (!en.IsScalar() || !YAML::convert<bool>::decode(en, v))
+                    throw Error(SB() << c.at(en) << ": " << where << ".enable: should be true or false");
+                e.enable = v;
+            }
+            e.macros = macros(p["macros"], where);
+            auto list = [&](const char* key, std::vector<std::string>& out) {
+                auto l = p[key];
+                if (!l) return;
+                if (!l.IsSequence()) throw Error(SB() << c.at(l) << ": " << where << "." << key << " should be a list");
+                for (std::size_t k = 0; k < l.size(); ++k) out.push_back(c.resolve(get<std::string>(c, l[k], where + "." + key)));
+            };
+            list("include", e.include);
+            list("libraries", e.libraries);
+            e.where = c.at(p);
+            cfg.plcs.push_back(std::move(e));
         }
     }
     if (auto dbs = root["db"]) {

@@ -58,6 +58,26 @@ struct AxisEntry {
     std::string where; // file:line:col of the entry in the IOC file
 };
 
+// A PLC file (ecmccfg loadPLCFile.cmd): `plcs: [{id, file, rate_ms, enable, macros, include,
+// libraries}]`.
+struct PlcEntry {
+    int id = 0;              // plc<id>, PV PLC<id as 2 digits>-...
+    std::string file;        // resolved path
+    double rate_ms = -1;     // scan period [ms]; -1 = every cycle
+    bool enable = true;
+    MacroMap macros;
+    std::vector<std::string> include;   // resolved directories searched by `include`
+    std::vector<std::string> libraries; // resolved files of `function` definitions
+    std::string where;       // file:line:col of the entry
+};
+
+// A plugin (include/beamctl/plugin.h): `plugins: [{file, config}]`.
+struct PluginEntry {
+    std::string file; // resolved path
+    std::string config;
+    std::string where;
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -67,6 +87,8 @@ struct IocConfig {
     int priority = 80;
     std::vector<BusConfig> buses;
     std::vector<AxisEntry> axes;
+    std::vector<PluginEntry> plugins;
+    std::vector<PlcEntry> plcs;
     std::vector<DbConfig> db;
     std::optional<uint16_t> ca_port; // default: EPICS_CAS_SERVER_PORT / 5064
     std::string acf;                 // resolved path

@@ -113,29 +113,38 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
         buses_.push_back(std::move(b));
     }
     axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, known_signals(), db_);
+    std::vector<motion::AxisConfig> axis_configs;
+    for (std::size_t i = 0; i < axes_->size(); ++i) axis_configs.push_back(axes_->config(i));
+    plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, signal_directory(), db_);
     for (const auto& d : cfg_.db) db_.load(pv::load_db_file(d.file, d.macros));
 }
 
 std::set<std::string> Ioc::known_signals() const {
-    // The names the masters will register: default-assignment entries, ONE/ZERO, masterstatus.
     std::set<std::string> names;
+    for (const auto& [name, desc] : signal_directory()) names.insert(name);
+    return names;
+}
+
+SignalDirectory Ioc::signal_directory() const {
+    // The names the masters will register: default-assignment entries, ONE/ZERO, masterstatus.
+    SignalDirectory dir;
     for (const auto& bc : cfg_.buses) {
-        names.insert(SB() << "ec" << bc.id << ".masterstatus");
+        dir[SB() << "ec" << bc.id << ".masterstatus"] = SignalDesc{false, "UDINT"};
         for (const auto& s : bc.slaves) {
             std::string pre = SB() << "ec" << bc.id << ".s" << s.position << ".";
-            names.insert(pre + "ONE");
-            names.insert(pre + "ZERO");
+            dir[pre + "ONE"] = SignalDesc{false, "UDINT"};
+            dir[pre + "ZERO"] = SignalDesc{false, "UDINT"};
             const ethercat::DeviceDesc* d = catalog_.find(s.type);
             if (!d) continue;
             for (const auto& pd : d->rx_pdos)
                 for (const auto& e : pd.entries)
-                    if (!e.name.empty()) names.insert(pre + e.name);
+                    if (!e.name.empty()) dir[pre + e.name] = SignalDesc{true, e.datatype};
             for (const auto& pd : d->tx_pdos)
                 for (const auto& e : pd.entries)
-                    if (!e.name.empty()) names.insert(pre + e.name);
+                    if (!e.name.empty()) dir[pre + e.name] = SignalDesc{false, e.datatype};
         }
     }
-    return names;
+    return dir;
 }
 
 Ioc::~Ioc() {
@@ -276,12 +285,30 @@ void Ioc::bring_up() {
             throw Error(SB() << r.where.file << ":" << r.where.line << ":" << r.where.col << ": no bus ec" << r.bus);
         },
         *engine_);
+    std::vector<registry::BoundSignal> bus_ok;
+    for (auto& b : buses_) bus_ok.push_back(b.bus->master().bind(std::string(SB() << "ec" << b.bus->id() << ".masterstatus")));
+    plcs_->bind(
+        *engine_, axes_->group(),
+        [this](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
+            for (auto& b : buses_) {
+                std::string pre = SB() << "ec" << b.bus->id() << ".";
+                if (name.rfind(pre, 0) != 0) continue;
+                registry::BoundSignal s = b.bus->master().bind(name);
+                if (s.bound()) return plc::EcEntry{s};
+                why = SB() << "no signal '" << name << "' on bus " << b.bus->id() << " after bring-up";
+                return std::nullopt;
+            }
+            why = SB() << "no bus for '" << name << "'";
+            return std::nullopt;
+        },
+        std::move(bus_ok));
     db_.init_records();
     brought_up_ = true;
 }
 
 void Ioc::publish() {
     axes_->publish();
+    plcs_->publish();
     rt::EngineStats es = engine_->stats();
     for (auto& b : buses_) {
         const ethercat::BusSnapshot& s = b.bus->snapshot();

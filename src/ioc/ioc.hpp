@@ -10,6 +10,7 @@
 #include "ethercat/bus.hpp"
 #include "ethercat/catalog.hpp"
 #include "ioc/axes.hpp"
+#include "ioc/plcs.hpp"
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "pv/database.hpp"
@@ -41,6 +42,9 @@ public:
     ethercat::sim::Plant* plant(std::size_t i) { return buses_.at(i).plant.get(); }
     const config::IocConfig& config() const { return cfg_; }
     IocAxes& axes() { return *axes_; }
+    IocPlcs& plcs() { return *plcs_; }
+    // Every process-data entry the configured buses will have, with its direction and type.
+    SignalDirectory signal_directory() const;
 
     // Runs the IOC: engine on its RT thread, CA server and publisher on the calling thread,
     // until SIGINT/SIGTERM. Prints the ready line.
@@ -75,6 +79,7 @@ private:
     std::unique_ptr<rt::Engine> engine_;
     std::vector<BusRt> buses_;
     std::unique_ptr<IocAxes> axes_;
+    std::unique_ptr<IocPlcs> plcs_;
     bool brought_up_ = false;
 };
 

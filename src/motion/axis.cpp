@@ -240,6 +240,16 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
         return 0;
     }
     if (!enabled) return refuse(error_id::kNotEnabled);
+    if (traj_source_ == 1) { // the PLC gives the setpoint
+        if (!p_.allow_source_change) {
+            finish(c.tag);
+            if (c.tag) st_.refused_tag = c.tag;
+            return error_id::kTrajSourceNotInternal; // returned, not latched (as ECMC)
+        }
+        traj_source_ = 0; // bumpless: the trajectory holds the PLC's last setpoint and velocity
+        vars_.traj.source = 0;
+        last_ext_set_ = NAN;
+    }
     has_pending_ = false;
     st_.warning_id = 0;
     st_.last_interlock = Interlock::None;

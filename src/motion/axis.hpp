@@ -49,6 +49,9 @@ constexpr uint32_t kNoSecondHomeFlank = 0x14D0D; // ERROR_SEQ_NO_SECOND_HOME_SWI
 constexpr uint32_t kLatchCount = 0x14D14;     // ERROR_SEQ_LATCH_COUNT_OUT_OF_RANGE (or no latch)
 constexpr uint32_t kVelocityZero = 0x14D12;    // ERROR_SEQ_VELOCITY_ZERO (also bad parameters)
 constexpr uint32_t kHomeNotAllowed = 0x14D1A;  // ERROR_SEQ_HOME_NOT_ALLOWED (sequence 0)
+// refusals that do not latch an axis error (ECMC returns them to the caller only)
+constexpr uint32_t kTrajSourceNotInternal = 0x20052; // ERROR_MAIN_TRAJ_SOURCE_NOT_INTERNAL
+constexpr uint32_t kCommandsBlocked = 0x20053;       // ERROR_MAIN_AXIS_COM_BLOCKED (allowplccmd 0)
 // warnings
 constexpr uint32_t kEnableLost = 0x114601;     // WARNING_DRV_ENABLED_LOST
 constexpr uint32_t kHardLimitFwd = 0x114C02;   // WARNING_MON_HARD_LIMIT_FWD_INTERLOCK
@@ -188,7 +191,11 @@ public:
     // RT: one cycle of `dt` seconds. Reads inputs from the image, writes drive outputs.
     void run(double dt) noexcept;
     // RT: starts a command. Returns 0 when accepted, else the error/warning id why not (the
-    // command is then finished at once: done_tag = its tag).
+    // command is then finished at once: done_tag = its tag). A motion command for an axis whose
+    // trajectory source is the PLC (traj.source 1) takes the axis back to its own trajectory,
+    // starting from the PLC's setpoint, when features.allowSrcChangeWhenEnabled is set (how a
+    // virtual axis that follows its physical axes is commanded); otherwise it is refused with
+    // kTrajSourceNotInternal.
     [[nodiscard]] uint32_t command(const AxisCommand& c) noexcept;
 
     const AxisStatus& status() const noexcept { return st_; }

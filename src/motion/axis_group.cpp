@@ -17,6 +17,7 @@ void AxisGroup::run(const rt::CycleInfo& c) noexcept {
     double dt = double(c.period_ns) * 1e-9;
     std::vector<AxisStatus>& out = statuses_.write_buffer();
     for (std::size_t i = 0; i < axes_.size(); ++i) {
+        if (hook_) hook_->before_axis(i, c);
         axes_[i]->run(dt);
         out[i] = axes_[i]->status();
     }

@@ -14,6 +14,13 @@
 
 namespace beamctl::motion {
 
+// Runs just before an axis in the cycle: its axis PLC (ARCHITECTURE.md §2). RT thread.
+class AxisHook {
+public:
+    virtual ~AxisHook() = default;
+    virtual void before_axis(std::size_t index, const rt::CycleInfo& c) noexcept = 0;
+};
+
 class AxisGroup : public rt::Stage {
 public:
     explicit AxisGroup(std::vector<std::unique_ptr<Axis>> axes, std::size_t queue = 1024);
@@ -35,6 +42,9 @@ public:
     bool pop_result(Result& r) noexcept { return results_.pop(r); }
     uint64_t commands_dropped() const noexcept { return dropped_.load(); }
 
+    // Before the cycle starts: who runs before each axis (nullptr: nobody).
+    void set_hook(AxisHook* hook) noexcept { hook_ = hook; }
+
     std::size_t size() const noexcept { return axes_.size(); }
     Axis& axis(std::size_t i) noexcept { return *axes_[i]; } // RT side (tests in virtual time)
 
@@ -48,6 +58,7 @@ private:
     SpscQueue<Result> results_;
     TripleBuffer<std::vector<AxisStatus>> statuses_;
     std::atomic<uint64_t> dropped_{0};
+    AxisHook* hook_ = nullptr;
 };
 
 } // namespace beamctl::motion

@@ -770,7 +770,8 @@ private:
         if (const int hf = host_function(t.text); hf >= 0) return parse_host_call(hf);
         if (const int hv = host_variable(t); hv >= 0) return variable_use(hv);
         // Reported without unwinding, so the rest of the statement is checked too.
-        error(t, SB() << "unknown name '" << t.text << "'");
+        const std::string why = host_.why_unknown(t.text);
+        error(t, SB() << "unknown name '" << t.text << "'" << (why.empty() ? "" : ": ") << why);
         next();
         if (is(Tok::lparen)) arguments(t, true);
         return placeholder(t);

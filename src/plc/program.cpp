@@ -212,6 +212,15 @@ std::string Program::fault_location() const {
            to_string(impl_->fault);
 }
 
+int Program::fault_index() const noexcept {
+    return impl_->fault_pc;
+}
+
+std::string Program::location(int index) const {
+    if (index < 0 || static_cast<std::size_t>(index) >= impl_->locations.size()) return {};
+    return impl_->locations[static_cast<std::size_t>(index)];
+}
+
 void Program::Impl::reset_calls() noexcept {
     for (detail::FunctionCode& f : functions) f.active = 0;
     save_top = 0;

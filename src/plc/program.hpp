@@ -46,6 +46,9 @@ public:
     // A name the code uses ("ax1.enc.actpos", "static.step", "ec0.s3.binaryInput01.0"): its
     // storage, or nullopt if unknown (a compile error naming it). Called only while compiling.
     virtual std::optional<Binding> resolve(std::string_view name) = 0;
+    // Why `name` is unknown ("no axis 7; the IOC has axes 1-4"), added to the compile error;
+    // "" for a plain "unknown name". Called only while compiling, after resolve() failed.
+    virtual std::string why_unknown(std::string_view /*name*/) { return {}; }
     // Host functions (ECMC's mc_*, ec_*, ds_*, plugins): looked up by name while compiling;
     // called in RT with the evaluated arguments.
     using Function = double (*)(void* ctx, const double* args, int nargs) noexcept;
@@ -112,6 +115,10 @@ public:
 
     // Where the last failing run() stopped: "file:line:col: <what>" (non-RT), "" after success.
     std::string fault_location() const;
+    // The same split for another thread: the faulting instruction (RT: read right after run(),
+    // -1 after success), and the "file:line:col" of an instruction (any thread; immutable).
+    int fault_index() const noexcept;
+    std::string location(int index) const;
     // Number of instructions (diagnostics, benchmarks).
     std::size_t size() const noexcept;
     // The compiled code as text, one instruction per line (debugging).

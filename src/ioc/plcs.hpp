@@ -1,0 +1,83 @@
+// The IOC's soft PLCs: `plcs:` of the IOC file (general PLCs) and the `plc:` code of axis files
+// (axis PLCs), with `plugins:`. Every PLC is compiled when the IOC is built, against the
+// configured buses and axes (errors with file:line:col, all at once), and again at bring-up
+// against the real addresses; then run by a plc::PlcRuntime in the RT cycle.
+//
+// PVs ($(P) = the IOC prefix, nn = the PLC id as two digits, as ecmccfg):
+//   $(P)PLCnn-EnaCmd (bo, writable: plc<n>.enable), -EnaAct (bi), -ScanTime (ai, s),
+//   -Err (longin: the latched run-time fault, 0 none), -Faults (longin), -Scans (longin)
+// println/print output goes to the IOC's standard output ("plc0: text"); faults are logged with
+// their location.
+// Threading: everything here on the IOC loop thread, except the runtime's RT side.
+#pragma once
+
+#include "config/ioc_config.hpp"
+#include "motion/axis_config.hpp"
+#include "motion/axis_group.hpp"
+#include "plc/plugin.hpp"
+#include "plc/runtime.hpp"
+#include "pv/database.hpp"
+#include "rt/engine.hpp"
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace beamctl::ioc {
+
+// A process-data entry as the configuration knows it before bring-up.
+struct SignalDesc {
+    bool output = false;  // written by the master (PLC code may write it)
+    std::string datatype; // catalog data type (BOOL, INT, UINT, DINT, REAL, LREAL, ...)
+};
+using SignalDirectory = std::map<std::string, SignalDesc>; // "ec0.s3.binaryInput01" -> desc
+
+class IocPlcs {
+public:
+    // Loads the plugins, reads every PLC and compiles it against `signals` and the axes' ids.
+    // Throws plc::CompileError (every error) or Error.
+    IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisConfig>& axes,
+            SignalDirectory signals, pv::Database& db);
+    ~IocPlcs();
+
+    // Bring-up: compiles for real (names bound to the image and the axes), adds the general
+    // PLCs' stage and the axis PLCs' hook. `ec` resolves an entry after bring-up.
+    using EcResolver = std::function<std::optional<plc::EcEntry>(const std::string& name, std::string& why)>;
+    void bind(rt::Engine& engine, motion::AxisGroup* group, const EcResolver& ec,
+              std::vector<registry::BoundSignal> bus_ok);
+    // IOC loop: statuses into PVs, output lines to stdout, faults to the log.
+    void publish();
+
+    // Options that check PLC code against this IOC without binding anything
+    // (`beamctl plc check --ioc`).
+    plc::PlcRuntime::Options check_options() const;
+    std::size_t size() const { return sources_.size(); }
+    plc::PlcRuntime* runtime() { return runtime_.get(); }
+    const std::vector<plc::PlcSource>& sources() const { return sources_; }
+
+private:
+    struct Pvs {
+        pv::Record *ena_cmd = nullptr, *ena_act = nullptr, *scan_time = nullptr, *err = nullptr,
+                   *faults = nullptr, *scans = nullptr;
+        std::size_t index = 0; // in the runtime
+        int last_enabled = -1;
+    };
+    void make_pvs(const std::string& prefix, pv::Database& db);
+
+    double cycle_s_;
+    SignalDirectory signals_;
+    std::vector<int> axis_ids_;
+    std::vector<std::unique_ptr<plc::Plugin>> plugins_;
+    std::vector<plc::PlcSource> sources_;
+    std::unique_ptr<plc::PlcRuntime> runtime_;
+    std::vector<Pvs> pvs_;
+    pv::Database& db_;
+    std::vector<std::string> last_faults_;
+};
+
+// Reads a general PLC entry or an axis file's `plc:` into a source (file text + code lines,
+// macros, include path: the file's directory first). Throws Error if a file cannot be read.
+plc::PlcSource plc_source(const config::PlcEntry& e);
+
+} // namespace beamctl::ioc

@@ -1,0 +1,641 @@
+#include "plc/runtime.hpp"
+
+#include "core/error.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+namespace beamctl::plc {
+namespace {
+
+// ECMC error codes returned by the mc_* and ec_* functions (ecmcPLCTask.h, ecmcErrorsList.h).
+constexpr double kAxisIdOutOfRange = 0x20502;   // ERROR_PLC_AXIS_ID_OUT_OF_RANGE
+constexpr double kEcBitsOutOfRange = 0x20800;   // ERROR_PLC_EC_LIB_BITS_OUT_OF_RANGE
+
+std::string lower(std::string_view s) {
+    std::string r(s);
+    for (char& c : r) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return r;
+}
+
+// "ax12.enc.actpos" -> (12, "enc.actpos"); false if `s` does not start with <prefix><digits>.
+bool split_indexed(std::string_view s, std::string_view prefix, int& n, std::string_view& rest) {
+    if (s.size() <= prefix.size() || s.substr(0, prefix.size()) != prefix) return false;
+    std::size_t i = prefix.size(), j = i;
+    while (j < s.size() && std::isdigit(static_cast<unsigned char>(s[j]))) ++j;
+    if (j == i || j - i > 6) return false;
+    n = std::stoi(std::string(s.substr(i, j - i)));
+    if (j == s.size()) {
+        rest = {};
+        return true;
+    }
+    if (s[j] != '.') return false;
+    rest = s.substr(j + 1);
+    return true;
+}
+
+bool is_identifier(std::string_view s) {
+    if (s.empty() || !(std::isalpha(static_cast<unsigned char>(s[0])) || s[0] == '_')) return false;
+    return std::all_of(s.begin(), s.end(), [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_'; });
+}
+
+} // namespace
+
+// One PLC: its program, its own variables, statics and process-data cells; the Host it was
+// compiled against.
+struct PlcRuntime::Plc : Host {
+    PlcRuntime& rt;
+    PlcSource src;
+    struct Vars {
+        double enable = 0, error = 0, scantime = 0, firstscan = 1, dbg = 0;
+    } vars;
+    std::deque<double> cells; // statics and check-mode stand-ins (stable addresses)
+    std::map<std::string, double*> statics, stand_ins;
+    struct EcCell {
+        registry::BoundSignal signal;
+        EcEntry::Kind kind = EcEntry::Kind::Integer;
+        bool writable = false;
+        double value = 0, read = 0;
+    };
+    std::deque<EcCell> ec;
+    std::map<std::string, EcCell*> ec_names;
+    std::optional<Program> program;
+    int divider = 1, counter = 0;
+    bool first_done = false;
+    std::atomic<int> enable_request{-1};
+    std::atomic<bool> st_enabled{false}, st_firstscan{true};
+    std::atomic<int> st_error{0}, st_fault_index{-1};
+    std::atomic<std::uint64_t> st_scans{0}, st_faults{0};
+
+    Plc(PlcRuntime& r, PlcSource s) : rt(r), src(std::move(s)) {}
+
+    std::string prefix() const {
+        return src.axis_plc ? std::string(SB() << "ax" << src.id << ".plc") : std::string(SB() << "plc" << src.id);
+    }
+
+    double* cell(std::map<std::string, double*>& m, const std::string& name) {
+        auto it = m.find(name);
+        if (it != m.end()) return it->second;
+        cells.push_back(0);
+        return m[name] = &cells.back();
+    }
+
+    static double* var(Vars& v, std::string_view item) {
+        std::string i = lower(item);
+        if (i == "enable") return &v.enable;
+        if (i == "error") return &v.error;
+        if (i == "scantime") return &v.scantime;
+        if (i == "firstscan") return &v.firstscan;
+        if (i == "dbg") return &v.dbg;
+        return nullptr;
+    }
+
+    // plc<n>.* or ax<n>.plc.* of this or another (already added) PLC.
+    std::optional<Binding> plc_variable(int id, bool axis_plc, std::string_view item) {
+        Plc* target = nullptr;
+        if (id == src.id && axis_plc == src.axis_plc) target = this;
+        for (auto& p : rt.plcs_)
+            if (p->src.id == id && p->src.axis_plc == axis_plc) target = p.get();
+        if (!target) return std::nullopt;
+        double* a = var(target->vars, item);
+        if (!a) return std::nullopt;
+        // scantime and firstscan are the runtime's; enable, error and dbg may be written
+        std::string i = lower(item);
+        return Binding{a, i == "enable" || i == "error" || i == "dbg", 1};
+    }
+
+    std::optional<Binding> resolve(std::string_view name) override {
+        std::string n(name);
+        if (n.rfind("static.", 0) == 0 && is_identifier(n.substr(7))) return Binding{cell(statics, n.substr(7)), true, 1};
+        if (n.rfind("global.", 0) == 0 && is_identifier(n.substr(7))) {
+            auto it = rt.globals_.find(n.substr(7));
+            if (it != rt.globals_.end()) return Binding{it->second, true, 1};
+            rt.globals_cells_.push_back(0);
+            return Binding{rt.globals_[n.substr(7)] = &rt.globals_cells_.back(), true, 1};
+        }
+        int id = 0;
+        std::string_view rest;
+        if (split_indexed(n, "plc", id, rest)) {
+            if (auto b = plc_variable(id, false, rest)) return b;
+            if (rt.opt_.check_only && var(vars, rest)) return Binding{cell(stand_ins, n), true, 1};
+            return std::nullopt;
+        }
+        if (split_indexed(n, "ax", id, rest)) {
+            if (lower(rest).rfind("plc.", 0) == 0) {
+                if (auto b = plc_variable(id, true, rest.substr(4))) return b;
+                if (rt.opt_.check_only && var(vars, rest.substr(4))) return Binding{cell(stand_ins, n), true, 1};
+                return std::nullopt;
+            }
+            const motion::AxisVariableInfo* info = motion::find_axis_variable(lower(rest));
+            if (!info) return std::nullopt;
+            for (motion::Axis* a : rt.opt_.axes)
+                if (a->params().id == id) return Binding{motion::axis_variable(a->variables(), *info), info->writable, 1};
+            if (rt.opt_.check_only && (!rt.opt_.known_axis_ids || std::count(rt.opt_.known_axis_ids->begin(), rt.opt_.known_axis_ids->end(), id)))
+                return Binding{cell(stand_ins, n), info->writable, 1};
+            return std::nullopt;
+        }
+        if (split_indexed(n, "ec", id, rest)) return ec_entry(n);
+        for (Plugin* p : rt.opt_.plugins)
+            if (auto v = p->constant(n)) {
+                cells.push_back(*v);
+                return Binding{&cells.back(), false, 1};
+            }
+        return std::nullopt;
+    }
+
+    // "ec0.s3.binaryInput01[.bit]", "ec0.masterstatus": a cell copied from/to the image.
+    std::optional<Binding> ec_entry(const std::string& n) {
+        if (auto it = ec_names.find(n); it != ec_names.end())
+            return Binding{&it->second->value, it->second->writable, 1};
+        std::string entry = n;
+        int bit = -1;
+        std::size_t dot = n.rfind('.');
+        std::string last = n.substr(dot + 1);
+        int slave = 0, m = 0;
+        std::string_view after;
+        if (!split_indexed(n, "ec", m, after)) return std::nullopt;
+        std::string_view slave_rest;
+        bool is_slave = split_indexed(after, "s", slave, slave_rest);
+        if (is_slave && std::count(n.begin(), n.end(), '.') == 3 && !last.empty() &&
+            std::all_of(last.begin(), last.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); })) {
+            bit = std::stoi(last);
+            entry = n.substr(0, dot);
+            if (bit > 63) return std::nullopt;
+        }
+        std::optional<EcEntry> e;
+        if (rt.opt_.ec) {
+            std::string why;
+            e = rt.opt_.ec(entry, why);
+        }
+        if (!e) {
+            bool well_formed = after == "masterstatus" || (is_slave && is_identifier(std::string(slave_rest.substr(0, slave_rest.find('.')))) &&
+                                                           std::count(n.begin(), n.end(), '.') == (bit >= 0 ? 3 : 2));
+            if (!rt.opt_.check_only || !well_formed || rt.opt_.ec) return std::nullopt;
+            e = EcEntry{{}, EcEntry::Kind::Integer, after != "masterstatus"};
+        }
+        ec.push_back(EcCell{e->signal, e->kind, e->writable});
+        ec.back().signal.bit = bit;
+        if (bit >= 0) ec.back().kind = EcEntry::Kind::Integer;
+        ec_names[n] = &ec.back();
+        return Binding{&ec.back().value, e->writable, 1};
+    }
+
+    std::string why_unknown(std::string_view name) override {
+        std::string n(name);
+        int id = 0;
+        std::string_view rest;
+        if (split_indexed(n, "ax", id, rest)) {
+            if (lower(rest).rfind("plc.", 0) == 0)
+                return SB() << "axis " << id << " has no PLC, or '" << rest.substr(4)
+                            << "' is not one of enable, error, scantime, firstscan, dbg";
+            if (!motion::find_axis_variable(lower(rest))) return SB() << "'" << rest << "' is not an axis variable (specs: ax<n>.enc.actpos, ax<n>.traj.extsetpos, ...)";
+            std::string ids;
+            for (motion::Axis* a : rt.opt_.axes) ids += (ids.empty() ? "" : ", ") + std::to_string(a->params().id);
+            if (rt.opt_.known_axis_ids)
+                for (int k : *rt.opt_.known_axis_ids) ids += (ids.empty() ? "" : ", ") + std::to_string(k);
+            return SB() << "no axis " << id << (ids.empty() ? std::string(" (the IOC has no axes)") : " (axes: " + ids + ")");
+        }
+        if (split_indexed(n, "plc", id, rest))
+            return SB() << "no PLC " << id << " before this one, or '" << rest << "' is not one of enable, error, scantime, firstscan, dbg";
+        if (split_indexed(n, "ec", id, rest)) {
+            if (rest.find(".mm.") != std::string_view::npos) return "memory maps (mm) are not supported yet";
+            if (!rt.opt_.ec) return "no such process-data entry (expected ec<m>.s<k>.<entry>[.<bit>] or ec<m>.masterstatus)";
+            std::string entry = n, why;
+            std::size_t dot = n.rfind('.');
+            std::string last = n.substr(dot + 1);
+            if (!last.empty() && std::all_of(last.begin(), last.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); }))
+                entry = n.substr(0, dot);
+            if (rt.opt_.ec(entry, why)) return "bit number out of range (0..63)";
+            return why;
+        }
+        if (split_indexed(n, "ds", id, rest)) return "data storage (ds<n>) is not available yet";
+        if (n.rfind("static.", 0) == 0 || n.rfind("global.", 0) == 0) return "not a valid variable name";
+        return {};
+    }
+
+    std::optional<FunctionInfo> function(std::string_view name) override;
+
+    void print(std::string_view text) noexcept override {
+        Output o;
+        o.plc = 0;
+        std::string_view p = src.axis_plc ? "ax" : "plc";
+        int k = std::snprintf(o.text, sizeof o.text, "%.*s%d: ", int(p.size()), p.data(), src.id);
+        std::size_t room = sizeof o.text - std::size_t(k);
+        std::size_t n = std::min(room, text.size());
+        std::memcpy(o.text + k, text.data(), n);
+        o.len = std::uint16_t(std::size_t(k) + n);
+        if (!rt.output_.push(o)) rt.dropped_.fetch_add(1, std::memory_order_relaxed);
+    }
+
+    // RT: the process image into the cells.
+    void copy_in() noexcept {
+        for (EcCell& c : ec) {
+            if (!c.signal.bound()) continue;
+            double v = 0;
+            if (c.kind == EcEntry::Kind::Integer || c.signal.bit >= 0) {
+                v = double(c.signal.get());
+            } else if (c.kind == EcEntry::Kind::Float32) {
+                uint32_t raw = uint32_t(c.signal.get_raw());
+                float f;
+                std::memcpy(&f, &raw, 4);
+                v = f;
+            } else {
+                uint64_t raw = c.signal.get_raw();
+                std::memcpy(&v, &raw, 8);
+            }
+            c.value = c.read = v;
+        }
+    }
+    // RT: cells the scan changed back into the image (as ECMC: only when changed).
+    void copy_out() noexcept {
+        for (EcCell& c : ec) {
+            if (!c.writable || !c.signal.bound()) continue;
+            if (std::memcmp(&c.value, &c.read, sizeof(double)) == 0) continue;
+            if (c.signal.bit >= 0) {
+                if ((c.value != 0) == (c.read != 0)) continue;
+                c.signal.set(c.value != 0 ? 1 : 0);
+            } else if (c.kind == EcEntry::Kind::Float32) {
+                float f = float(c.value);
+                uint32_t raw;
+                std::memcpy(&raw, &f, 4);
+                c.signal.set(int64_t(raw));
+            } else if (c.kind == EcEntry::Kind::Float64) {
+                int64_t raw;
+                std::memcpy(&raw, &c.value, 8);
+                c.signal.set(raw);
+            } else {
+                if (!std::isfinite(c.value)) continue; // nothing sensible to write
+                double v = std::trunc(c.value);
+                v = std::clamp(v, -9.2233720368547748e18, 1.8446744073709552e19);
+                c.signal.set(v >= 9.2233720368547748e18 ? int64_t(uint64_t(v)) : int64_t(v));
+            }
+        }
+    }
+};
+
+// ---- built-in functions ----------------------------------------------------------------------
+
+struct Builtins {
+    using Plc = PlcRuntime::Plc;
+
+    // The axis with ECMC index `id` (the axis id), as its AxisGroup index; -1 if none.
+    static int axis_index(PlcRuntime& rt, double id) noexcept {
+        if (!(id >= 0 && id < 1e6)) return -1;
+        int n = int(id);
+        for (std::size_t i = 0; i < rt.opt_.axes.size(); ++i)
+            if (rt.opt_.axes[i]->params().id == n) return int(i);
+        return -1;
+    }
+    static double result(PlcRuntime& rt, uint32_t code) noexcept {
+        rt.mc_error_ = code;
+        return code;
+    }
+    static double fb(PlcRuntime& rt, const double* a, int which) noexcept {
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        motion::Axis& axis = *rt.opt_.axes[std::size_t(i)];
+        PlcRuntime::McMemory& m = rt.mc_[std::size_t(i)];
+        bool exe = a[1] != 0;
+        bool* last = which == 0 ? &m.abs : which == 1 ? &m.rel : which == 2 ? &m.vel : which == 3 ? &m.home : &m.halt;
+        if (which != 4 && axis.variables().allowplccmd == 0) return result(rt, motion::error_id::kCommandsBlocked);
+        if (axis.variables().traj.source != 0) return result(rt, motion::error_id::kTrajSourceNotInternal);
+        bool rising = exe && !*last, falling = !exe && *last;
+        *last = exe;
+        if (falling && which != 4) { // a block whose execute drops halts its move (ECMC setExecute(0))
+            motion::AxisCommand h{motion::CommandType::Halt};
+            return result(rt, axis.command(h));
+        }
+        if (!rising) return 0;
+        motion::AxisCommand c;
+        switch (which) {
+        case 0:
+        case 1:
+            c.type = which == 0 ? motion::CommandType::MoveAbsolute : motion::CommandType::MoveRelative;
+            c.position = a[2];
+            c.velocity = a[3];
+            c.acceleration = a[4];
+            c.deceleration = a[5];
+            break;
+        case 2:
+            c.type = motion::CommandType::MoveVelocity;
+            c.velocity = a[2];
+            c.acceleration = a[3];
+            c.deceleration = a[4];
+            break;
+        case 3:
+            c.type = motion::CommandType::Home;
+            c.homing_sequence = int(a[2]);
+            break;
+        default:
+            c.type = motion::CommandType::Halt;
+            break;
+        }
+        return result(rt, axis.command(c));
+    }
+
+    static double move_abs(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 0); }
+    static double move_rel(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 1); }
+    static double move_vel(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 2); }
+    static double home(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 3); }
+    static double halt(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 4); }
+
+    static double power(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        motion::Axis& axis = *rt.opt_.axes[std::size_t(i)];
+        bool on = a[1] != 0;
+        if (on && axis.variables().allowplccmd == 0) return result(rt, motion::error_id::kCommandsBlocked);
+        if (axis.status().enable_cmd == on) return 0;
+        motion::AxisCommand c{motion::CommandType::Power};
+        c.on = on;
+        return result(rt, axis.command(c));
+    }
+    static double reset(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        motion::Axis& axis = *rt.opt_.axes[std::size_t(i)];
+        if (axis.variables().allowplccmd == 0) return result(rt, motion::error_id::kCommandsBlocked);
+        return result(rt, axis.command(motion::AxisCommand{motion::CommandType::Reset}));
+    }
+    static double set_act_pos(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        return result(rt, rt.opt_.axes[std::size_t(i)]->command(motion::AxisCommand{motion::CommandType::SetPosition, a[1]}));
+    }
+    template <typename F> static double query(void* ctx, const double* a, F f) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) {
+            rt.mc_error_ = kAxisIdOutOfRange;
+            return 0;
+        }
+        return f(*rt.opt_.axes[std::size_t(i)]);
+    }
+    static double get_busy(void* ctx, const double* a, int) noexcept {
+        return query(ctx, a, [](motion::Axis& x) { return x.status().busy ? 1.0 : 0.0; });
+    }
+    static double get_homed(void* ctx, const double* a, int) noexcept {
+        return query(ctx, a, [](motion::Axis& x) { return x.status().homed ? 1.0 : 0.0; });
+    }
+    static double get_axis_err(void* ctx, const double* a, int) noexcept {
+        return query(ctx, a, [](motion::Axis& x) { return double(x.status().error_id); });
+    }
+    static double get_act_pos(void* ctx, const double* a, int n) noexcept {
+        int enc = n >= 2 ? int(a[1]) : 1; // ECMC: encoder index from 1
+        return query(ctx, a, [enc](motion::Axis& x) {
+            const motion::AxisStatus& s = x.status();
+            if (enc == 1 && s.enc_count == 0) return s.act_pos; // virtual axis
+            if (enc < 1 || enc > s.enc_count) return 0.0;
+            return s.enc_pos[std::size_t(enc - 1)];
+        });
+    }
+    static double get_enc_ready(void* ctx, const double* a, int) noexcept {
+        return query(ctx, a, [](motion::Axis&) { return 1.0; });
+    }
+    static double get_err(void* ctx, const double*, int) noexcept { return static_cast<PlcRuntime*>(ctx)->mc_error_; }
+
+    // ec_* bit operations on the integer part of a value (0..63), ECMC's libEc.
+    static bool bit_ok(PlcRuntime& rt, double b) noexcept {
+        if (b >= 0 && b < 64) return true;
+        rt.ec_error_ = kEcBitsOutOfRange;
+        return false;
+    }
+    static uint64_t u(double v) noexcept { return v >= 0 && v < 1.8446744073709552e19 ? uint64_t(v) : 0; }
+    static double set_bit(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        return bit_ok(rt, a[1]) ? double(u(a[0]) | uint64_t(1) << int(a[1])) : a[0];
+    }
+    static double clr_bit(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        return bit_ok(rt, a[1]) ? double(u(a[0]) & ~(uint64_t(1) << int(a[1]))) : a[0];
+    }
+    static double flp_bit(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        return bit_ok(rt, a[1]) ? double(u(a[0]) ^ uint64_t(1) << int(a[1])) : a[0];
+    }
+    static double chk_bit(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        return bit_ok(rt, a[1]) ? double(u(a[0]) >> int(a[1]) & 1) : a[0];
+    }
+    static double wrt_bit(void* c, const double* a, int) noexcept { // (value, wrtValue, bit)
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        if (!bit_ok(rt, a[2])) return a[0];
+        uint64_t m = uint64_t(1) << int(a[2]);
+        return double(a[1] > 0 ? u(a[0]) | m : u(a[0]) & ~m);
+    }
+    static uint64_t mask(int start, int stop) noexcept {
+        int n = stop - start + 1;
+        if (n <= 0) return 0;
+        return n >= 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1;
+    }
+    static double wrt_bits(void* c, const double* a, int) noexcept { // (value, wrtValue, start, stop)
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        if (!bit_ok(rt, a[2]) || !bit_ok(rt, a[3])) return a[0];
+        int s = int(a[2]);
+        uint64_t m = mask(s, int(a[3]));
+        return double((u(a[0]) & ~(m << s)) | ((u(a[1]) & m) << s));
+    }
+    static double chk_bits(void* c, const double* a, int) noexcept { // (value, start, stop)
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        if (!bit_ok(rt, a[1]) || !bit_ok(rt, a[2])) return a[0];
+        int s = int(a[1]);
+        return double(u(a[0]) >> s & mask(s, int(a[2])));
+    }
+    static double get_time(void* c, const double*, int) noexcept { return double(static_cast<PlcRuntime*>(c)->cycle_ns_); }
+    static double get_time_l32(void* c, const double*, int) noexcept { return double(uint32_t(static_cast<PlcRuntime*>(c)->cycle_ns_)); }
+    static double get_time_u32(void* c, const double*, int) noexcept { return double(uint32_t(static_cast<PlcRuntime*>(c)->cycle_ns_ >> 32)); }
+    static double ec_get_err(void* c, const double*, int) noexcept { return static_cast<PlcRuntime*>(c)->ec_error_; }
+    static double ec_err_rst(void* c, const double*, int) noexcept {
+        static_cast<PlcRuntime*>(c)->ec_error_ = 0;
+        return 0;
+    }
+
+    // A plugin function: ctx is the Plugin::Function.
+    static double plugin(void* ctx, const double* a, int) noexcept {
+        return static_cast<const Plugin::Function*>(ctx)->fn(a);
+    }
+};
+
+std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view name) {
+    struct Entry {
+        const char* name;
+        Host::Function fn;
+        int min, max;
+        bool motion; // needs axes (any name is fine when only checking)
+    };
+    static const Entry table[] = {
+        {"mc_move_abs", Builtins::move_abs, 6, 6, true},   {"mc_move_rel", Builtins::move_rel, 6, 6, true},
+        {"mc_move_vel", Builtins::move_vel, 5, 5, true},   {"mc_home", Builtins::home, 5, 5, true},
+        {"mc_halt", Builtins::halt, 2, 2, true},           {"mc_power", Builtins::power, 2, 2, true},
+        {"mc_reset", Builtins::reset, 1, 1, true},         {"mc_get_busy", Builtins::get_busy, 1, 1, true},
+        {"mc_get_homed", Builtins::get_homed, 1, 1, true}, {"mc_get_axis_err", Builtins::get_axis_err, 1, 1, true},
+        {"mc_get_act_pos", Builtins::get_act_pos, 1, 2, true}, {"mc_set_act_pos", Builtins::set_act_pos, 2, 2, true},
+        {"mc_get_enc_ready", Builtins::get_enc_ready, 1, 1, true}, {"mc_get_err", Builtins::get_err, 0, 0, false},
+        {"ec_set_bit", Builtins::set_bit, 2, 2, false},    {"ec_clr_bit", Builtins::clr_bit, 2, 2, false},
+        {"ec_flp_bit", Builtins::flp_bit, 2, 2, false},    {"ec_chk_bit", Builtins::chk_bit, 2, 2, false},
+        {"ec_wrt_bit", Builtins::wrt_bit, 3, 3, false},    {"ec_wrt_bits", Builtins::wrt_bits, 4, 4, false},
+        {"ec_chk_bits", Builtins::chk_bits, 3, 3, false},  {"ec_get_time", Builtins::get_time, 0, 0, false},
+        {"ec_get_time_l32", Builtins::get_time_l32, 0, 0, false}, {"ec_get_time_u32", Builtins::get_time_u32, 0, 0, false},
+        {"ec_get_err", Builtins::ec_get_err, 0, 0, false}, {"ec_err_rst", Builtins::ec_err_rst, 0, 0, false},
+    };
+    std::string n = lower(name);
+    for (const Entry& e : table)
+        if (n == e.name) return FunctionInfo{e.fn, &rt, e.min, e.max};
+    for (Plugin* p : rt.opt_.plugins)
+        if (const Plugin::Function* f = p->function(name))
+            return FunctionInfo{Builtins::plugin, const_cast<Plugin::Function*>(f), f->nargs, f->nargs};
+    return std::nullopt;
+}
+
+// ---- the runtime -----------------------------------------------------------------------------
+
+PlcRuntime::PlcRuntime(Options options) : opt_(std::move(options)), output_(256) {
+    axis_plcs_.assign(opt_.axes.size(), nullptr);
+    mc_.assign(opt_.axes.size(), McMemory{});
+}
+
+PlcRuntime::~PlcRuntime() = default;
+
+void PlcRuntime::add(const PlcSource& source) {
+    for (auto& p : plcs_)
+        if (p->src.id == source.id && p->src.axis_plc == source.axis_plc)
+            throw Error(SB() << source.file << ": " << p->prefix() << " is defined twice (first in " << p->src.file << ")");
+    auto p = std::make_unique<Plc>(*this, source);
+    int axis_index = -1;
+    if (source.axis_plc) {
+        for (std::size_t i = 0; i < opt_.axes.size(); ++i)
+            if (opt_.axes[i]->params().id == source.id) axis_index = int(i);
+        if (axis_index < 0 && !opt_.check_only) throw Error(SB() << source.file << ": no axis " << source.id << " for its axis PLC");
+    } else {
+        if (source.id < 0) throw Error(SB() << source.file << ": PLC id " << source.id << " should be >= 0");
+        if (source.rate_ms == 0 || (source.rate_ms < 0 && source.rate_ms != -1) || !std::isfinite(source.rate_ms))
+            throw Error(SB() << source.file << ": rate_ms " << source.rate_ms << " should be > 0 (or -1: every cycle)");
+        double cycles = source.rate_ms > 0 ? source.rate_ms * 1e-3 / opt_.cycle_s : 1;
+        p->divider = std::max(1, int(std::lround(cycles)));
+    }
+    p->vars.scantime = p->divider * opt_.cycle_s;
+    p->vars.enable = source.enable ? 1 : 0;
+    CompileOptions co;
+    co.macros = source.macros;
+    std::string self = p->prefix();
+    co.macros.emplace("SELF", self);
+    co.macros.emplace("SELF_ID", std::to_string(source.id));
+    co.macros.emplace("M", "ec0");
+    co.macros.emplace("M_ID", "0");
+    co.include_path = source.include_path;
+    co.libraries = source.libraries;
+    co.max_loop_iterations = opt_.loop_budget;
+    p->program.emplace(Program::compile(source.text, source.file, *p, co));
+    p->st_enabled = source.enable;
+    if (axis_index >= 0) axis_plcs_[std::size_t(axis_index)] = p.get();
+    plcs_.push_back(std::move(p));
+}
+
+bool PlcRuntime::buses_ok() noexcept {
+    if (started_) return true;
+    for (const registry::BoundSignal& s : opt_.bus_ok)
+        if (s.bound() && s.get() == 0) return false;
+    started_ = true;
+    return true;
+}
+
+void PlcRuntime::scan(Plc& p, const rt::CycleInfo& c) noexcept {
+    cycle_ns_ = c.t_ns;
+    int req = p.enable_request.exchange(-1, std::memory_order_acq_rel);
+    if (req >= 0) {
+        if (req && p.vars.enable == 0) p.vars.error = 0; // enabling clears a latched fault
+        p.vars.enable = req;
+    }
+    p.st_enabled.store(p.vars.enable != 0, std::memory_order_relaxed);
+    if (p.vars.enable == 0) return;
+    if (p.counter < p.divider - 1) { // ECMC: skip cycles, then run
+        ++p.counter;
+        return;
+    }
+    p.counter = 0;
+    if (!buses_ok()) return; // PLCs wait for the first cycle with every bus OK
+    p.vars.firstscan = p.first_done ? 0 : 1;
+    p.copy_in();
+    int r = p.program->run();
+    p.copy_out();
+    p.first_done = true;
+    p.st_firstscan.store(false, std::memory_order_relaxed);
+    p.st_scans.fetch_add(1, std::memory_order_relaxed);
+    if (r != 0) {
+        p.vars.error = r;
+        p.st_fault_index.store(p.program->fault_index(), std::memory_order_relaxed);
+        p.st_faults.fetch_add(1, std::memory_order_relaxed);
+    }
+    p.st_error.store(int(p.vars.error), std::memory_order_relaxed);
+    p.st_enabled.store(p.vars.enable != 0, std::memory_order_relaxed);
+}
+
+void PlcRuntime::run(const rt::CycleInfo& c) noexcept {
+    for (auto& p : plcs_)
+        if (!p->src.axis_plc) scan(*p, c);
+    for (Plugin* p : opt_.plugins) (void)p->realtime(0); // after the general PLCs (plugin.h)
+}
+
+void PlcRuntime::before_axis(std::size_t index, const rt::CycleInfo& c) noexcept {
+    if (index < axis_plcs_.size() && axis_plcs_[index]) scan(*axis_plcs_[index], c);
+}
+
+const PlcSource& PlcRuntime::source(std::size_t i) const {
+    return plcs_.at(i)->src;
+}
+
+std::string PlcRuntime::prefix(std::size_t i) const {
+    return plcs_.at(i)->prefix();
+}
+
+void PlcRuntime::request_enable(std::size_t i, bool on) noexcept {
+    if (i < plcs_.size()) plcs_[i]->enable_request.store(on ? 1 : 0, std::memory_order_release);
+}
+
+PlcRuntime::Status PlcRuntime::status(std::size_t i) const noexcept {
+    Status s;
+    if (i >= plcs_.size()) return s;
+    const Plc& p = *plcs_[i];
+    s.enabled = p.st_enabled.load(std::memory_order_relaxed);
+    s.firstscan = p.st_firstscan.load(std::memory_order_relaxed);
+    s.error = p.st_error.load(std::memory_order_relaxed);
+    s.scantime_s = p.divider * opt_.cycle_s;
+    s.scans = p.st_scans.load(std::memory_order_relaxed);
+    s.faults = p.st_faults.load(std::memory_order_relaxed);
+    return s;
+}
+
+std::string PlcRuntime::fault(std::size_t i) const {
+    if (i >= plcs_.size()) return {};
+    const Plc& p = *plcs_[i];
+    int e = p.st_error.load(std::memory_order_relaxed);
+    if (e == 0) return {};
+    std::string where = p.program->location(p.st_fault_index.load(std::memory_order_relaxed));
+    return where + (where.empty() ? "" : ": ") + to_string(RunStatus(e));
+}
+
+bool PlcRuntime::pop_output(std::string& text) {
+    Output o;
+    if (!output_.pop(o)) return false;
+    text.assign(o.text, o.len);
+    return true;
+}
+
+const double* PlcRuntime::global(const std::string& name) const {
+    auto it = globals_.find(name);
+    return it == globals_.end() ? nullptr : it->second;
+}
+
+const double* PlcRuntime::static_variable(std::size_t plc, const std::string& name) const {
+    if (plc >= plcs_.size()) return nullptr;
+    auto it = plcs_[plc]->statics.find(name);
+    return it == plcs_[plc]->statics.end() ? nullptr : it->second;
+}
+
+} // namespace beamctl::plc

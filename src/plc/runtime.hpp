@@ -1,0 +1,158 @@
+// The PLCs of an IOC in the RT cycle (ECMC's PLC main). General PLCs run in stage GeneralPlcs
+// after the axes, each at its own rate; an axis PLC runs just before its axis (AxisHook). Both
+// wait for the first cycle in which every bus is OK, as ECMC's do.
+//
+// Names in PLC code bind once, at compile time (ARCHITECTURE.md §1, specs/ecmc.md §2):
+//   ax<n>.*                    the axis's AxisVariables (ECMC names; writability from the table)
+//   ec<m>.s<k>.<entry>[.<bit>] process-data entries, copied in before each scan and out after it
+//   ec<m>.masterstatus         when the scan changed them (ECMC's ecmcPLCDataIF); inputs are
+//                              read-only
+//   static.<name>              per PLC, kept between scans (init 0)
+//   global.<name>              shared by all PLCs of the IOC
+//   plc<n>.enable|error|scantime|firstscan|dbg   a general PLC's own variables
+//   ax<n>.plc.enable|error|scantime|firstscan|dbg  an axis PLC's
+//   plugin constants
+// Functions: ExprTk's math (the language), ec_* bit operations and ec_get_time, mc_* motion
+// function blocks (on the axis command API, acting on the rising edge of `execute`, returning
+// ECMC error codes), and plugin functions. A run-time fault (index out of range, loop budget)
+// latches the PLC's `error` (cleared when it is enabled again) and the scan's remaining code is
+// skipped; the next scan runs normally.
+//
+// Threading: the constructor and add() on a non-RT thread before the cycle starts; run() and
+// before_axis() on the RT thread; request_enable(), status(), fault() and pop_output() on ONE
+// non-RT thread (the IOC loop).
+#pragma once
+
+#include "core/macros.hpp"
+#include "core/spsc_queue.hpp"
+#include "motion/axis.hpp"
+#include "motion/axis_group.hpp"
+#include "plc/plugin.hpp"
+#include "plc/program.hpp"
+#include "registry/signal.hpp"
+#include "rt/engine.hpp"
+
+#include <array>
+#include <atomic>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace beamctl::plc {
+
+// A process-data entry PLC code may name, as the IOC resolves it.
+struct EcEntry {
+    registry::BoundSignal signal; // unbound when only checking
+    enum class Kind : uint8_t { Integer, Float32, Float64 } kind = Kind::Integer;
+    bool writable = false;        // an output entry
+};
+
+// One PLC to compile.
+struct PlcSource {
+    int id = 0;            // general: plc<id>; axis PLC: the axis id (ax<id>.plc)
+    bool axis_plc = false;
+    std::string file;      // reported in errors; includes are searched next to it
+    std::string text;      // the code
+    double rate_ms = -1;   // general PLCs: scan period [ms]; -1 (or <= one cycle): every cycle
+    bool enable = true;    // plc<n>.enable at start
+    MacroMap macros;       // PLC_MACROS; SELF, SELF_ID, M and M_ID are added when absent
+    std::vector<std::string> include_path;
+    std::vector<std::string> libraries; // files of `function` definitions
+};
+
+class PlcRuntime : public rt::Stage, public motion::AxisHook {
+public:
+    struct Options {
+        double cycle_s = 0.001; // engine period [s]
+        // Accept every well-formed name of the known namespaces without binding it to anything
+        // real (`beamctl plc check` without an IOC): each gets its own cell.
+        bool check_only = false;
+        // Resolves "ec0.s3.binaryInput01" / "ec0.masterstatus" (no bit); nullopt with `why`
+        // set if there is no such entry. Unset: ec names are unknown (unless check_only).
+        std::function<std::optional<EcEntry>(const std::string& name, std::string& why)> ec;
+        // ec<m>.masterstatus of every bus: PLCs start in the first cycle in which all are 1.
+        std::vector<registry::BoundSignal> bus_ok;
+        std::vector<motion::Axis*> axes;   // in AxisGroup order (before_axis indexes); ids from params
+        // check_only: the axis ids that exist (nullopt: any id)
+        std::optional<std::vector<int>> known_axis_ids;
+        std::vector<Plugin*> plugins;      // functions and constants by name
+        std::uint64_t loop_budget = 1000000; // loop iterations per scan before a fault
+    };
+    explicit PlcRuntime(Options options);
+    ~PlcRuntime() override;
+    PlcRuntime(const PlcRuntime&) = delete;
+    PlcRuntime& operator=(const PlcRuntime&) = delete;
+
+    // Compiles and adds a PLC (non-RT, before the cycle starts). Throws CompileError with every
+    // error (file:line:col and a caret), or Error (a second PLC with the same id, a bad rate).
+    void add(const PlcSource& source);
+
+    const char* name() const noexcept override { return "plcs"; }
+    // RT: the general PLCs whose turn it is.
+    void run(const rt::CycleInfo& c) noexcept override;
+    // RT: the axis PLC of the axis at `index` of the group (called by the AxisGroup).
+    void before_axis(std::size_t index, const rt::CycleInfo& c) noexcept override;
+
+    // Non-RT (IOC loop) face.
+    std::size_t size() const { return plcs_.size(); }
+    const PlcSource& source(std::size_t i) const;
+    // "plc0" or "ax3.plc": the name of its variables.
+    std::string prefix(std::size_t i) const;
+    // Sets plc<n>.enable from outside (a PV); applied at the PLC's next cycle.
+    void request_enable(std::size_t i, bool on) noexcept;
+    struct Status {
+        bool enabled = false;
+        bool firstscan = true;
+        int error = 0;            // latched RunStatus of the last fault (0: none)
+        double scantime_s = 0;
+        std::uint64_t scans = 0, faults = 0;
+    };
+    Status status(std::size_t i) const noexcept;
+    // Where the latched fault happened ("file:line:col: what"), "" if none.
+    std::string fault(std::size_t i) const;
+    // println/print output of the PLCs, one chunk at a time ("plc0: text"). Lines that did not
+    // fit the queue are counted in output_dropped().
+    bool pop_output(std::string& text);
+    std::uint64_t output_dropped() const noexcept { return dropped_.load(std::memory_order_relaxed); }
+
+    // The cells a name is bound to (tests and diagnostics; nullptr if no PLC uses it).
+    const double* global(const std::string& name) const;
+    const double* static_variable(std::size_t plc, const std::string& name) const;
+
+    struct Plc; // internal
+
+private:
+    friend struct Plc;
+    void scan(Plc& p, const rt::CycleInfo& c) noexcept;
+    bool buses_ok() noexcept;
+
+    Options opt_;
+    std::vector<std::unique_ptr<Plc>> plcs_;
+    std::vector<Plc*> axis_plcs_; // by AxisGroup index
+    std::deque<double> globals_cells_;
+    std::map<std::string, double*> globals_;
+    bool started_ = false; // every bus was OK once
+    std::uint64_t cycle_ns_ = 0;
+    // mc_* function-block memory, per axis (by AxisGroup index): last `execute` per block
+    struct McMemory {
+        bool abs = false, rel = false, vel = false, home = false, halt = false;
+    };
+    std::vector<McMemory> mc_;
+    double mc_error_ = 0; // last mc_* error (mc_get_err)
+    double ec_error_ = 0; // last ec_* error (ec_get_err)
+    struct Output {
+        int plc = 0;
+        std::uint16_t len = 0;
+        char text[1024];
+    };
+    SpscQueue<Output> output_;
+    std::atomic<std::uint64_t> dropped_{0};
+
+    friend struct Builtins;
+};
+
+} // namespace beamctl::plc
