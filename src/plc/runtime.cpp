@@ -390,7 +390,7 @@ struct Builtins {
         int enc = n >= 2 ? int(a[1]) : 1; // ECMC: encoder index from 1
         return query(ctx, a, [enc](motion::Axis& x) {
             const motion::AxisStatus& s = x.status();
-            if (enc == 1 && s.enc_count == 0) return s.act_pos; // virtual axis
+            if (enc == 1 && (s.enc_count == 0 || x.params().virtual_axis)) return s.act_pos; // virtual axis
             if (enc < 1 || enc > s.enc_count) return 0.0;
             return s.enc_pos[std::size_t(enc - 1)];
         });

@@ -1,0 +1,111 @@
+// The IOC side of the RCP bridge without sockets: beacons become records, data packets update
+// them, client puts and motor commands become data packets handed to a send function, silence
+// turns an application's PVs INVALID/COMM, malformed input is counted and logged. Time is what
+// the caller passes in (virtual time in tests); RcpBridge (bridge.hpp) feeds it from a UDP socket
+// on the IOC's event loop. See README.md in this folder for every rule the spec leaves open.
+//
+// PVs ($(P) = BridgeConfig::prefix, APP = application name, NAME = object name, '.' -> '_'):
+//   per object (pv_pattern, default $(P)APP:NAME):
+//     AI ai, AO ao + NAME_RBV ai, BI bi, BO bo + NAME_RBV bi, LI longin, LO longout + NAME_RBV
+//     longin; with a learned count > 1 a waveform instead (AI/AO DOUBLE, LI/LO LONG, BI/BO
+//     UCHAR; outputs get a waveform NAME_RBV too); MOTOR: motor record + NAME_PosErr (ai) +
+//     NAME_ErrCode (longin).
+//   per application: $(P)APP:RxCount TxCount BeaconAge (ai), Online (bi), Objects (longin),
+//     Malformed-<Reason> (ai) for every reason of protocol.hpp except None and NotWritable.
+//   bridge-wide: $(P)RxCount TxCount (ai), Applications (longin), Malformed-<Reason> (ai).
+// Counters and BeaconAge are published once per second by tick().
+//
+// Threading: one thread (the IOC loop, owner of the Database) makes every call. The Database
+// must outlive the core; the destructor removes every record the core created.
+#pragma once
+
+#include "bridge/rcp/protocol.hpp"
+#include "pv/database.hpp"
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace beamctl::bridge::rcp {
+
+// An IPv4 UDP endpoint; ip as a number (127.0.0.1 = 0x7F000001).
+struct Endpoint {
+    uint32_t ip = 0;
+    uint16_t port = 0;
+    bool operator==(const Endpoint&) const = default;
+    std::string str() const; // "127.0.0.1:18065"
+};
+
+struct BridgeConfig {
+    std::string listen_address = "0.0.0.0"; // IPv4 dotted quad the sockets bind to
+    uint16_t port = kDefaultPort;            // the beacon port (data is accepted on it too)
+    std::string prefix;                      // e.g. "DEMO:RCP:"
+    double timeout_s = 3;                    // [s] silence before INVALID/COMM
+    std::string db_out;                      // generated .db file; empty: none
+    // Object PV names: <prefix>, <application> and <name> are replaced.
+    std::string pv_pattern = "<prefix><application>:<name>";
+    double continuation_window_s = 0.1; // [s] a beacon and its continuations
+    double motor_ack_timeout_s = 0.5;   // [s] see motor_driver.hpp
+    std::size_t max_applications = 32;  // beacons of further applications are refused
+    // Fields of every generated motor record (after the generated DESC/DTYP/OUT).
+    std::vector<std::pair<std::string, std::string>> motor_fields = {
+        {"MRES", "0.0001"}, {"PREC", "4"}, {"VELO", "1"},  {"ACCL", "0.5"},
+        {"JVEL", "1"},      {"HVEL", "1"}, {"RTRY", "0"}, {"TWV", "1"},
+    };
+    // Throws Error naming the bad setting.
+    void validate() const;
+};
+
+class BridgeCore {
+public:
+    using SendFn = std::function<bool(const Endpoint& to, std::span<const uint8_t> packet)>;
+    using Clock = std::function<double()>; // monotonic [s], the time of puts and motor commands
+
+    struct Counters {
+        uint64_t rx = 0; // packets accepted (bridge-wide: every datagram handed in)
+        uint64_t tx = 0; // packets sent
+        std::array<uint64_t, kMalformedReasons> malformed{};
+    };
+    struct AppInfo {
+        std::string name;
+        Endpoint beacon_from;  // source of the latest beacon
+        bool online = true;
+        std::size_t objects = 0;
+        double last_beacon_s = 0; // [s]
+        Counters counters;
+    };
+
+    // Creates the bridge-wide diagnostic records. Throws Error on a bad config or a name clash.
+    BridgeCore(pv::Database& db, BridgeConfig cfg, SendFn send, Clock clock);
+    ~BridgeCore();
+    BridgeCore(const BridgeCore&) = delete;
+    BridgeCore& operator=(const BridgeCore&) = delete;
+
+    // One received datagram (any size) from `from`, arrived at now_s [s].
+    void handle_packet(std::span<const uint8_t> packet, const Endpoint& from, double now_s);
+    // Ends beacon windows, detects silence, publishes diagnostics. Call every <= 50 ms.
+    void tick(double now_s);
+
+    // Local ports the applications send data to besides config().port (their port_ioc);
+    // changes are announced by ports_version().
+    const std::vector<uint16_t>& data_ports() const;
+    uint64_t ports_version() const;
+
+    const Counters& totals() const;
+    std::vector<AppInfo> applications() const;
+    // The PV name an object of an application gets.
+    std::string pv_name(std::string_view application, std::string_view object_name) const;
+    const BridgeConfig& config() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+} // namespace beamctl::bridge::rcp

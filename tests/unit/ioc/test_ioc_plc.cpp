@@ -1,0 +1,361 @@
+// The soft PLC inside an IOC, in virtual time (whole IOCs built from YAML, buses simulated):
+// cycle order (ECMC acceptance 1), rates and variable scoping (9), mc_* function blocks (3),
+// the demo slit's virtual axes (2), plugins (15), axis PLCs, run-time faults, compile errors
+// against the IOC's buses and axes.
+#include "config/ioc_config.hpp"
+#include "ioc/ioc.hpp"
+#include "plc/runtime.hpp"
+#include "rt/engine.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+using namespace beamctl;
+
+namespace {
+
+const std::string kSource = BEAMCTL_SOURCE_DIR;
+
+struct TempDir {
+    std::filesystem::path path;
+    TempDir() {
+        char tmpl[] = "/tmp/beamctl_plc_XXXXXX";
+        path = mkdtemp(tmpl);
+    }
+    ~TempDir() { std::filesystem::remove_all(path); }
+    std::string write(const std::string& name, const std::string& text) const {
+        std::ofstream(path / name) << text;
+        return (path / name).string();
+    }
+};
+
+// A small IOC: two digital terminals wired output 1 -> input 1, and virtual axes.
+std::string ioc_yaml(const std::string& axes, const std::string& plcs, const std::string& extra = "") {
+    return "ioc: {name: T}\n"
+           "engine: {rate_hz: 1000}\n"
+           "buses:\n"
+           "  - id: 0\n"
+           "    link: {type: sim, plant: plant.yaml}\n"
+           "    slaves:\n"
+           "      - {position: 0, type: EK1100}\n"
+           "      - {position: 1, type: EL1008}\n"
+           "      - {position: 2, type: EL2008}\n" +
+           axes + plcs + extra;
+}
+const char* kPlant = "wiring:\n  - {from: s2.binaryOutput01, to: s1.binaryInput01}\n";
+std::string virtual_axis(int id, const std::string& extra_macros = "") {
+    return "  - {file: " + kSource + "/examples/demo/axes/virtual.yaml, macros: {AX_ID: " + std::to_string(id) +
+           ", AX_NAME: V" + std::to_string(id) + ", DESC: v, LOW: -100, HIGH: 100" + extra_macros + "}}\n";
+}
+
+struct VirtualIoc {
+    rt::VirtualClock clock;
+    std::unique_ptr<ioc::Ioc> ioc;
+    explicit VirtualIoc(const std::string& path) {
+        ioc = std::make_unique<ioc::Ioc>(config::IocConfig::load(path), clock);
+        ioc->bring_up();
+    }
+    void cycles(int n) { ioc->engine().run_cycles(uint64_t(n)); }
+    plc::PlcRuntime& plcs() { return *ioc->plcs().runtime(); }
+    double stat(std::size_t plc, const std::string& name) {
+        const double* v = plcs().static_variable(plc, name);
+        if (!v) throw std::runtime_error("no static " + name);
+        return *v;
+    }
+    motion::Axis& axis(const std::string& name) {
+        int i = ioc->axes().find(name);
+        if (i < 0) throw std::runtime_error("no axis " + name);
+        return ioc->axes().group()->axis(std::size_t(i));
+    }
+    void send(const std::string& name, motion::AxisCommand c) {
+        ASSERT_NE(ioc->axes().send(std::size_t(ioc->axes().find(name)), c), 0u);
+    }
+};
+
+} // namespace
+
+// Acceptance 1: an input of cycle k is seen by the PLC in k; its output leaves in k; a general
+// PLC's extsetpos acts on its axis in k+1. The output written in scan 5 leaves with the frame of
+// cycle 5; the input terminal (position 1) sits before the output terminal (position 2) on the
+// segment, so that frame samples the input before the output changes and the frame of cycle 6
+// brings it back, received at the start of cycle 7 and seen by scan 7. (Had the output left a
+// cycle later, or the input been seen a cycle later, this would be 8.)
+TEST(IocPlc, CycleOrder) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("main.plc", R"(
+        static.n := static.n + 1;
+        if (static.n == 1) { ax1.drv.enable := 1; };
+        if (static.n == 5) { ec0.s2.binaryOutput01 := 1; };
+        if (ec0.s1.binaryInput01 and static.seen == 0) { static.seen := static.n; };
+        if (static.n == 10) { ax1.traj.source := 1; ax1.traj.extsetpos := 5; };
+        if (ax1.traj.setpos == 5 and static.moved == 0) { static.moved := static.n; };
+    )");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("axes:\n" + virtual_axis(1), "plcs:\n  - {id: 0, file: main.plc}\n")));
+    v.cycles(20);
+    EXPECT_EQ(v.stat(0, "n"), 20);
+    EXPECT_EQ(v.stat(0, "seen"), 7);
+    EXPECT_EQ(v.stat(0, "moved"), 11); // written after the axes in cycle 10, taken in cycle 11
+}
+
+// An axis PLC runs just before its axis: what it writes acts in the same cycle.
+TEST(IocPlc, AxisPlcActsInTheSameCycle) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("axis.yaml", R"(
+axis: {id: 1, type: virtual, features: {allowSrcChangeWhenEnabled: true}}
+epics: {name: Follower}
+encoder: {numerator: 1, denominator: 1, type: 1, bits: 32, source: 1}
+trajectory: {axis: {velocity: 1, acceleration: 1}}
+input: {limit: {forward: ec0.s0.ONE.0, backward: ec0.s0.ONE.0}}
+monitoring: {lag: {enable: false, tolerance: 1, time: 10}}
+plc:
+  enable: true
+  code:
+    - "if (ax1.plc.firstscan) { ax1.drv.enable := 1; ax1.traj.source := 1; };"
+    - "static.k := static.k + 1; ax1.traj.extsetpos := static.k; global.k := static.k;"
+)");
+    d.write("main.plc", "static.lag := global.k - ax1.traj.setpos;\n");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("axes:\n  - {file: axis.yaml}\n", "plcs:\n  - {id: 0, file: main.plc}\n")));
+    v.cycles(50);
+    EXPECT_EQ(*v.plcs().global("k"), 50);
+    EXPECT_EQ(v.axis("Follower").status().set_pos, 50);
+    EXPECT_EQ(v.stat(0, "lag"), 0); // the general PLC (index 0; axis PLCs follow plcs:) sees this cycle's setpoint
+    EXPECT_EQ(v.plcs().prefix(1), "ax1.plc");
+}
+
+// Acceptance 9: rate_ms 10 at 1 kHz runs every 10th cycle with scantime 0.01 and one firstscan;
+// static is per PLC, global shared, var local to the scan.
+TEST(IocPlc, RatesAndScoping) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("slow.plc", R"(
+        static.scans := static.scans + 1;
+        static.scantime := plc0.scantime;
+        if (plc0.firstscan) { static.first := static.first + 1; };
+        static.x := static.x + 1;
+        global.g := global.g + 1;
+        var v := 0;
+        v := v + 1;
+        static.v := v;
+    )");
+    d.write("fast.plc", R"(
+        static.x := static.x + 10;
+        global.g := global.g + 1;
+        static.slow := plc0.enable;
+    )");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("", "plcs:\n  - {id: 0, file: slow.plc, rate_ms: 10}\n  - {id: 1, file: fast.plc}\n")));
+    v.cycles(100);
+    EXPECT_EQ(v.stat(0, "scans"), 10);
+    EXPECT_DOUBLE_EQ(v.stat(0, "scantime"), 0.01);
+    EXPECT_EQ(v.stat(0, "first"), 1);
+    EXPECT_EQ(v.stat(0, "x"), 10);
+    EXPECT_EQ(v.stat(1, "x"), 1000);
+    EXPECT_EQ(*v.plcs().global("g"), 110);
+    EXPECT_EQ(v.stat(0, "v"), 1);
+    EXPECT_EQ(v.stat(1, "slow"), 1);
+    EXPECT_EQ(v.plcs().status(0).scans, 10u);
+    // Disabled from outside: it stops; enabled again: it continues, firstscan does not repeat.
+    v.plcs().request_enable(0, false);
+    v.cycles(100);
+    EXPECT_EQ(v.stat(0, "scans"), 10);
+    EXPECT_EQ(v.stat(1, "slow"), 0);
+    v.plcs().request_enable(0, true);
+    v.cycles(100);
+    EXPECT_EQ(v.stat(0, "scans"), 20);
+    EXPECT_EQ(v.stat(0, "first"), 1);
+}
+
+// Acceptance 3: mc_move_abs(1, edge, 10, 5, 10, 10) from 0 is busy for about 2.5 s, then at
+// target; execute held high does not start it again.
+TEST(IocPlc, McMoveAbsoluteOnTheRisingEdge) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("main.plc", R"(
+        static.n := static.n + 1;
+        if (plc0.firstscan) { static.p := mc_power(1, 1); };
+        static.go := static.n >= 10;
+        static.r := mc_move_abs(1, static.go, 10, 5, 10, 10);
+        if (mc_get_busy(1)) { static.busy := static.busy + 1; };
+        static.pos := mc_get_act_pos(1, 1);
+        ax1.enc.extactpos := ax1.traj.setpos;
+    )");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("axes:\n" + virtual_axis(1), "plcs:\n  - {id: 0, file: main.plc}\n")));
+    v.cycles(3000);
+    EXPECT_EQ(v.stat(0, "p"), 0);
+    EXPECT_EQ(v.stat(0, "r"), 0);
+    EXPECT_NEAR(v.stat(0, "busy"), 2500, 20);
+    EXPECT_DOUBLE_EQ(v.axis("V1").status().act_pos, 10);
+    EXPECT_TRUE(v.axis("V1").status().at_target);
+    EXPECT_DOUBLE_EQ(v.stat(0, "pos"), 10);
+    // Moved elsewhere by another client while execute stays high: no second start.
+    v.send("V1", motion::AxisCommand{motion::CommandType::MoveAbsolute, 3});
+    v.cycles(9000); // 7 mm at the configured 1 mm/s
+    EXPECT_FALSE(v.axis("V1").status().busy);
+    EXPECT_DOUBLE_EQ(v.axis("V1").status().act_pos, 3);
+}
+
+// mc_* refusals return ECMC codes without touching the axis: unknown axis, PLC commands blocked,
+// trajectory source not internal.
+TEST(IocPlc, McErrorCodes) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("main.plc", R"(
+        static.n := static.n + 1;
+        static.unknown := mc_move_abs(7, 1, 1, 1, 1, 1);
+        if (static.n == 2) { ax1.traj.source := 1; };
+        if (static.n == 5) { static.external := mc_move_abs(1, 1, 1, 1, 1, 1); static.err := mc_get_err(); };
+        if (static.n == 6) { ax1.traj.source := 0; ax1.allowplccmd := 0; };
+        if (static.n == 8) { static.blocked := mc_move_rel(1, 1, 1, 1, 1, 1); };
+    )");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("axes:\n" + virtual_axis(1), "plcs:\n  - {id: 0, file: main.plc}\n")));
+    v.cycles(10);
+    EXPECT_EQ(v.stat(0, "unknown"), 0x20502);
+    EXPECT_EQ(v.stat(0, "external"), 0x20052);
+    EXPECT_EQ(v.stat(0, "err"), 0x20052);
+    EXPECT_EQ(v.stat(0, "blocked"), 0x20053);
+    EXPECT_EQ(v.axis("V1").status().error_id, 0u);
+}
+
+// ec_* bit operations and ec_get_time (the cycle's time, ns).
+TEST(IocPlc, EcFunctions) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("main.plc", R"(
+        static.a := ec_set_bit(0, 3);
+        static.b := ec_clr_bit(15, 0);
+        static.c := ec_flp_bit(5, 1);
+        static.d := ec_chk_bit(4, 2);
+        static.e := ec_wrt_bits(0, 5, 4, 7);
+        static.f := ec_chk_bits(176, 4, 7);
+        static.g := ec_wrt_bit(0, 1, 63) > 0;
+        static.bad := ec_set_bit(1, 64);
+        static.err := ec_get_err();
+        static.t1 := static.t0;
+        static.t0 := ec_get_time();
+    )");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("", "plcs:\n  - {id: 0, file: main.plc}\n")));
+    v.cycles(3);
+    EXPECT_EQ(v.stat(0, "a"), 8);
+    EXPECT_EQ(v.stat(0, "b"), 14);
+    EXPECT_EQ(v.stat(0, "c"), 7);
+    EXPECT_EQ(v.stat(0, "d"), 1);
+    EXPECT_EQ(v.stat(0, "e"), 80);
+    EXPECT_EQ(v.stat(0, "f"), 11);
+    EXPECT_EQ(v.stat(0, "g"), 1);
+    EXPECT_EQ(v.stat(0, "bad"), 1);
+    EXPECT_EQ(v.stat(0, "err"), 0x20800);
+    EXPECT_EQ(v.stat(0, "t0") - v.stat(0, "t1"), 1e6);
+}
+
+// A run-time fault latches plc<n>.error and the location; the rest of that scan is skipped, the
+// next scans run; enabling again clears it.
+TEST(IocPlc, RunTimeFaultLatches) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("main.plc", "static.n := static.n + 1;\nvar v[2] := {1, 2};\nif (static.n == 3) { static.bad := v[static.n]; };\nstatic.after := static.after + 1;\n");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("", "plcs:\n  - {id: 0, file: main.plc}\n")));
+    v.cycles(10);
+    EXPECT_EQ(v.stat(0, "n"), 10);
+    EXPECT_EQ(v.stat(0, "after"), 9);
+    EXPECT_EQ(v.plcs().status(0).error, int(plc::RunStatus::index_out_of_range));
+    EXPECT_EQ(v.plcs().status(0).faults, 1u);
+    EXPECT_NE(v.plcs().fault(0).find("main.plc:3:"), std::string::npos) << v.plcs().fault(0);
+    v.plcs().request_enable(0, false);
+    v.cycles(1);
+    v.plcs().request_enable(0, true);
+    v.cycles(1);
+    EXPECT_EQ(v.plcs().status(0).error, 0);
+}
+
+// Acceptance 15 (PLC part): a plugin's functions and constants are callable from PLC code, and
+// its realtime() runs each cycle.
+TEST(IocPlc, PluginFunctions) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("main.plc", "static.s := ex_scale(2);\nstatic.c := ex_clamp(7, 0, 5);\nstatic.pi := ex_pi;\nstatic.n := ex_cycles();\n");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("", "plcs:\n  - {id: 0, file: main.plc}\n",
+                                              std::string("plugins:\n  - {file: ") + BEAMCTL_TEST_PLUGIN + ", config: \"GAIN=2.5\"}\n")));
+    v.cycles(10);
+    EXPECT_EQ(v.stat(0, "s"), 5);
+    EXPECT_EQ(v.stat(0, "c"), 5);
+    EXPECT_NEAR(v.stat(0, "pi"), M_PI, 1e-15);
+    EXPECT_GE(v.stat(0, "n"), 8);
+}
+
+// Compile errors against the IOC: all of them, each with file:line:col and the reason.
+TEST(IocPlc, CompileErrorsNameWhatAndWhere) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("main.plc", "ax1.enc.actpos := 1;\nstatic.a := ax9.enc.actpos;\nec0.s1.binaryInput01 := 1;\nstatic.b := ec0.s1.nothing;\n"
+                        "static.c := ec0.s2.binaryOutput01.99;\nstatic.d := ds0.data;\n");
+    try {
+        rt::VirtualClock clock;
+        ioc::Ioc ioc(config::IocConfig::load(d.write("ioc.yaml", ioc_yaml("axes:\n" + virtual_axis(1), "plcs:\n  - {id: 0, file: main.plc}\n"))), clock);
+        FAIL() << "compiled";
+    } catch (const plc::CompileError& e) {
+        std::string all;
+        for (const auto& s : e.errors()) all += s + "\n";
+        EXPECT_NE(all.find("main.plc:1:1: 'ax1.enc.actpos' is read-only"), std::string::npos) << all;
+        EXPECT_NE(all.find("main.plc:2:13: unknown name 'ax9.enc.actpos': no axis 9 (axes: 1)"), std::string::npos) << all;
+        EXPECT_NE(all.find("main.plc:3:1: 'ec0.s1.binaryInput01' is read-only"), std::string::npos) << all;
+        EXPECT_NE(all.find("main.plc:4:13: unknown name 'ec0.s1.nothing': no process-data entry 'ec0.s1.nothing'"), std::string::npos) << all;
+        EXPECT_NE(all.find("main.plc:5:13: unknown name 'ec0.s2.binaryOutput01.99': bit number out of range"), std::string::npos) << all;
+        EXPECT_NE(all.find("main.plc:6:13: unknown name 'ds0.data': data storage"), std::string::npos) << all;
+    }
+}
+
+// Acceptance 2 on the shipped demo: CEN 0, GAP -> 4 mm puts the blades at -2 and +2, CEN/GAP
+// read back from the blades; simultaneous CEN and GAP moves do not drift; a blade on its high
+// limit blocks the directions that push it further only.
+TEST(IocPlc, DemoSlitVirtualAxes) {
+    VirtualIoc v(kSource + "/examples/demo/ioc.yaml");
+    v.cycles(100); // the slit PLC enables the blades and virtual axes
+    ASSERT_TRUE(v.axis("SlitVGap").status().enabled);
+    v.send("SlitVGap", motion::AxisCommand{motion::CommandType::MoveAbsolute, 4});
+    v.cycles(5000);
+    const auto& top = v.axis("SlitTop").status();
+    const auto& bottom = v.axis("SlitBottom").status();
+    EXPECT_NEAR(bottom.act_pos, -2, 0.01);
+    EXPECT_NEAR(top.act_pos, 2, 0.01);
+    EXPECT_NEAR(v.axis("SlitVGap").status().act_pos, 4, 0.01);
+    EXPECT_NEAR(v.axis("SlitVCen").status().act_pos, 0, 0.01);
+    EXPECT_FALSE(v.axis("SlitVGap").status().busy);
+    EXPECT_EQ(v.stat(0, "vstate"), 0); // back in S0: the blades on their own trajectories
+
+    // Both at once: centre to 3 while the gap goes to 6; then both hold exactly.
+    v.send("SlitVCen", motion::AxisCommand{motion::CommandType::MoveAbsolute, 3});
+    v.send("SlitVGap", motion::AxisCommand{motion::CommandType::MoveAbsolute, 6});
+    v.cycles(6000);
+    EXPECT_NEAR(bottom.act_pos, 0, 0.01);
+    EXPECT_NEAR(top.act_pos, 6, 0.01);
+    EXPECT_DOUBLE_EQ(v.axis("SlitVGap").status().set_pos - v.axis("SlitVGap").status().target_pos, 0);
+    EXPECT_NEAR(top.set_pos - bottom.set_pos, 6, 1e-12); // no drift of the gap
+
+    // A blade moved directly: CEN and GAP follow it.
+    v.send("SlitTop", motion::AxisCommand{motion::CommandType::MoveAbsolute, 7});
+    v.cycles(2000);
+    EXPECT_NEAR(v.axis("SlitVGap").status().act_pos, 7, 0.01);
+    EXPECT_NEAR(v.axis("SlitVCen").status().act_pos, 3.5, 0.01);
+
+    // The top blade onto its forward limit switch (at +12 mm of its axis).
+    v.send("SlitTop", motion::AxisCommand{motion::CommandType::MoveAbsolute, 15});
+    v.cycles(6000);
+    ASSERT_TRUE(top.limit_fwd);
+    double cen = v.axis("SlitVCen").status().act_pos, gap = v.axis("SlitVGap").status().act_pos;
+    v.send("SlitVCen", motion::AxisCommand{motion::CommandType::MoveRelative, 1});
+    v.cycles(2000);
+    EXPECT_NEAR(v.axis("SlitVCen").status().act_pos, cen, 0.02) << "CEN forward must be blocked";
+    v.send("SlitVGap", motion::AxisCommand{motion::CommandType::MoveRelative, 1});
+    v.cycles(2000);
+    EXPECT_NEAR(v.axis("SlitVGap").status().act_pos, gap, 0.02) << "GAP forward must be blocked";
+    v.send("SlitVCen", motion::AxisCommand{motion::CommandType::MoveRelative, -1});
+    v.cycles(3000);
+    EXPECT_NEAR(v.axis("SlitVCen").status().act_pos, cen - 1, 0.02) << "CEN backward is allowed";
+    EXPECT_FALSE(top.limit_fwd);
+    EXPECT_EQ(v.axis("SlitVCen").status().error_id, 0u);
+}
