@@ -1,5 +1,5 @@
 """The demo beamline (examples/demo/ioc.yaml, what `bash build.sh demo` runs): it loads, reaches
-OP with all 20 terminals, and its six axes work through their motor records: a slit blade homes and
+OP with all 25 terminals, and its real axes work through their motor records: a slit blade homes and
 moves, the absolute-encoder sample axis is referenced at start, the soft records are served."""
 
 
@@ -26,9 +26,9 @@ def demo(tmp_path):
         release_port(port)
 
 
-def test_demo_runs_twenty_terminals_and_six_axes(demo):
-    assert ca.get(connect("DEMO:m0-SlvCntr")) == 20
-    for pos in range(20):
+def test_demo_runs_twenty_five_terminals_and_its_axes(demo):
+    assert ca.get(connect("DEMO:m0-SlvCntr")) == 25
+    for pos in range(25):
         assert wait_for(lambda: ca.get(connect(f"DEMO:m0s{pos:03d}-Operational")) == 1, timeout=5)
     for ax in AXES:
         assert ca.get(connect(f"DEMO:{ax}.RTYP")) == "motor"

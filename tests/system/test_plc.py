@@ -1,0 +1,165 @@
+"""The soft PLC seen by a real EPICS client (pyepics): the demo's virtual slit and mirror axes
+moved through their motor records, the PLC PVs (enable, scan time, latched fault), println output, and the
+`beamctl plc check` command."""
+
+import math
+import subprocess
+import time
+
+import epics
+import pytest
+from epics import ca
+
+from conftest import BEAMCTL, REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port, running_ioc, wait_for
+
+
+@pytest.fixture
+def demo(tmp_path):
+    port = acquire_port()
+    srv = RunServer(tmp_path, REPO_ROOT / "examples" / "demo" / "ioc.yaml", port).start()
+    try:
+        assert wait_for(lambda: ca.get(connect("DEMO:m0-Stat-OK")) == 1, timeout=10)
+        yield srv
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs("DEMO:")
+        release_port(port)
+
+
+def pos(name):
+    return ca.get(connect(f"DEMO:{name}-PosAct"))
+
+
+def test_virtual_slit_gap_and_centre_move_the_blades(demo):
+    # the slit PLC powers the blades and the virtual axes when it starts
+    for ax in ("SlitTop", "SlitBottom", "SlitVGap", "SlitVCen"):
+        assert wait_for(lambda: ca.get(connect(f"DEMO:{ax}-EnaAct")) == 1, timeout=5), ax
+    assert ca.get(connect("DEMO:PLC00-EnaAct")) == 1
+    assert ca.get(connect("DEMO:PLC00-Err")) == 0
+    assert abs(ca.get(connect("DEMO:PLC00-ScanTime")) - 0.001) < 1e-9
+    gap = epics.Motor("DEMO:SlitVGap", timeout=5)
+    cen = epics.Motor("DEMO:SlitVCen", timeout=5)
+    assert gap.move(4.0, wait=True, timeout=30) == 0
+    assert abs(gap.get("RBV") - 4.0) < 0.01
+    assert abs(pos("SlitTop") - 2.0) < 0.01 and abs(pos("SlitBottom") + 2.0) < 0.01
+    assert abs(cen.get("RBV")) < 0.01
+    assert cen.move(1.5, wait=True, timeout=30) == 0
+    assert abs(pos("SlitTop") - 3.5) < 0.01 and abs(pos("SlitBottom") + 0.5) < 0.01
+    assert abs(gap.get("RBV") - 4.0) < 0.01  # the gap did not drift while the centre moved
+    # a blade moved on its own: the virtual readbacks follow it
+    top = epics.Motor("DEMO:SlitTop", timeout=5)
+    assert top.move(5.5, wait=True, timeout=30) == 0
+    assert wait_for(lambda: abs(gap.get("RBV") - 6.0) < 0.01, timeout=5)
+    assert wait_for(lambda: abs(cen.get("RBV") - 2.5) < 0.01, timeout=5)
+    # the gap's soft limit (30 mm) is the motor record's high limit
+    assert gap.move(40.0, wait=True) == -12
+
+
+def test_virtual_mirror_pitch(demo):
+    pitch = epics.Motor("DEMO:MirrorPitch", timeout=5)
+    assert wait_for(lambda: ca.get(connect("DEMO:MirrorPitch-EnaAct")) == 1, timeout=5)
+    assert pitch.get("EGU") == "mrad"
+    assert pitch.move(1.5, wait=True, timeout=30) == 0
+    assert abs(pitch.get("RBV") - 1.5) < 0.002
+    yui, yuo, yd = pos("MirrorYUI"), pos("MirrorYUO"), pos("MirrorYD")
+    assert abs(yui - yuo) < 0.002
+    assert abs((yui - yd) - 800 * math.tan(1.5e-3)) < 0.005  # Y jacks 800 mm apart
+    for other in ("MirrorYaw", "MirrorRoll", "MirrorX", "MirrorY"):
+        assert abs(ca.get(connect(f"DEMO:{other}.RBV"))) < 0.005, other
+    assert pitch.move(0.0, wait=True, timeout=30) == 0
+    assert abs(pos("MirrorYD")) < 0.01
+
+
+def test_plc_enable_pv_stops_and_restarts_the_scans(demo):
+    scans = connect("DEMO:PLC00-Scans")
+    assert wait_for(lambda: ca.get(scans) > 100, timeout=5)
+    ca.put(connect("DEMO:PLC00-EnaCmd"), 0, wait=True)
+    assert wait_for(lambda: ca.get(connect("DEMO:PLC00-EnaAct")) == 0, timeout=5)
+    time.sleep(0.2)
+    stopped = ca.get(scans)
+    time.sleep(0.3)
+    assert ca.get(scans) == stopped
+    ca.put(connect("DEMO:PLC00-EnaCmd"), 1, wait=True)
+    assert wait_for(lambda: ca.get(scans) > stopped + 50, timeout=5)
+
+
+IOC = """
+ioc: {{name: {name}, prefix: "{prefix}"}}
+engine: {{rate_hz: 1000}}
+buses:
+  - id: 0
+    link: {{type: sim, plant: plant.yaml}}
+    slaves:
+      - {{position: 0, type: EK1100}}
+      - {{position: 1, type: EL1008}}
+      - {{position: 2, type: EL2008}}
+plcs:
+  - {{id: 3, file: main.plc, rate_ms: 100}}
+"""
+
+MAIN = """
+static.n := static.n + 1;
+if (plc3.firstscan) { println('hello from', plc3.scantime); };
+ec0.s2.binaryOutput02 := static.n % 2;
+var v[2] := {1, 2};
+if (static.n == 5) { static.bad := v[static.n]; };
+"""
+
+
+def test_plc_pvs_output_and_a_latched_fault(tmp_path, prefix):
+    plant = "wiring:\n  - {from: s2.binaryOutput02, to: s1.binaryInput02}\n"
+    with running_ioc(tmp_path, prefix, IOC, {"main.plc": MAIN, "plant.yaml": plant}) as srv:
+        assert abs(ca.get(connect(prefix + "PLC03-ScanTime")) - 0.1) < 1e-9
+        assert wait_for(lambda: any("plc3: hello from" in l and "0.10000" in l for l in srv.stdout_lines), timeout=5), srv.stdout_lines
+        # the output written by the PLC toggles at its 10 Hz rate (seen through a wire on BI02)
+        bo = connect(prefix + "m0s001-BI02")
+        seen = set()
+        deadline = time.monotonic() + 3
+        while time.monotonic() < deadline and len(seen) < 2:
+            seen.add(ca.get(bo))
+            time.sleep(0.02)
+        assert seen == {0, 1}
+        # scan 5 indexes v[5]: the fault latches in -Err (MAJOR) and is logged with its place
+        err = connect(prefix + "PLC03-Err")
+        assert wait_for(lambda: ca.get(err) == 1, timeout=5)
+        assert ca.get(connect(prefix + "PLC03-Faults")) == 1
+        assert epics.caget(prefix + "PLC03-Err.SEVR") == 2
+        assert wait_for(lambda: "main.plc:6:" in srv.stderr(), timeout=5), srv.stderr()[-2000:]
+        # the scans go on after the fault
+        scans = ca.get(connect(prefix + "PLC03-Scans"))
+        assert wait_for(lambda: ca.get(connect(prefix + "PLC03-Scans")) > scans, timeout=3)
+
+
+def run_check(*args):
+    return subprocess.run([str(BEAMCTL), "plc", "check", *args], capture_output=True, text=True, timeout=60)
+
+
+def test_plc_check_command(tmp_path):
+    good = tmp_path / "good.plc"
+    good.write_text("ax${AX}.traj.extsetpos := ec0.s4.positionActual01 / 1000;\nstatic.x := 1;\n")
+    r = run_check("-m", "AX=3", str(good))
+    assert r.returncode == 0, r.stderr
+    assert "good.plc: OK" in r.stdout
+    bad = tmp_path / "bad.plc"
+    bad.write_text("static.x := 1;\nax1.enc.actpos := 2;\nstatic.y := nosuch + 1;\n")
+    r = run_check(str(bad))
+    assert r.returncode == 1
+    assert f"{bad}:2:1: 'ax1.enc.actpos' is read-only" in r.stderr
+    assert f"{bad}:3:13: unknown name 'nosuch'" in r.stderr
+    assert "^" in r.stderr  # the line is shown with a caret
+    # against the demo IOC: its axes and entries exist, others do not
+    demo = REPO_ROOT / "examples" / "demo" / "ioc.yaml"
+    ok = tmp_path / "demo_ok.plc"
+    ok.write_text("static.a := ax11.enc.actpos + ec0.s1.binaryInput01;\nec0.s3.binaryOutput01 := 1;\n")
+    r = run_check("--ioc", str(demo), str(ok))
+    assert r.returncode == 0, r.stderr
+    nok = tmp_path / "demo_bad.plc"
+    nok.write_text("static.a := ax99.enc.actpos;\nec0.s1.binaryInput01 := 1;\n")
+    r = run_check("--ioc", str(demo), str(nok))
+    assert r.returncode == 1
+    assert "no axis 99" in r.stderr
+    assert "'ec0.s1.binaryInput01' is read-only" in r.stderr
+    # the shipped PLC library compiles
+    r = run_check("-I", str(REPO_ROOT / "examples" / "plc_lib"), str(REPO_ROOT / "examples" / "demo" / "plc" / "slit.plc"))
+    assert r.returncode == 0, r.stderr
