@@ -2,6 +2,7 @@
 // cycle order (ECMC acceptance 1), rates and variable scoping (9), mc_* function blocks (3),
 // the demo slit's virtual axes (2), plugins (15), axis PLCs, run-time faults, compile errors
 // against the IOC's buses and axes.
+#include "../alloc_counter.hpp"
 #include "config/ioc_config.hpp"
 #include "ioc/ioc.hpp"
 #include "plc/runtime.hpp"
@@ -381,4 +382,20 @@ TEST(IocPlc, DemoMirrorPitch) {
     EXPECT_EQ(v.stat(1, "mirror"), 0);
     for (const char* jack : {"MirrorXU", "MirrorXD", "MirrorYUI", "MirrorYUO", "MirrorYD"})
         EXPECT_EQ(v.axis(jack).status().error_id, 0u) << jack;
+}
+
+// RT rule 1 with PLCs: the whole demo cycle (bus, axes with their PLC variables, the slit and
+// mirror PLCs, virtual moves starting and ending) allocates nothing.
+TEST(IocPlc, DemoCycleWithPlcsAllocatesNothing) {
+    VirtualIoc v(kSource + "/examples/demo/ioc.yaml");
+    v.cycles(200);
+    v.send("SlitVGap", motion::AxisCommand{motion::CommandType::MoveAbsolute, 2});
+    v.send("MirrorRoll", motion::AxisCommand{motion::CommandType::MoveAbsolute, 1});
+    test::count_allocations(true);
+    v.cycles(3000);
+    test::count_allocations(false);
+    EXPECT_EQ(test::allocations(), 0);
+    EXPECT_NEAR(v.axis("SlitVGap").status().act_pos, 2, 0.01);
+    EXPECT_NEAR(v.axis("MirrorRoll").status().act_pos, 1, 0.002);
+    EXPECT_GE(v.plcs().status(0).scans, 3000u);
 }
