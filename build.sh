@@ -9,7 +9,7 @@ ROOT=$(pwd)
 JOBS=${JOBS:-$(nproc)}
 
 # Debian packages the build, the tests and the demo need.
-BUILD_PKGS="g++ cmake ninja-build pkgconf libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libyaml-cpp-dev libtinyxml2-dev"
+BUILD_PKGS="g++ cmake ninja-build pkgconf libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libyaml-cpp-dev libtinyxml2-dev libmuparser-dev"
 TEST_PKGS="python3 python3-pytest python3-pyepics python3-numpy iproute2 procps clang-14 libclang-rt-14-dev"
 
 deps() {

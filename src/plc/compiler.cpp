@@ -5,6 +5,7 @@
 #include <cstring>
 #include <limits>
 #include <map>
+#include <string>
 
 namespace beamctl::plc::detail {
 
@@ -320,13 +321,78 @@ private:
         if (!need && !has_side_effects(n)) return {};
         const Pos saved = pos_;
         pos_ = n.pos;
+        // A pure arithmetic expression computes each distinct subexpression once (kinematics
+        // repeat sin(yaw / 1000) and the like); the values are bitwise the same.
+        const bool memo_root = need && !memo_on_ && is_operation(n) && pure_arith(n);
+        if (memo_root) {
+            memo_on_ = true;
+            memo_root_ = &n;
+        }
         Ref r = gen_node(n, need ? dst : Ref{}, need);
+        if (memo_root) {
+            memo_on_ = false;
+            memo_root_ = nullptr;
+            memo_.clear();
+        }
         if (need && dst.valid()) r = finish(r, dst);
         pos_ = saved;
         return r;
     }
 
+    // ---- common subexpressions ---------------------------------------------------------------
+
+    static bool is_operation(const Node& n) {
+        return n.kind == NK::neg || n.kind == NK::binary || n.kind == NK::builtin;
+    }
+    // Numbers, scalar variables and arithmetic on them: no side effects, no control flow.
+    static bool pure_arith(const Node& n) {
+        switch (n.kind) {
+        case NK::num:
+        case NK::var:
+            return true;
+        case NK::binary:
+            if (n.op == static_cast<int>(BinOp::scand) || n.op == static_cast<int>(BinOp::scor)) return false;
+            [[fallthrough]];
+        case NK::neg:
+        case NK::builtin:
+            for (const NodePtr& k : n.kids)
+                if (!k || !pure_arith(*k)) return false;
+            return true;
+        default:
+            return false;
+        }
+    }
+    static void append_key(const Node& n, std::string& k) {
+        k += static_cast<char>(n.kind);
+        k += static_cast<char>(n.op);
+        auto raw = [&k](const void* p, std::size_t size) { k.append(static_cast<const char*>(p), size); };
+        if (n.kind == NK::num) raw(&n.num, sizeof n.num);
+        if (n.kind == NK::var) raw(&n.ref, sizeof n.ref);
+        if (n.kind == NK::builtin) raw(&n.builtin, sizeof n.builtin);
+        k += '(';
+        for (const NodePtr& c : n.kids) append_key(*c, k);
+        k += ')';
+    }
+    // While generating a pure expression: the temporary already holding `n`'s value, or
+    // generates it into a new one (the root may go straight to `dst`).
+    template <typename Gen> Ref memoized(const Node& n, Ref dst, Gen generate) {
+        if (!memo_on_) return generate(dst);
+        if (&n == memo_root_) return generate(dst);
+        std::string key;
+        append_key(n, key);
+        if (auto it = memo_.find(key); it != memo_.end()) return it->second;
+        const Ref r = generate(Ref{});
+        memo_.emplace(std::move(key), r);
+        return r;
+    }
+
     Ref gen_node(const Node& n, Ref dst, bool need) {
+        if (memo_on_ && is_operation(n))
+            return memoized(n, dst, [&](Ref d) { return gen_operation(n, d); });
+        return gen_operation(n, dst, need);
+    }
+
+    Ref gen_operation(const Node& n, Ref dst, bool need = true) {
         switch (n.kind) {
         case NK::num:
             return konst(n.num);
@@ -1000,6 +1066,9 @@ private:
     std::vector<std::uint32_t> fn_result_slot_;
     std::uint32_t next_slot_ = 0, high_ = 0;
     int locals_ = 0;
+    bool memo_on_ = false;             // generating a pure expression (common subexpressions)
+    const Node* memo_root_ = nullptr;
+    std::map<std::string, Ref> memo_;  // structural key -> temporary holding its value
     int frame_ = -1;
     Pos pos_;
 };

@@ -1,0 +1,223 @@
+// Soft PLC evaluation cost: one scan of the kinematics examples (examples/kinematics/mirror.plc
+// and mirror_matrix.plc, both states; spiral.plc), a generated 100-statement PLC, and each of
+// the mirror's ten output expressions (five jacks from the pose, five pose values from the
+// jacks) written out as one expression over bound variables and evaluated by our PLC
+// (`r := <expr>;`, one scan) and, when built with BEAMCTL_BENCH_MUPARSER, by muparser
+// (Parser::Eval) with the same variables bound. Issue target: beamctl faster than muparser on
+// every expression.
+#include "plc/program.hpp"
+
+#include <benchmark/benchmark.h>
+
+#ifdef BEAMCTL_BENCH_MUPARSER
+#include <muParser.h>
+#endif
+
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+using beamctl::plc::Binding;
+using beamctl::plc::CompileOptions;
+using beamctl::plc::Host;
+using beamctl::plc::Program;
+
+namespace {
+
+const std::filesystem::path kExamples =
+    std::filesystem::path(__FILE__).parent_path().parent_path() / "examples";
+
+// Every name is a double of its own, created on first use.
+class MapHost : public Host {
+public:
+    double& operator[](const std::string& name) { return vars_[name]; }
+    std::optional<Binding> resolve(std::string_view name) override {
+        return Binding{&vars_[std::string(name)], true, 1};
+    }
+
+private:
+    std::map<std::string, double> vars_;
+};
+
+// ---- the mirror's output expressions (default geometry of mirror_trig.plc_inc) ---------------
+
+std::string replace_all(std::string s, const std::string& from, const std::string& to) {
+    for (std::size_t p = s.find(from); p != std::string::npos; p = s.find(from, p + to.size()))
+        s.replace(p, from.size(), to);
+    return s;
+}
+
+// Expands the upper-case placeholders, innermost last.
+std::string expand(std::string e) {
+    const std::pair<const char*, const char*> defs[] = {
+        {"CY_", "((P_ + SX * Q_) / (1 - SX * TY))"},
+        {"P_", "((yui + yuo) / 2 - 50 + SZ * 400 + 50 * NN)"},
+        {"Q_", "(xu - 60 + TY * 25 + TZ * 400 + 60 * MM)"},
+        {"NN", "sqrt(1 + SX ^ 2 + SZ ^ 2)"},
+        {"MM", "sqrt(1 + TY ^ 2 + TZ ^ 2)"},
+        {"TY", "(SZ * TZ - SX)"},
+        {"SX", "((yui - yuo) / 300)"},
+        {"SZ", "((yd - (yui + yuo) / 2) / 800)"},
+        {"TZ", "((xd - xu) / 800)"},
+        {"NX", "(sin(yaw / 1000) * sin(pitch / 1000) * cos(roll / 1000) - cos(yaw / 1000) * "
+               "sin(roll / 1000))"},
+        {"NY", "(cos(pitch / 1000) * cos(roll / 1000))"},
+        {"NZ", "(sin(yaw / 1000) * sin(roll / 1000) + cos(yaw / 1000) * sin(pitch / 1000) * "
+               "cos(roll / 1000))"},
+        {"MX", "(cos(yaw / 1000) * cos(roll / 1000) + sin(yaw / 1000) * sin(pitch / 1000) * "
+               "sin(roll / 1000))"},
+        {"MY", "(cos(pitch / 1000) * sin(roll / 1000))"},
+        {"MZ", "(cos(yaw / 1000) * sin(pitch / 1000) * sin(roll / 1000) - sin(yaw / 1000) * "
+               "cos(roll / 1000))"},
+    };
+    for (const auto& [name, text] : defs) e = replace_all(e, name, text);
+    return e;
+}
+
+struct Expr {
+    const char* name;
+    std::string text;
+};
+
+const std::vector<Expr>& mirror_exprs() {
+    static const std::vector<Expr> exprs = {
+        {"inv_YUI", expand("cy + (NX * (cx - 150) + NZ * 400 - 50) / NY + 50")},
+        {"inv_YUO", expand("cy + (NX * (cx + 150) + NZ * 400 - 50) / NY + 50")},
+        {"inv_YD", expand("cy + (NX * cx - NZ * 400 - 50) / NY + 50")},
+        {"inv_XU", expand("cx + (MY * (cy + 25) + MZ * 400 - 60) / MX + 60")},
+        {"inv_XD", expand("cx + (MY * (cy + 25) - MZ * 400 - 60) / MX + 60")},
+        {"fwd_PITCH", expand("1000 * atan2(-(SZ + SX * TZ), sqrt((TY * NN) ^ 2 + (MM) ^ 2))")},
+        {"fwd_YAW", expand("1000 * atan2(TZ + TY * SZ, 1 - SX * TY)")},
+        {"fwd_ROLL", expand("1000 * atan2(-TY * NN, MM)")},
+        {"fwd_CX", expand("Q_ + TY * CY_")},
+        {"fwd_CY", expand("CY_")},
+    };
+    return exprs;
+}
+
+// A pose of 3, -4, 5 mrad, 6, -7 mm and jack positions near it.
+const std::pair<const char*, double> kInputs[] = {
+    {"pitch", 3}, {"yaw", -4}, {"roll", 5},    {"cx", 6},    {"cy", -7},
+    {"xu", 7.3},  {"xd", 3.9}, {"yui", -4.8}, {"yuo", -6.4}, {"yd", -9.4}};
+
+void BM_Expr_beamctl(benchmark::State& state) {
+    const Expr& e = mirror_exprs()[std::size_t(state.range(0))];
+    state.SetLabel(e.name);
+    MapHost h;
+    for (const auto& [n, v] : kInputs) h[n] = v;
+    Program p = Program::compile("r := " + e.text + ";", "expr.plc", h);
+    double& r = h["r"];
+    for (auto _ : state) {
+        if (p.run() != 0) state.SkipWithError("scan failed");
+        benchmark::DoNotOptimize(r);
+    }
+    state.counters["instructions"] = double(p.size());
+}
+BENCHMARK(BM_Expr_beamctl)->DenseRange(0, 9);
+
+#ifdef BEAMCTL_BENCH_MUPARSER
+void BM_Expr_muparser(benchmark::State& state) {
+    const Expr& e = mirror_exprs()[std::size_t(state.range(0))];
+    state.SetLabel(e.name);
+    std::map<std::string, double> vars;
+    mu::Parser parser;
+    for (const auto& [n, v] : kInputs) {
+        vars[n] = v;
+        parser.DefineVar(n, &vars[n]);
+    }
+    parser.SetExpr(e.text);
+    double r = parser.Eval(); // compiles to bytecode on the first Eval
+    for (auto _ : state) {
+        r = parser.Eval();
+        benchmark::DoNotOptimize(r);
+    }
+}
+BENCHMARK(BM_Expr_muparser)->DenseRange(0, 9);
+#endif
+
+// ---- whole scans --------------------------------------------------------------------------------
+
+// A shipped kinematics PLC with its axes at a pose; `busy` puts it in state 1 (inverse running).
+void scan_example(benchmark::State& state, const char* file, const char* busy_axis) {
+    MapHost h;
+    CompileOptions o;
+    o.macros = {{"SELF", "plc0"}, {"SELF_ID", "0"}};
+    o.include_path = {(kExamples / "plc_lib").string()};
+    Program p = Program::compile_file((kExamples / "kinematics" / file).string(), h, o);
+    const double jacks[] = {7.3, 3.9, -4.8, -6.4, -9.4};
+    for (int j = 0; j < 5; ++j) {
+        h["ax" + std::to_string(j + 1) + ".enc.actpos"] = jacks[j];
+        h["ax" + std::to_string(j + 1) + ".traj.setpos"] = jacks[j];
+        h["ax" + std::to_string(j + 6) + ".traj.setpos"] = kInputs[j].second;
+    }
+    if (busy_axis) h[std::string(busy_axis) + ".traj.busy"] = 1;
+    for (int i = 0; i < 2; ++i) p.run(); // first scan, state change
+    for (auto _ : state) {
+        if (p.run() != 0) state.SkipWithError("scan failed");
+        benchmark::ClobberMemory();
+    }
+    state.counters["instructions"] = double(p.size());
+}
+void BM_Scan_mirror_trig_S1(benchmark::State& s) { scan_example(s, "mirror.plc", "ax6"); }
+void BM_Scan_mirror_trig_S0(benchmark::State& s) { scan_example(s, "mirror.plc", nullptr); }
+void BM_Scan_mirror_matrix_S1(benchmark::State& s) { scan_example(s, "mirror_matrix.plc", "ax6"); }
+void BM_Scan_mirror_matrix_S0(benchmark::State& s) { scan_example(s, "mirror_matrix.plc", nullptr); }
+void BM_Scan_spiral_S1(benchmark::State& s) { scan_example(s, "spiral.plc", "ax3"); }
+BENCHMARK(BM_Scan_mirror_trig_S1);
+BENCHMARK(BM_Scan_mirror_trig_S0);
+BENCHMARK(BM_Scan_mirror_matrix_S1);
+BENCHMARK(BM_Scan_mirror_matrix_S0);
+BENCHMARK(BM_Scan_spiral_S1);
+
+// 100 statements in four kinds, 25 of each: arithmetic, math functions, if/else, min/max with a
+// comparison; over 2 inputs and 100 statics, each reading an earlier result.
+std::string hundred_statements() {
+    std::string code;
+    char line[256];
+    for (int i = 0; i < 100; ++i) {
+        const int j = (i * 37 + 11) % 100;
+        switch (i % 4) {
+        case 0:
+            std::snprintf(line, sizeof line, "static.v%d := static.v%d * 1.5 + x - 2;\n", i, j);
+            break;
+        case 1:
+            std::snprintf(line, sizeof line,
+                          "static.v%d := sin(static.v%d) * cos(x) + sqrt(abs(y));\n", i, j);
+            break;
+        case 2:
+            std::snprintf(line, sizeof line,
+                          "if (static.v%d > x) { static.v%d := static.v%d - 1; } else { "
+                          "static.v%d := y; };\n",
+                          j, i, j, i);
+            break;
+        default:
+            std::snprintf(line, sizeof line,
+                          "static.v%d := max(static.v%d, y) / (1 + abs(x)) + (x < y);\n", i, j);
+        }
+        code += line;
+    }
+    return code;
+}
+
+void BM_Scan_100_statements(benchmark::State& state) {
+    MapHost h;
+    h["x"] = 0.25;
+    h["y"] = -1.5;
+    Program p = Program::compile(hundred_statements(), "hundred.plc", h);
+    for (auto _ : state) {
+        if (p.run() != 0) state.SkipWithError("scan failed");
+        benchmark::ClobberMemory();
+    }
+    state.counters["instructions"] = double(p.size());
+    state.counters["ns_per_statement"] = benchmark::Counter(
+        100 * double(state.iterations()), benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_Scan_100_statements);
+
+} // namespace
+
+BENCHMARK_MAIN();
