@@ -399,3 +399,22 @@ TEST(IocPlc, DemoCycleWithPlcsAllocatesNothing) {
     EXPECT_NEAR(v.axis("MirrorRoll").status().act_pos, 1, 0.002);
     EXPECT_GE(v.plcs().status(0).scans, 3000u);
 }
+
+// The shipped log-spiral example: a move of the arc length puts the stage on the spiral
+// (seed eqs 21-23, origin at the stage's start) and the readbacks follow.
+TEST(IocPlc, SpiralExample) {
+    VirtualIoc v(kSource + "/examples/kinematics/ioc.yaml");
+    v.cycles(100);
+    EXPECT_NEAR(v.axis("SpiralL").status().act_pos, 0, 1e-6);
+    v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 5});
+    v.cycles(9000);
+    EXPECT_FALSE(v.axis("SpiralL").status().busy);
+    const double a = 1, b = 0.2, k = a * std::sqrt(1 + b * b) / b;
+    const double theta = std::log1p(5 / k) / b, r = a * std::exp(b * theta);
+    EXPECT_NEAR(v.axis("StageX").status().act_pos, -1 + r * std::cos(theta), 0.01);
+    EXPECT_NEAR(v.axis("StageY").status().act_pos, r * std::sin(theta), 0.01);
+    EXPECT_NEAR(v.axis("SpiralL").status().act_pos, 5, 0.01);
+    EXPECT_NEAR(v.axis("SpiralR").status().act_pos, r, 0.01);
+    EXPECT_NEAR(v.axis("SpiralTheta").status().act_pos, theta, 0.01);
+    EXPECT_EQ(v.stat(0, "spiral"), 0);
+}
