@@ -85,11 +85,11 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
     if (!root || root.IsNull()) throw Error(SB() << path << ":1:1: empty configuration (needs at least ioc:)");
     for (auto kv : root) {
         std::string k = kv.first.as<std::string>();
-        if (k == "bridges" || k == "web")
+        if (k == "web")
             throw Error(SB() << c.at(kv.first) << ": '" << k
                              << "' is not supported by this version of beamctl yet");
     }
-    only_keys(c, root, "the IOC file", {"ioc", "engine", "buses", "axes", "plugins", "plcs", "db", "ca"});
+    only_keys(c, root, "the IOC file", {"ioc", "engine", "buses", "axes", "plugins", "plcs", "db", "bridges", "ca"});
     if (!root["ioc"]) throw Error(SB() << path << ":1:1: missing required key 'ioc' ({name: ..., prefix: ...})");
     {
         auto n = root["ioc"];
@@ -274,6 +274,26 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
                 for (auto kv : m) dc.macros[kv.first.as<std::string>()] = get<std::string>(c, kv.second, where + ".macros");
             }
             cfg.db.push_back(dc);
+        }
+    }
+    if (auto bridges = root["bridges"]) {
+        only_keys(c, bridges, "bridges", {"rcp"});
+        if (auto r = bridges["rcp"]) {
+            only_keys(c, r, "bridges.rcp", {"listen", "port", "prefix", "timeout_s", "db_out", "pv_pattern"});
+            RcpBridgeEntry e;
+            e.prefix = cfg.prefix + "RCP:";
+            if (r["listen"]) e.listen = get<std::string>(c, r["listen"], "bridges.rcp.listen");
+            if (r["port"]) e.port = uint16_t(get_uint(c, r["port"], "bridges.rcp.port", 65535));
+            if (r["prefix"]) e.prefix = get<std::string>(c, r["prefix"], "bridges.rcp.prefix");
+            if (auto t = r["timeout_s"]) {
+                e.timeout_s = get<double>(c, t, "bridges.rcp.timeout_s");
+                if (!(e.timeout_s > 0 && e.timeout_s <= 3600))
+                    throw Error(SB() << c.at(t) << ": bridges.rcp.timeout_s: " << e.timeout_s << " should be > 0 and <= 3600");
+            }
+            if (r["db_out"]) e.db_out = c.resolve(get<std::string>(c, r["db_out"], "bridges.rcp.db_out"));
+            if (r["pv_pattern"]) e.pv_pattern = get<std::string>(c, r["pv_pattern"], "bridges.rcp.pv_pattern");
+            e.where = c.at(r);
+            cfg.rcp = e;
         }
     }
     if (auto ca = root["ca"]) {

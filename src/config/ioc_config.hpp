@@ -78,6 +78,17 @@ struct PluginEntry {
     std::string where;
 };
 
+// The UDP bridge to rapid-control-prototyping machines (`bridges: rcp:`; docs/rcp.md).
+struct RcpBridgeEntry {
+    std::string listen = "0.0.0.0"; // IPv4 address the bridge's sockets bind to
+    uint16_t port = 18065;          // beacon port (data is accepted on it too)
+    std::string prefix;             // PV prefix; default: the IOC prefix + "RCP:"
+    double timeout_s = 3;           // [s] silence before an application's PVs go INVALID/COMM
+    std::string db_out;             // resolved path of the generated .db file; empty: none
+    std::string pv_pattern;         // object PV names; empty: "<prefix><application>:<name>"
+    std::string where;
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -90,6 +101,7 @@ struct IocConfig {
     std::vector<PluginEntry> plugins;
     std::vector<PlcEntry> plcs;
     std::vector<DbConfig> db;
+    std::optional<RcpBridgeEntry> rcp;
     std::optional<uint16_t> ca_port; // default: EPICS_CAS_SERVER_PORT / 5064
     std::string acf;                 // resolved path
 
