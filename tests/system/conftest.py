@@ -472,3 +472,18 @@ def running_ioc(workdir, prefix, ioc_text, files=None, config_name="ioc.yaml"):
         srv.kill()
         forget_pvs(prefix)
         release_port(port)
+
+
+@pytest.fixture
+def demo(tmp_path):
+    """The demo beamline (examples/demo/ioc.yaml) on a pool port, once its bus is OK."""
+    port = acquire_port()
+    srv = RunServer(tmp_path, REPO_ROOT / "examples" / "demo" / "ioc.yaml", port).start()
+    try:
+        assert wait_for(lambda: epics.ca.get(connect("DEMO:m0-Stat-OK")) == 1, timeout=10)
+        yield srv
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs("DEMO:")
+        release_port(port)

@@ -7,23 +7,11 @@ import epics
 import pytest
 from epics import ca
 
-from conftest import REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port, wait_for
+from conftest import connect, wait_for
 
 AXES = ["SlitTop", "SlitBottom", "SlitLeft", "SlitRight", "SampleX", "SampleY"]
 
 
-@pytest.fixture
-def demo(tmp_path):
-    port = acquire_port()
-    srv = RunServer(tmp_path, REPO_ROOT / "examples" / "demo" / "ioc.yaml", port).start()
-    try:
-        assert wait_for(lambda: ca.get(connect("DEMO:m0-Stat-OK")) == 1, timeout=10)
-        yield srv
-    finally:
-        srv.stop()
-        srv.kill()
-        forget_pvs("DEMO:")
-        release_port(port)
 
 
 def test_demo_runs_twenty_five_terminals_and_its_axes(demo):

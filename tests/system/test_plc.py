@@ -10,21 +10,9 @@ import epics
 import pytest
 from epics import ca
 
-from conftest import BEAMCTL, REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port, running_ioc, wait_for
+from conftest import BEAMCTL, REPO_ROOT, connect, running_ioc, wait_for
 
 
-@pytest.fixture
-def demo(tmp_path):
-    port = acquire_port()
-    srv = RunServer(tmp_path, REPO_ROOT / "examples" / "demo" / "ioc.yaml", port).start()
-    try:
-        assert wait_for(lambda: ca.get(connect("DEMO:m0-Stat-OK")) == 1, timeout=10)
-        yield srv
-    finally:
-        srv.stop()
-        srv.kill()
-        forget_pvs("DEMO:")
-        release_port(port)
 
 
 def pos(name):
