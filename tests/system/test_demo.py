@@ -4,7 +4,6 @@ moves, the absolute-encoder sample axis is referenced at start, the soft records
 
 
 import epics
-import pytest
 from epics import ca
 
 from conftest import connect, wait_for

@@ -7,7 +7,6 @@ import subprocess
 import time
 
 import epics
-import pytest
 from epics import ca
 
 from conftest import BEAMCTL, REPO_ROOT, connect, running_ioc, wait_for

@@ -19,10 +19,10 @@ namespace {
 log::Logger lg("rcp");
 
 constexpr double kTickPeriod_s = 0.05;
-constexpr int kBatch = 32;          // datagrams per recvmmsg
-constexpr int kBatchesPerWake = 8;  // then back to the loop (level-triggered: it comes back)
+constexpr int kBatch = 32;              // datagrams per recvmmsg
+constexpr int kBatchesPerWake = 8;      // then back to the loop (level-triggered: it comes back)
 constexpr std::size_t kRxBuffer = 1024; // > 1000 so that longer datagrams are seen as Long
-constexpr int kRcvBuf = 4 << 20;    // [bytes] room for bursts at 10 000 packets/s
+constexpr int kRcvBuf = 4 << 20;        // [bytes] room for bursts at 10 000 packets/s
 
 sockaddr_in to_sockaddr(const Endpoint& e) {
     sockaddr_in sa{};
@@ -34,7 +34,8 @@ sockaddr_in to_sockaddr(const Endpoint& e) {
 
 } // namespace
 
-RcpBridge::RcpBridge(pv::Database& db, EventLoop& loop, BridgeConfig cfg) : loop_(loop) {
+RcpBridge::RcpBridge(pv::Database& db, EventLoop& loop, BridgeConfig cfg)
+    : loop_(loop) {
     cfg.validate();
     parse_ipv4(cfg.listen_address, listen_ip_);
     fd_ = open_socket(cfg.port);
@@ -144,12 +145,13 @@ void RcpBridge::sync_ports() {
         if (data_fds_.count(p)) continue;
         int fd = open_socket(p);
         if (fd < 0) {
-            LOG_ERR(lg, "cannot open data port udp " << core_->config().listen_address << ":" << p
-                                                     << " announced by an application: "
-                                                     << std::strerror(errno));
+            LOG_ERR(lg, "cannot open data port udp "
+                            << core_->config().listen_address << ":" << p
+                            << " announced by an application: " << std::strerror(errno));
             continue;
         }
-        LOG_INFO(lg, "listening for RCP data on udp " << core_->config().listen_address << ":" << p);
+        LOG_INFO(lg,
+                 "listening for RCP data on udp " << core_->config().listen_address << ":" << p);
         data_fds_[p] = fd;
         loop_.add_fd(fd, EPOLLIN, [this, fd](uint32_t) { on_readable(fd); });
     }

@@ -34,8 +34,12 @@ std::string truncated(std::string s, std::size_t n) {
     return s;
 }
 
-// Reasons that get a Malformed-<Reason> PV (NotWritable never happens on the IOC side).
-bool has_pv(Malformed m) { return m != Malformed::None && m != Malformed::NotWritable; }
+// Reasons that get a Malformed-<Reason> PV: NotWritable never happens on the IOC side, and
+// UnknownApplication is never attributed to an application (bridge-wide PV only).
+bool has_pv(Malformed m, bool per_app) {
+    return m != Malformed::None && m != Malformed::NotWritable &&
+           !(per_app && m == Malformed::UnknownApplication);
+}
 
 pv::DbRecord make_record(const char* type, std::string name,
                          std::vector<std::pair<std::string, std::string>> fields) {
@@ -116,10 +120,10 @@ struct BridgeCore::Impl {
     struct Object {
         App* app = nullptr;
         BeaconObject desc;
-        std::string pv;   // main record
-        Endpoint write_to; // ip_rcp:port_rcp (0 replaced by the beacon's source)
-        uint16_t count = 0; // learned from the first data entry (MOTOR: 5); 0 = not yet
-        bool failed = false;     // records could not be created: data is accepted and ignored
+        std::string pv;      // main record
+        Endpoint write_to;   // ip_rcp:port_rcp (0 replaced by the beacon's source)
+        uint16_t count = 0;  // learned from the first data entry (MOTOR: 5); 0 = not yet
+        bool failed = false; // records could not be created: data is accepted and ignored
         bool waveform = false;
         bool valued = false;     // a value arrived (input main, output readback, motor)
         bool out_valued = false; // the output record has a value (written or initialised)
@@ -182,6 +186,7 @@ struct BridgeCore::Impl {
     DataPacket data;
     Packet tx{};
     std::array<double, kMaxValues> scratch{};
+    std::array<bool, kMaxDataEntries> skip{}; // entries of `data` validate() set aside
     std::vector<uint16_t> ports;
     uint64_t ports_version = 0;
     double now = 0;
@@ -189,7 +194,10 @@ struct BridgeCore::Impl {
     bool db_dirty = false;
 
     Impl(pv::Database& d, BridgeConfig c, SendFn s, Clock k)
-        : db(d), cfg(std::move(c)), send(std::move(s)), clock(std::move(k)) {}
+        : db(d)
+        , cfg(std::move(c))
+        , send(std::move(s))
+        , clock(std::move(k)) {}
 
     ~Impl() {
         for (auto& a : apps) {
@@ -199,8 +207,6 @@ struct BridgeCore::Impl {
         }
         for (auto& d : global.defs) db.remove(d.name);
     }
-
-    double time_now() const { return clock ? clock() : now; }
 
     std::string expand(std::string_view app, std::string_view name) const {
         std::string out;
@@ -228,8 +234,8 @@ struct BridgeCore::Impl {
     bool load(const std::vector<pv::DbRecord>& defs, const std::string& what) {
         for (const auto& d : defs) {
             if (d.name.size() > kMaxRecordName) {
-                LOG_ERR(lg, what << ": PV name " << d.name << " is longer than "
-                                 << kMaxRecordName << " characters; not created");
+                LOG_ERR(lg, what << ": PV name " << d.name << " is longer than " << kMaxRecordName
+                                 << " characters; not created");
                 return false;
             }
             if (db.find(d.name)) {
@@ -249,8 +255,7 @@ struct BridgeCore::Impl {
     }
 
     std::string describe(const App& a, const BeaconObject& d) const {
-        return SB() << "rcp application " << a.name << " object " << int(d.id) << " '" << d.name
-                    << "'";
+        return SB() << "application " << a.name << " object " << int(d.id) << " '" << d.name << "'";
     }
 
     void build(Object& o) {
@@ -259,9 +264,8 @@ struct BridgeCore::Impl {
         ObjectType t = d.type;
         bool is_float = d.data_type == DataType::Float32 || d.data_type == DataType::Float64;
         std::string prec = is_float ? "4" : "0";
-        std::string desc = truncated(SB() << "RCP " << a.name << " " << to_string(t) << " "
-                                          << int(d.id),
-                                     40);
+        std::string desc =
+            truncated(SB() << "RCP " << a.name << " " << to_string(t) << " " << int(d.id), 40);
         std::string info = SB() << a.name << " " << int(d.id) << " " << to_string(t) << " "
                                 << to_string(d.data_type);
         o.defs.clear();
@@ -275,7 +279,8 @@ struct BridgeCore::Impl {
         o.waveform = t != ObjectType::Motor && o.count > 1;
         if (t == ObjectType::Motor) {
             std::vector<std::pair<std::string, std::string>> f = {
-                {"DESC", desc}, {"DTYP", "asynMotor"},
+                {"DESC", desc},
+                {"DTYP", "asynMotor"},
                 {"OUT", SB() << "@rcp(" << a.name << "," << int(d.id) << ")"}};
             for (const auto& kv : cfg.motor_fields) f.push_back(kv);
             rec("motor", o.pv, f);
@@ -303,22 +308,29 @@ struct BridgeCore::Impl {
                 return f;
             };
             switch (t) {
-            case ObjectType::AI: rec("ai", o.pv, analog); break;
+            case ObjectType::AI:
+                rec("ai", o.pv, analog);
+                break;
             case ObjectType::AO:
                 rec("ao", o.pv, analog);
                 rec("ai", rb, readback(analog));
                 break;
-            case ObjectType::BI: rec("bi", o.pv, binary); break;
+            case ObjectType::BI:
+                rec("bi", o.pv, binary);
+                break;
             case ObjectType::BO:
                 rec("bo", o.pv, binary);
                 rec("bi", rb, readback(binary));
                 break;
-            case ObjectType::LI: rec("longin", o.pv, integer); break;
+            case ObjectType::LI:
+                rec("longin", o.pv, integer);
+                break;
             case ObjectType::LO:
                 rec("longout", o.pv, integer);
                 rec("longin", rb, readback(integer));
                 break;
-            case ObjectType::Motor: break;
+            case ObjectType::Motor:
+                break;
             }
         }
         o.valued = o.out_valued = false;
@@ -368,24 +380,44 @@ struct BridgeCore::Impl {
 
     bool make_diag(Diag& d, const std::string& base, bool per_app, const std::string& what) {
         auto counter = [&](const std::string& n, const std::string& desc) {
-            d.defs.push_back(make_record("ai", base + n, {{"DESC", truncated(desc, 40)}, {"PREC", "0"}}));
+            d.defs.push_back(
+                make_record("ai", base + n, {{"DESC", truncated(desc, 40)}, {"PREC", "0"}}));
         };
         counter("RxCount", "Packets received");
         counter("TxCount", "Packets sent");
         if (per_app) {
-            d.defs.push_back(make_record("ai", base + "BeaconAge",
-                                         {{"DESC", "Time since the last beacon"}, {"PREC", "1"}, {"EGU", "s"}}));
+            d.defs.push_back(
+                make_record("ai", base + "BeaconAge",
+                            {{"DESC", "Time since the last beacon"}, {"PREC", "1"}, {"EGU", "s"}}));
             d.defs.push_back(make_record("bi", base + "Online",
                                          {{"DESC", "Beacon or data within the timeout"},
-                                          {"ZNAM", "Offline"}, {"ONAM", "Online"}, {"ZSV", "MAJOR"}}));
-            d.defs.push_back(make_record("longin", base + "Objects", {{"DESC", "Objects announced"}}));
+                                          {"ZNAM", "Offline"},
+                                          {"ONAM", "Online"},
+                                          {"ZSV", "MAJOR"}}));
+            d.defs.push_back(
+                make_record("longin", base + "Objects", {{"DESC", "Objects announced"}}));
         } else {
-            d.defs.push_back(make_record("longin", base + "Applications", {{"DESC", "RCP applications"}}));
+            d.defs.push_back(
+                make_record("longin", base + "Applications", {{"DESC", "RCP applications"}}));
         }
         for (std::size_t m = 0; m < kMalformedReasons; ++m)
-            if (has_pv(Malformed(m)))
+            if (has_pv(Malformed(m), per_app))
                 counter(std::string("Malformed-") + to_string(Malformed(m)),
                         std::string("Malformed: ") + to_string(Malformed(m)));
+        // Names too long for a record are left out (the counters stay in totals()/the log);
+        // RxCount, the shortest, decides whether the application gets diagnostics at all.
+        std::string skipped;
+        for (auto it = d.defs.begin(); it != d.defs.end();) {
+            if (it->name.size() <= kMaxRecordName) {
+                ++it;
+                continue;
+            }
+            skipped += (skipped.empty() ? "" : ", ") + it->name;
+            it = d.defs.erase(it);
+        }
+        if (!skipped.empty())
+            LOG_WARN(lg, what << ": diagnostic PV names longer than " << kMaxRecordName
+                              << " characters left out: " << skipped);
         if (!load(d.defs, what)) {
             d.defs.clear();
             return false;
@@ -400,7 +432,7 @@ struct BridgeCore::Impl {
             d.count = db.find(base + "Applications");
         }
         for (std::size_t m = 0; m < kMalformedReasons; ++m)
-            if (has_pv(Malformed(m)))
+            if (has_pv(Malformed(m), per_app))
                 d.malformed[m] = db.find(base + "Malformed-" + to_string(Malformed(m)));
         for (const auto& r : d.defs) db.find(r.name)->val_read_only = true;
         return true;
@@ -422,8 +454,8 @@ struct BridgeCore::Impl {
         set_scalar(*r, f, v);
     }
 
-    void set_values(pv::Record& r, const pv::FieldDesc* f, bool waveform,
-                    std::span<const double> v, bool binary) {
+    void set_values(pv::Record& r, const pv::FieldDesc* f, bool waveform, std::span<const double> v,
+                    bool binary) {
         if (!waveform) return set_scalar(r, f, binary ? double(v[0] != 0) : v[0]);
         pv::Elements e = r.elements(*f);
         uint32_t n = uint32_t(std::min<std::size_t>(v.size(), e.capacity));
@@ -450,16 +482,19 @@ struct BridgeCore::Impl {
 
     void restore(pv::Record* r, bool valued) {
         if (!r) return;
-        if (valued) db.process(*r);
-        else alarm_only(r, pv::kStatUdf, pv::kInvalid);
+        if (valued)
+            db.process(*r);
+        else
+            alarm_only(r, pv::kStatUdf, pv::kInvalid);
     }
 
     // ---------------------------------------------------------------- output
     bool send_packet(App& a, const Endpoint& to) {
-        if (to.ip == 0 || to.port == 0 || !send(to, std::span<const uint8_t>(tx))) {
+        if (to.ip == 0 || to.port == 0 || !send || !send(to, std::span<const uint8_t>(tx))) {
             if (now >= send_limit.next_s) {
                 LOG_WARN(lg, "application " << a.name << ": cannot send to " << to.str() << " ("
-                                            << send_limit.suppressed << " more failures since the last report)");
+                                            << send_limit.suppressed
+                                            << " more failures since the last report)");
                 send_limit.next_s = now + 1;
                 send_limit.suppressed = 0;
             } else {
@@ -489,8 +524,8 @@ struct BridgeCore::Impl {
             }
             scratch[0] = v;
         }
-        DataEntry d{o.desc.id, o.desc.type, o.desc.data_type, n, o.desc.name,
-                    std::span<const double>(scratch.data(), n)};
+        DataEntry d{o.desc.id, o.desc.type, o.desc.data_type,
+                    n,         o.desc.name, std::span<const double>(scratch.data(), n)};
         WriteResult w = write_data(tx, o.app->model_time, std::span<const DataEntry>(&d, 1));
         if (!w) {
             LOG_WARN(lg, "put to " << o.pv << " refused: " << to_string(w.status) << " ("
@@ -504,8 +539,9 @@ struct BridgeCore::Impl {
     }
 
     bool send_motor(Object& o, const RcpMotorDriver::Command& c) {
-        DataEntry d{o.desc.id, ObjectType::Motor, DataType::Float64, kMotorValueCount,
-                    o.desc.name, std::span<const double>(c.data(), c.size())};
+        DataEntry d{o.desc.id,         ObjectType::Motor,
+                    DataType::Float64, kMotorValueCount,
+                    o.desc.name,       std::span<const double>(c.data(), c.size())};
         if (!write_data(tx, o.app->model_time, std::span<const DataEntry>(&d, 1))) return false;
         return send_packet(*o.app, o.write_to);
     }
@@ -568,7 +604,8 @@ struct BridgeCore::Impl {
         if (apps.size() >= cfg.max_applications) {
             report(nullptr, {Malformed::UnknownApplication, 9}, from,
                    (SB() << "application " << name << " refused: the limit of "
-                        << cfg.max_applications << " applications is reached").str());
+                         << cfg.max_applications << " applications is reached")
+                       .str());
             return nullptr;
         }
         auto a = std::make_unique<App>();
@@ -577,11 +614,13 @@ struct BridgeCore::Impl {
         a->ip = from.ip;
         a->beacon_from = from;
         a->last_rx_s = a->last_beacon_s = now;
-        std::string what = SB() << "rcp application " << name << " from " << from.str();
+        std::string what = SB() << "application " << name << " from " << from.str();
         if (!make_diag(a->diag, cfg.prefix + a->pv_name + ":", true, what)) {
-            report(nullptr, {Malformed::UnknownApplication, 9}, from,
-                   (SB() << "application " << name
-                        << " refused: its PV names are taken (the same name from another address?)").str());
+            report(
+                nullptr, {Malformed::UnknownApplication, 9}, from,
+                (SB() << "application " << name
+                      << " refused: its PV names are taken (the same name from another address?)")
+                    .str());
             return nullptr;
         }
         db.init_records();
@@ -607,15 +646,18 @@ struct BridgeCore::Impl {
         if (beacon.continuation) {
             if (!a->assembling || now - a->assembly_start_s > cfg.continuation_window_s) {
                 LOG_DEBUG(lg, "application " << a->name << ": continuation beacon without a beacon "
-                                             << "in the last " << cfg.continuation_window_s << " s ignored");
+                                             << "in the last " << cfg.continuation_window_s
+                                             << " s ignored");
                 use = false;
             } else {
                 for (std::size_t i = 0; i < beacon.objects.size(); ++i)
                     for (const BeaconObject& q : a->pending)
                         if (q.id == beacon.objects[i].id || q.name == beacon.objects[i].name)
-                            return report(a, {Malformed::DuplicateObject,
-                                              uint16_t(kBeaconHeaderSize + i * kBeaconObjectSize)},
-                                          from, "object id or name already in this beacon's earlier packet");
+                            return report(
+                                a,
+                                {Malformed::DuplicateObject,
+                                 uint16_t(kBeaconHeaderSize + i * kBeaconObjectSize)},
+                                from, "object id or name already in this beacon's earlier packet");
             }
         }
         a->counters.rx++;
@@ -626,12 +668,13 @@ struct BridgeCore::Impl {
         if (!use) return;
         if (beacon.continuation) {
             a->pending.insert(a->pending.end(), beacon.objects.begin(), beacon.objects.end());
+            apply_model(*a, false);
         } else {
-            if (a->assembling) apply_model(*a);
+            if (a->assembling) apply_model(*a, true);
             a->pending = beacon.objects;
             a->assembling = true;
             a->assembly_start_s = now;
-            if (cfg.continuation_window_s <= 0) apply_model(*a);
+            apply_model(*a, cfg.continuation_window_s <= 0);
         }
     }
 
@@ -639,55 +682,78 @@ struct BridgeCore::Impl {
         return Endpoint{d.ip_rcp ? d.ip_rcp : from.ip, d.port_rcp ? d.port_rcp : from.port};
     }
 
-    // The union of a beacon and its continuations: retire, create, update.
-    void apply_model(App& a) {
-        a.assembling = false;
-        std::vector<BeaconObject> objs = std::move(a.pending);
-        a.pending.clear();
+    // The union of a beacon and its continuations (a.pending). While the window is open
+    // (final == false) objects are only added, into free ids and free PV names, so that the
+    // first beacon of an application and new objects need not wait; when it closes
+    // (final == true) the model is exactly the union: objects not in it, or changed (type,
+    // data type or name), are retired, the rest created, addresses updated.
+    void apply_model(App& a, bool final) {
         std::bitset<256> keep;
-        for (const auto& n : objs) {
+        for (const auto& n : a.pending) {
             const auto& cur = a.objects[n.id];
             if (cur && cur->desc.type == n.type && cur->desc.data_type == n.data_type &&
                 cur->desc.name == n.name)
                 keep[n.id] = true;
         }
-        bool changed = false;
-        for (std::size_t id = 1; id < 256; ++id) {
-            auto& cur = a.objects[id];
-            if (!cur || keep[id]) continue;
-            LOG_INFO(lg, describe(a, cur->desc) << " retired");
-            unbuild(*cur);
-            cur.reset();
-            changed = true;
+        std::size_t created = 0, retired = 0;
+        if (final) {
+            std::bitset<256> listed;
+            for (const auto& n : a.pending) listed[n.id] = true;
+            for (std::size_t id = 1; id < 256; ++id) {
+                auto& cur = a.objects[id];
+                if (!cur || keep[id]) continue;
+                LOG_INFO(lg, describe(a, cur->desc) << (listed[id] ? " changed" : " retired"));
+                unbuild(*cur);
+                cur.reset();
+                ++retired;
+            }
         }
-        for (const auto& n : objs) {
+        for (const auto& n : a.pending) {
             if (keep[n.id]) {
                 Object& o = *a.objects[n.id];
                 o.desc = n;
                 o.write_to = resolve(n, a.beacon_from);
                 continue;
             }
+            if (a.objects[n.id]) continue; // changed: when the window closes
+            std::string pv = expand(a.name, n.name);
+            if (!final && (db.find(pv) || db.find(pv + "_RBV") || db.find(pv + "_PosErr") ||
+                           db.find(pv + "_ErrCode")))
+                continue; // maybe a retiring object's name: when the window closes
             auto o = std::make_unique<Object>();
             o->app = &a;
             o->desc = n;
-            o->pv = expand(a.name, n.name);
+            o->pv = std::move(pv);
             o->write_to = resolve(n, a.beacon_from);
             o->count = n.type == ObjectType::Motor ? kMotorValueCount : 0;
             build(*o);
-            if (!o->failed) LOG_INFO(lg, describe(a, n) << ": " << to_string(n.type) << " " << o->pv);
+            if (!o->failed)
+                LOG_DEBUG(lg, describe(a, n) << ": " << to_string(n.type) << " " << o->pv);
             a.objects[n.id] = std::move(o);
-            changed = true;
+            ++created;
         }
-        a.object_count = objs.size();
-        if (changed) {
+        if (final) {
+            a.assembling = false;
+            a.pending.clear();
+        }
+        a.object_count = 0;
+        for (const auto& o : a.objects) a.object_count += o != nullptr;
+        if (created || retired) {
             db.init_records();
+            if (!a.online)
+                for (auto& o : a.objects)
+                    if (o) go_offline_object(*o);
             db_dirty = true;
+            LOG_INFO(lg, "application " << a.name << " (" << a.beacon_from.str()
+                                        << "): " << a.object_count << " objects; " << created
+                                        << " new, " << retired << " retired");
         }
         set_if_changed(a.diag.count, double(a.object_count));
         std::vector<uint16_t> p;
         for (const auto& app : apps)
             for (const auto& o : app->objects)
-                if (o && o->desc.port_ioc && o->desc.port_ioc != cfg.port) p.push_back(o->desc.port_ioc);
+                if (o && o->desc.port_ioc && o->desc.port_ioc != cfg.port)
+                    p.push_back(o->desc.port_ioc);
         std::sort(p.begin(), p.end());
         p.erase(std::unique(p.begin(), p.end()), p.end());
         if (p != ports) {
@@ -696,13 +762,29 @@ struct BridgeCore::Impl {
         }
     }
 
+    // True if entry e describes an object of the beacon being assembled (data may arrive for a
+    // new or changed object before the window closes: dropped, not malformed).
+    static bool in_pending(const App& a, const DataEntry& e) {
+        if (!a.assembling) return false;
+        for (const auto& n : a.pending)
+            if (n.id == e.id && n.type == e.type && n.data_type == e.data_type && n.name == e.name)
+                return true;
+        return false;
+    }
+
     // ---------------------------------------------------------------- data
-    Fault validate(const App& a, std::span<const uint8_t> p) const {
+    // Checks every entry of `data` against the application's model; entries for objects of a
+    // beacon still being assembled are marked in `skip`.
+    Fault validate(const App& a, std::span<const uint8_t> p) {
         auto view = data.view();
         for (std::size_t i = 0; i < view.size(); ++i) {
             const DataEntry& e = view[i];
             auto at = uint16_t(reinterpret_cast<const uint8_t*>(e.name.data()) - p.data() - 5);
             const Object* o = a.objects[e.id].get();
+            bool same = o && e.type == o->desc.type && e.data_type == o->desc.data_type &&
+                        e.name == o->desc.name;
+            skip[i] = !same && in_pending(a, e);
+            if (skip[i]) continue;
             if (!o) return {Malformed::UnknownObject, at, &e, nullptr};
             if (e.type != o->desc.type) return {Malformed::TypeMismatch, uint16_t(at + 1), &e, o};
             if (e.data_type != o->desc.data_type)
@@ -710,8 +792,9 @@ struct BridgeCore::Impl {
             if (e.name != o->desc.name) return {Malformed::NameMismatch, uint16_t(at + 5), &e, o};
             uint16_t expect = o->count;
             for (std::size_t j = 0; j < i && !expect; ++j)
-                if (view[j].id == e.id) expect = view[j].count;
-            if (expect && e.count != expect) return {Malformed::CountMismatch, uint16_t(at + 3), &e, o};
+                if (view[j].id == e.id && !skip[j]) expect = view[j].count;
+            if (expect && e.count != expect)
+                return {Malformed::CountMismatch, uint16_t(at + 3), &e, o};
         }
         return {};
     }
@@ -752,7 +835,10 @@ struct BridgeCore::Impl {
         a.counters.rx++;
         a.model_time = data.timestamp;
         mark_alive(a);
-        for (const DataEntry& e : data.view()) {
+        auto view = data.view();
+        for (std::size_t i = 0; i < view.size(); ++i) {
+            if (skip[i]) continue;
+            const DataEntry& e = view[i];
             Object& o = *a.objects[e.id];
             if (o.count == 0) learn(o, e.count);
             if (o.failed) continue;
@@ -854,7 +940,8 @@ struct BridgeCore::Impl {
         db_dirty = false;
         if (cfg.db_out.empty()) return;
         std::ostringstream os;
-        os << "# Generated by the beamctl RCP bridge; rewritten whenever a beacon changes the PVs.\n";
+        os << "# Generated by the beamctl RCP bridge; rewritten whenever a beacon changes the "
+              "PVs.\n";
         for (const auto& r : global.defs) write_record(os, r);
         for (const auto& a : apps) {
             os << "\n# application " << a->name << " from " << a->beacon_from.str() << ": "
@@ -875,16 +962,19 @@ struct BridgeCore::Impl {
             }
         }
         if (std::rename(tmp.c_str(), cfg.db_out.c_str()) != 0)
-            LOG_ERR(lg, "cannot rename " << tmp << " to " << cfg.db_out << ": " << std::strerror(errno));
+            LOG_ERR(lg, "cannot rename " << tmp << " to " << cfg.db_out << ": "
+                                         << std::strerror(errno));
     }
 
     void tick(double t) {
         now = t;
         for (auto& a : apps) {
-            if (a->assembling && now - a->assembly_start_s >= cfg.continuation_window_s) apply_model(*a);
+            if (a->assembling && now - a->assembly_start_s >= cfg.continuation_window_s)
+                apply_model(*a, true);
             if (a->online && now - a->last_rx_s >= cfg.timeout_s) go_offline(*a);
             for (auto& o : a->objects)
-                if (o && o->driver && o->driver->phase() == RcpMotorDriver::Phase::Sent) o->motor->poll();
+                if (o && o->driver && o->driver->phase() == RcpMotorDriver::Phase::Sent)
+                    o->motor->poll();
         }
         if (now >= next_diag_s) {
             for (auto& a : apps) publish(a->diag, a->counters, a.get());
@@ -897,8 +987,10 @@ struct BridgeCore::Impl {
     void handle(std::span<const uint8_t> p, const Endpoint& from, double t) {
         now = t;
         totals.rx++;
-        if (classify(p) == PacketKind::Beacon) on_beacon(p, from);
-        else on_data(p, from);
+        if (classify(p) == PacketKind::Beacon)
+            on_beacon(p, from);
+        else
+            on_data(p, from);
         if (db_dirty) write_db_file();
     }
 };
@@ -916,16 +1008,27 @@ BridgeCore::BridgeCore(pv::Database& db, BridgeConfig cfg, SendFn send, Clock cl
 
 BridgeCore::~BridgeCore() = default;
 
-void BridgeCore::handle_packet(std::span<const uint8_t> packet, const Endpoint& from, double now_s) {
+void BridgeCore::handle_packet(std::span<const uint8_t> packet, const Endpoint& from,
+                               double now_s) {
     impl_->handle(packet, from, now_s);
 }
 
-void BridgeCore::tick(double now_s) { impl_->tick(now_s); }
+void BridgeCore::tick(double now_s) {
+    impl_->tick(now_s);
+}
 
-const std::vector<uint16_t>& BridgeCore::data_ports() const { return impl_->ports; }
-uint64_t BridgeCore::ports_version() const { return impl_->ports_version; }
-const BridgeCore::Counters& BridgeCore::totals() const { return impl_->totals; }
-const BridgeConfig& BridgeCore::config() const { return impl_->cfg; }
+const std::vector<uint16_t>& BridgeCore::data_ports() const {
+    return impl_->ports;
+}
+uint64_t BridgeCore::ports_version() const {
+    return impl_->ports_version;
+}
+const BridgeCore::Counters& BridgeCore::totals() const {
+    return impl_->totals;
+}
+const BridgeConfig& BridgeCore::config() const {
+    return impl_->cfg;
+}
 
 std::vector<BridgeCore::AppInfo> BridgeCore::applications() const {
     std::vector<AppInfo> v;

@@ -11,9 +11,13 @@
 //     UCHAR; outputs get a waveform NAME_RBV too); MOTOR: motor record + NAME_PosErr (ai) +
 //     NAME_ErrCode (longin).
 //   per application: $(P)APP:RxCount TxCount BeaconAge (ai), Online (bi), Objects (longin),
-//     Malformed-<Reason> (ai) for every reason of protocol.hpp except None and NotWritable.
-//   bridge-wide: $(P)RxCount TxCount (ai), Applications (longin), Malformed-<Reason> (ai).
-// Counters and BeaconAge are published once per second by tick().
+//     Malformed-<Reason> (ai) for every reason of protocol.hpp but None, NotWritable and
+//     UnknownApplication.
+//   bridge-wide: $(P)RxCount TxCount (ai), Applications (longin), Malformed-<Reason> (ai, all
+//     but None and NotWritable).
+// Counters and BeaconAge are published once per second by tick(). A PV whose name would be
+// longer than 60 characters is left out (logged); an object whose PV names are taken or too long
+// gets no PVs (logged) and its data is accepted and ignored.
 //
 // Threading: one thread (the IOC loop, owner of the Database) makes every call. The Database
 // must outlive the core; the destructor removes every record the core created.
@@ -44,10 +48,10 @@ struct Endpoint {
 
 struct BridgeConfig {
     std::string listen_address = "0.0.0.0"; // IPv4 dotted quad the sockets bind to
-    uint16_t port = kDefaultPort;            // the beacon port (data is accepted on it too)
-    std::string prefix;                      // e.g. "DEMO:RCP:"
-    double timeout_s = 3;                    // [s] silence before INVALID/COMM
-    std::string db_out;                      // generated .db file; empty: none
+    uint16_t port = kDefaultPort;           // the beacon port (data is accepted on it too)
+    std::string prefix;                     // e.g. "DEMO:RCP:"
+    double timeout_s = 3;                   // [s] silence before INVALID/COMM
+    std::string db_out;                     // generated .db file; empty: none
     // Object PV names: <prefix>, <application> and <name> are replaced.
     std::string pv_pattern = "<prefix><application>:<name>";
     double continuation_window_s = 0.1; // [s] a beacon and its continuations
@@ -55,7 +59,7 @@ struct BridgeConfig {
     std::size_t max_applications = 32;  // beacons of further applications are refused
     // Fields of every generated motor record (after the generated DESC/DTYP/OUT).
     std::vector<std::pair<std::string, std::string>> motor_fields = {
-        {"MRES", "0.0001"}, {"PREC", "4"}, {"VELO", "1"},  {"ACCL", "0.5"},
+        {"MRES", "0.0001"}, {"PREC", "4"}, {"VELO", "1"}, {"ACCL", "0.5"},
         {"JVEL", "1"},      {"HVEL", "1"}, {"RTRY", "0"}, {"TWV", "1"},
     };
     // Throws Error naming the bad setting.
@@ -74,7 +78,7 @@ public:
     };
     struct AppInfo {
         std::string name;
-        Endpoint beacon_from;  // source of the latest beacon
+        Endpoint beacon_from; // source of the latest beacon
         bool online = true;
         std::size_t objects = 0;
         double last_beacon_s = 0; // [s]

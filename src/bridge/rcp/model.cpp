@@ -26,14 +26,17 @@ struct Yaml {
     [[noreturn]] void fail(const YAML::Node& n, const std::string& msg) const {
         throw Error(SB() << where(n) << ": " << msg);
     }
-    void keys(const YAML::Node& n, std::initializer_list<const char*> allowed, const char* what) const {
+    void keys(const YAML::Node& n, std::initializer_list<const char*> allowed,
+              const char* what) const {
         if (!n.IsMap()) fail(n, SB() << what << " should be a mapping");
         for (auto kv : n) {
             std::string k = kv.first.as<std::string>();
-            if (std::none_of(allowed.begin(), allowed.end(), [&](const char* a) { return k == a; })) {
+            if (std::none_of(allowed.begin(), allowed.end(),
+                             [&](const char* a) { return k == a; })) {
                 std::string list;
                 for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
-                fail(kv.first, SB() << "unknown key '" << k << "' in " << what << " (expected " << list << ")");
+                fail(kv.first, SB() << "unknown key '" << k << "' in " << what << " (expected "
+                                    << list << ")");
             }
         }
     }
@@ -67,7 +70,8 @@ struct Yaml {
         } catch (const YAML::Exception&) {
             fail(n, SB() << key << " should be an integer");
         }
-        if (v < lo || v > hi) fail(n, SB() << key << " should be in " << lo << ".." << hi << " (got " << v << ")");
+        if (v < lo || v > hi)
+            fail(n, SB() << key << " should be in " << lo << ".." << hi << " (got " << v << ")");
         return v;
     }
     bool flag(const YAML::Node& parent, const char* key, bool def) const {
@@ -82,7 +86,8 @@ struct Yaml {
     uint32_t ip(const YAML::Node& n, const char* key) const {
         std::string s = str(n, key);
         uint32_t v;
-        if (!parse_ipv4(s, v)) fail(n, SB() << key << " '" << s << "' should be an IPv4 address such as 127.0.0.1");
+        if (!parse_ipv4(s, v))
+            fail(n, SB() << key << " '" << s << "' should be an IPv4 address such as 127.0.0.1");
         return v;
     }
     // [lo, hi] with lo < hi
@@ -97,26 +102,46 @@ struct Yaml {
 DataType default_data_type(ObjectType t) {
     switch (t) {
     case ObjectType::BI:
-    case ObjectType::BO: return DataType::Bool;
+    case ObjectType::BO:
+        return DataType::Bool;
     case ObjectType::LI:
-    case ObjectType::LO: return DataType::Int32;
-    default: return DataType::Float64;
+    case ObjectType::LO:
+        return DataType::Int32;
+    default:
+        return DataType::Float64;
     }
 }
 
-bool is_integer(DataType t) { return t != DataType::Float32 && t != DataType::Float64; }
+bool is_integer(DataType t) {
+    return t != DataType::Float32 && t != DataType::Float64;
+}
 
 // Range of an integer data type.
 void int_range(DataType t, double& lo, double& hi) {
     switch (t) {
-    case DataType::Bool: lo = 0, hi = 1; return;
-    case DataType::Int8: lo = -128, hi = 127; return;
-    case DataType::UInt8: lo = 0, hi = 255; return;
-    case DataType::Int16: lo = -32768, hi = 32767; return;
-    case DataType::UInt16: lo = 0, hi = 65535; return;
-    case DataType::Int32: lo = -2147483648.0, hi = 2147483647.0; return;
-    case DataType::UInt32: lo = 0, hi = 4294967295.0; return;
-    default: lo = -std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::max();
+    case DataType::Bool:
+        lo = 0, hi = 1;
+        return;
+    case DataType::Int8:
+        lo = -128, hi = 127;
+        return;
+    case DataType::UInt8:
+        lo = 0, hi = 255;
+        return;
+    case DataType::Int16:
+        lo = -32768, hi = 32767;
+        return;
+    case DataType::UInt16:
+        lo = 0, hi = 65535;
+        return;
+    case DataType::Int32:
+        lo = -2147483648.0, hi = 2147483647.0;
+        return;
+    case DataType::UInt32:
+        lo = 0, hi = 4294967295.0;
+        return;
+    default:
+        lo = -std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::max();
     }
 }
 
@@ -135,7 +160,9 @@ double representable(DataType t, double v) {
 }
 
 ObjectSpec parse_object(const Yaml& y, const YAML::Node& n) {
-    y.keys(n, {"id", "name", "type", "data_type", "count", "signal", "plant", "within", "counter", "setpoint", "motor"},
+    y.keys(n,
+           {"id", "name", "type", "data_type", "count", "signal", "plant", "within", "counter",
+            "setpoint", "motor"},
            "an object");
     ObjectSpec o;
     o.where = y.where(n);
@@ -145,29 +172,42 @@ ObjectSpec parse_object(const Yaml& y, const YAML::Node& n) {
     o.id = uint8_t(y.integer(n["id"], "id", 1, 255));
     o.name = y.str(n["name"], "name");
     if (!valid_name(o.name))
-        y.fail(n["name"], SB() << "name '" << o.name << "' should be 1..39 characters of [A-Za-z0-9_:.-]");
+        y.fail(n["name"],
+               SB() << "name '" << o.name << "' should be 1..39 characters of [A-Za-z0-9_:.-]");
     std::string type = y.str(n["type"], "type");
-    if (!parse_object_type(type, o.type)) y.fail(n["type"], SB() << "unknown type '" << type << "' (expected AI AO BI BO LI LO MOTOR)");
+    if (!parse_object_type(type, o.type))
+        y.fail(n["type"],
+               SB() << "unknown type '" << type << "' (expected AI AO BI BO LI LO MOTOR)");
     o.data_type = default_data_type(o.type);
     if (auto d = n["data_type"]) {
         std::string s = y.str(d, "data_type");
         if (!parse_data_type(s, o.data_type))
-            y.fail(d, SB() << "unknown data_type '" << s << "' (expected bool int8 uint8 int16 uint16 int32 uint32 float32 float64)");
-        if (o.type == ObjectType::Motor && o.data_type != DataType::Float64) y.fail(d, "a MOTOR object is float64");
+            y.fail(
+                d,
+                SB() << "unknown data_type '" << s
+                     << "' (expected bool int8 uint8 int16 uint16 int32 uint32 float32 float64)");
+        if (o.type == ObjectType::Motor && o.data_type != DataType::Float64)
+            y.fail(d, "a MOTOR object is float64");
     }
     if (o.type == ObjectType::Motor) o.count = kMotorValueCount;
     if (auto c = n["count"]) {
-        if (o.type == ObjectType::Motor) y.fail(c, "a MOTOR object has no count: (always 5 values)");
+        if (o.type == ObjectType::Motor)
+            y.fail(c, "a MOTOR object has no count: (always 5 values)");
         o.count = uint16_t(y.integer(c, "count", 1, int64_t(kMaxValues)));
         if (kDataHeaderSize + entry_wire_size(o.data_type, o.count) + 1 > kPacketSize)
-            y.fail(c, SB() << "count " << o.count << " of " << to_string(o.data_type) << " does not fit one data packet (at most "
-                           << (kPacketSize - kDataHeaderSize - kEntryHeaderSize - 1) / data_type_size(o.data_type) << ")");
+            y.fail(c, SB() << "count " << o.count << " of " << to_string(o.data_type)
+                           << " does not fit one data packet (at most "
+                           << (kPacketSize - kDataHeaderSize - kEntryHeaderSize - 1) /
+                                  data_type_size(o.data_type)
+                           << ")");
     }
     const char* kinds[] = {"signal", "plant", "within", "counter", "setpoint", "motor"};
     const char* kind = nullptr;
     for (const char* k : kinds)
         if (n[k]) {
-            if (kind) y.fail(n[k], SB() << "an object has one behaviour, not both " << kind << ": and " << k << ":");
+            if (kind)
+                y.fail(n[k], SB() << "an object has one behaviour, not both " << kind << ": and "
+                                  << k << ":");
             kind = k;
         }
     auto allowed = [&](std::initializer_list<ObjectType> types) {
@@ -175,9 +215,13 @@ ObjectSpec parse_object(const Yaml& y, const YAML::Node& n) {
             y.fail(n[kind], SB() << kind << ": is not for a " << to_string(o.type) << " object");
     };
     if (!kind) {
-        if (is_output(o.type)) kind = "setpoint";
-        else if (o.type == ObjectType::Motor) kind = "motor";
-        else y.fail(n, SB() << "a " << to_string(o.type) << " object needs a behaviour (signal:, plant:, within: or counter:)");
+        if (is_output(o.type))
+            kind = "setpoint";
+        else if (o.type == ObjectType::Motor)
+            kind = "motor";
+        else
+            y.fail(n, SB() << "a " << to_string(o.type)
+                           << " object needs a behaviour (signal:, plant:, within: or counter:)");
     }
     YAML::Node b = n[kind];
     std::string k = kind;
@@ -187,11 +231,17 @@ ObjectSpec parse_object(const Yaml& y, const YAML::Node& n) {
         SignalSpec s;
         if (auto sh = b["shape"]) {
             std::string v = y.str(sh, "shape");
-            if (v == "sine") s.shape = SignalSpec::Shape::Sine;
-            else if (v == "square") s.shape = SignalSpec::Shape::Square;
-            else if (v == "ramp") s.shape = SignalSpec::Shape::Ramp;
-            else if (v == "constant") s.shape = SignalSpec::Shape::Constant;
-            else y.fail(sh, SB() << "unknown shape '" << v << "' (expected sine, square, ramp, constant)");
+            if (v == "sine")
+                s.shape = SignalSpec::Shape::Sine;
+            else if (v == "square")
+                s.shape = SignalSpec::Shape::Square;
+            else if (v == "ramp")
+                s.shape = SignalSpec::Shape::Ramp;
+            else if (v == "constant")
+                s.shape = SignalSpec::Shape::Constant;
+            else
+                y.fail(sh, SB() << "unknown shape '" << v
+                                << "' (expected sine, square, ramp, constant)");
         }
         s.amplitude = y.num(b, "amplitude", 1);
         s.frequency_hz = y.num(b, "frequency_hz", 1);
@@ -214,7 +264,8 @@ ObjectSpec parse_object(const Yaml& y, const YAML::Node& n) {
         allowed({ObjectType::BI});
         y.keys(b, {"value", "target", "tolerance"}, "within");
         WithinSpec w;
-        if (!b["value"] || !b["target"]) y.fail(b, "within: needs value: and target: (object names)");
+        if (!b["value"] || !b["target"])
+            y.fail(b, "within: needs value: and target: (object names)");
         w.value = y.str(b["value"], "value");
         w.target = y.str(b["target"], "target");
         w.tolerance = y.num(b, "tolerance", 0);
@@ -224,10 +275,12 @@ ObjectSpec parse_object(const Yaml& y, const YAML::Node& n) {
         allowed({ObjectType::LI});
         y.keys(b, {"step", "enable"}, "counter");
         CounterSpec c;
-        if (auto s = b["step"]) c.step = y.integer(s, "step", -(int64_t(1) << 32), int64_t(1) << 32);
+        if (auto s = b["step"])
+            c.step = y.integer(s, "step", -(int64_t(1) << 32), int64_t(1) << 32);
         if (b["enable"]) c.enable = y.str(b["enable"], "enable");
         if (!is_integer(o.data_type) || o.data_type == DataType::Bool)
-            y.fail(n, SB() << "counter: needs an integer data_type (got " << to_string(o.data_type) << ")");
+            y.fail(n, SB() << "counter: needs an integer data_type (got " << to_string(o.data_type)
+                           << ")");
         o.behaviour = c;
     } else if (k == "setpoint") {
         allowed({ObjectType::AO, ObjectType::BO, ObjectType::LO});
@@ -237,26 +290,34 @@ ObjectSpec parse_object(const Yaml& y, const YAML::Node& n) {
             s.initial = y.num(b, "initial", 0);
             s.min = y.num(b, "min", s.min);
             s.max = y.num(b, "max", s.max);
-            if (!(s.min <= s.max)) y.fail(b, SB() << "setpoint: min " << s.min << " should be <= max " << s.max);
+            if (!(s.min <= s.max))
+                y.fail(b, SB() << "setpoint: min " << s.min << " should be <= max " << s.max);
         }
         if (representable(o.data_type, s.initial) != s.initial)
-            y.fail(b ? b["initial"] : n, SB() << "initial " << s.initial << " is not a " << to_string(o.data_type) << " value");
+            y.fail(b ? b["initial"] : n, SB() << "initial " << s.initial << " is not a "
+                                              << to_string(o.data_type) << " value");
         o.behaviour = s;
     } else {
         allowed({ObjectType::Motor});
         MotorSpec m;
         if (b) {
-            y.keys(b, {"position", "velocity", "max_velocity", "acceleration", "max_acceleration", "soft_limits",
-                       "hard_limits", "home_position", "home_velocity", "enabled"},
+            y.keys(b,
+                   {"position", "velocity", "max_velocity", "acceleration", "max_acceleration",
+                    "soft_limits", "hard_limits", "home_position", "home_velocity", "enabled"},
                    "motor");
             m.position = y.num(b, "position", m.position);
             m.velocity = y.positive(b, "velocity", m.velocity);
             m.max_velocity = y.positive(b, "max_velocity", std::max(m.max_velocity, m.velocity));
             m.acceleration = y.positive(b, "acceleration", m.acceleration);
-            m.max_acceleration = y.positive(b, "max_acceleration", std::max(m.max_acceleration, m.acceleration));
-            if (m.velocity > m.max_velocity) y.fail(b["velocity"], SB() << "velocity " << m.velocity << " exceeds max_velocity " << m.max_velocity);
+            m.max_acceleration =
+                y.positive(b, "max_acceleration", std::max(m.max_acceleration, m.acceleration));
+            if (m.velocity > m.max_velocity)
+                y.fail(b["velocity"], SB() << "velocity " << m.velocity << " exceeds max_velocity "
+                                           << m.max_velocity);
             if (m.acceleration > m.max_acceleration)
-                y.fail(b["acceleration"], SB() << "acceleration " << m.acceleration << " exceeds max_acceleration " << m.max_acceleration);
+                y.fail(b["acceleration"], SB() << "acceleration " << m.acceleration
+                                               << " exceeds max_acceleration "
+                                               << m.max_acceleration);
             if (auto s = b["soft_limits"]) {
                 std::tie(m.soft_low, m.soft_high) = y.range(s, "soft_limits");
                 m.has_soft_limits = true;
@@ -265,12 +326,15 @@ ObjectSpec parse_object(const Yaml& y, const YAML::Node& n) {
                 std::tie(m.hard_low, m.hard_high) = y.range(h, "hard_limits");
                 m.has_hard_limits = true;
                 if (m.position < m.hard_low || m.position > m.hard_high)
-                    y.fail(b["position"] ? b["position"] : b, SB() << "position " << m.position << " is outside hard_limits");
+                    y.fail(b["position"] ? b["position"] : b,
+                           SB() << "position " << m.position << " is outside hard_limits");
             }
             m.home_position = y.num(b, "home_position", m.home_position);
             m.home_velocity = y.positive(b, "home_velocity", m.home_velocity);
-            if (m.has_hard_limits && (m.home_position <= m.hard_low || m.home_position >= m.hard_high))
-                y.fail(b["home_position"] ? b["home_position"] : b, "home_position should be between the hard limits");
+            if (m.has_hard_limits &&
+                (m.home_position <= m.hard_low || m.home_position >= m.hard_high))
+                y.fail(b["home_position"] ? b["home_position"] : b,
+                       "home_position should be between the hard limits");
             m.enabled = y.flag(b, "enabled", true);
         }
         o.behaviour = m;
@@ -282,10 +346,14 @@ double signal_value(const SignalSpec& s, double t, double shift) {
     double turns = s.frequency_hz * t + s.phase + shift;
     double frac = turns - std::floor(turns);
     switch (s.shape) {
-    case SignalSpec::Shape::Sine: return s.offset + s.amplitude * std::sin(2 * std::numbers::pi * turns);
-    case SignalSpec::Shape::Square: return s.offset + (frac < 0.5 ? s.amplitude : -s.amplitude);
-    case SignalSpec::Shape::Ramp: return s.offset + s.amplitude * frac;
-    case SignalSpec::Shape::Constant: return s.offset + s.amplitude;
+    case SignalSpec::Shape::Sine:
+        return s.offset + s.amplitude * std::sin(2 * std::numbers::pi * turns);
+    case SignalSpec::Shape::Square:
+        return s.offset + (frac < 0.5 ? s.amplitude : -s.amplitude);
+    case SignalSpec::Shape::Ramp:
+        return s.offset + s.amplitude * frac;
+    case SignalSpec::Shape::Constant:
+        return s.offset + s.amplitude;
     }
     return 0;
 }
@@ -295,7 +363,8 @@ double signal_value(const SignalSpec& s, double t, double shift) {
 // ---------------------------------------------------------------- configuration
 ModelConfig ModelConfig::load(const std::string& file) {
     std::ifstream f(file);
-    if (!f) throw Error(SB() << file << ": cannot open the rcp-sim model: " << std::strerror(errno));
+    if (!f)
+        throw Error(SB() << file << ": cannot open the rcp-sim model: " << std::strerror(errno));
     std::stringstream ss;
     ss << f.rdbuf();
     return parse(ss.str(), file);
@@ -306,24 +375,31 @@ ModelConfig ModelConfig::parse(std::string_view text, const std::string& file) {
     try {
         root = YAML::Load(std::string(text));
     } catch (const YAML::ParserException& e) {
-        throw Error(SB() << file << ":" << e.mark.line + 1 << ":" << e.mark.column + 1 << ": " << e.msg);
+        throw Error(SB() << file << ":" << e.mark.line + 1 << ":" << e.mark.column + 1 << ": "
+                         << e.msg);
     }
     Yaml y{file};
-    if (!root || !root.IsMap()) throw Error(SB() << file << ":1:1: expected a mapping with application:, objects:, ...");
-    y.keys(root, {"application", "rate_hz", "beacon_period_s", "ioc", "listen", "objects"}, "the model");
+    if (!root || !root.IsMap())
+        throw Error(SB() << file << ":1:1: expected a mapping with application:, objects:, ...");
+    y.keys(root, {"application", "rate_hz", "beacon_period_s", "ioc", "listen", "objects"},
+           "the model");
     ModelConfig c;
     if (!root["application"]) y.fail(root, "the model needs application: (its name)");
     c.application = y.str(root["application"], "application");
     if (!valid_name(c.application))
-        y.fail(root["application"], SB() << "application '" << c.application << "' should be 1..39 characters of [A-Za-z0-9_:.-]");
+        y.fail(root["application"], SB() << "application '" << c.application
+                                         << "' should be 1..39 characters of [A-Za-z0-9_:.-]");
     c.rate_hz = y.positive(root, "rate_hz", c.rate_hz);
-    if (c.rate_hz > 100000) y.fail(root["rate_hz"], SB() << "rate_hz " << c.rate_hz << " should be <= 100000");
+    if (c.rate_hz > 100000)
+        y.fail(root["rate_hz"], SB() << "rate_hz " << c.rate_hz << " should be <= 100000");
     c.beacon_period_s = y.positive(root, "beacon_period_s", c.beacon_period_s);
     if (auto n = root["ioc"]) {
         y.keys(n, {"host", "port", "data_port"}, "ioc");
         if (n["host"]) c.ioc_ip = y.ip(n["host"], "host");
         if (n["port"]) c.ioc_port = uint16_t(y.integer(n["port"], "port", 1, 65535));
-        c.ioc_data_port = n["data_port"] ? uint16_t(y.integer(n["data_port"], "data_port", 1, 65535)) : c.ioc_port;
+        c.ioc_data_port = n["data_port"]
+                              ? uint16_t(y.integer(n["data_port"], "data_port", 1, 65535))
+                              : c.ioc_port;
     }
     if (auto n = root["listen"]) {
         y.keys(n, {"host", "port"}, "listen");
@@ -331,7 +407,8 @@ ModelConfig ModelConfig::parse(std::string_view text, const std::string& file) {
         if (n["port"]) c.listen_port = uint16_t(y.integer(n["port"], "port", 0, 65535));
     }
     YAML::Node objs = root["objects"];
-    if (!objs || !objs.IsSequence() || objs.size() == 0) y.fail(objs ? objs : root, "objects: should be a non-empty list");
+    if (!objs || !objs.IsSequence() || objs.size() == 0)
+        y.fail(objs ? objs : root, "objects: should be a non-empty list");
     for (auto n : objs) c.objects.push_back(parse_object(y, n));
     Model check(c); // cross references, duplicates: the same errors the Model constructor throws
     return c;
@@ -351,13 +428,16 @@ uint32_t MotorState::status_bits() const {
     return b;
 }
 
-Model::Model(ModelConfig cfg) : cfg_(std::move(cfg)) {
+Model::Model(ModelConfig cfg)
+    : cfg_(std::move(cfg)) {
     if (cfg_.objects.empty()) throw Error("rcp-sim model: no objects");
     by_id_.fill(-1);
     for (const ObjectSpec& s : cfg_.objects) {
-        if (by_id_[s.id] >= 0) throw Error(SB() << s.where << ": object id " << int(s.id) << " is used twice");
+        if (by_id_[s.id] >= 0)
+            throw Error(SB() << s.where << ": object id " << int(s.id) << " is used twice");
         for (const Obj& o : objs_)
-            if (o.spec.name == s.name) throw Error(SB() << s.where << ": object name '" << s.name << "' is used twice");
+            if (o.spec.name == s.name)
+                throw Error(SB() << s.where << ": object name '" << s.name << "' is used twice");
         by_id_[s.id] = int16_t(objs_.size());
         Obj o;
         o.spec = s;
@@ -367,29 +447,37 @@ Model::Model(ModelConfig cfg) : cfg_(std::move(cfg)) {
     auto ref = [&](const ObjectSpec& s, const std::string& name, const char* key, bool want_scalar,
                    std::initializer_list<ObjectType> types) {
         int i = index(name);
-        if (i < 0) throw Error(SB() << s.where << ": " << key << ": no object named '" << name << "'");
+        if (i < 0)
+            throw Error(SB() << s.where << ": " << key << ": no object named '" << name << "'");
         const ObjectSpec& t = objs_[std::size_t(i)].spec;
         if (types.size() && std::find(types.begin(), types.end(), t.type) == types.end())
-            throw Error(SB() << s.where << ": " << key << ": '" << name << "' is a " << to_string(t.type) << " object");
+            throw Error(SB() << s.where << ": " << key << ": '" << name << "' is a "
+                             << to_string(t.type) << " object");
         if (want_scalar && t.count != 1)
-            throw Error(SB() << s.where << ": " << key << ": '" << name << "' has " << t.count << " values, not 1");
+            throw Error(SB() << s.where << ": " << key << ": '" << name << "' has " << t.count
+                             << " values, not 1");
         return i;
     };
     for (Obj& o : objs_) {
         const ObjectSpec& s = o.spec;
-        bool scalar_only = std::holds_alternative<PlantSpec>(s.behaviour) || std::holds_alternative<WithinSpec>(s.behaviour) ||
+        bool scalar_only = std::holds_alternative<PlantSpec>(s.behaviour) ||
+                           std::holds_alternative<WithinSpec>(s.behaviour) ||
                            std::holds_alternative<CounterSpec>(s.behaviour);
-        if (scalar_only && s.count != 1) throw Error(SB() << s.where << ": this behaviour has one value (count 1)");
+        if (scalar_only && s.count != 1)
+            throw Error(SB() << s.where << ": this behaviour has one value (count 1)");
         if (auto* p = std::get_if<PlantSpec>(&s.behaviour)) {
             o.input = ref(s, p->input, "plant input", true, {ObjectType::AO});
-            if (!p->enable.empty()) o.enable = ref(s, p->enable, "plant enable", true, {ObjectType::BO});
+            if (!p->enable.empty())
+                o.enable = ref(s, p->enable, "plant enable", true, {ObjectType::BO});
             o.plant_state = p->initial;
         } else if (auto* w = std::get_if<WithinSpec>(&s.behaviour)) {
-            auto any = {ObjectType::AI, ObjectType::AO, ObjectType::BI, ObjectType::BO, ObjectType::LI, ObjectType::LO};
+            auto any = {ObjectType::AI, ObjectType::AO, ObjectType::BI,
+                        ObjectType::BO, ObjectType::LI, ObjectType::LO};
             o.input = ref(s, w->value, "within value", true, any);
             o.target = ref(s, w->target, "within target", true, any);
         } else if (auto* c = std::get_if<CounterSpec>(&s.behaviour)) {
-            if (!c->enable.empty()) o.enable = ref(s, c->enable, "counter enable", true, {ObjectType::BO});
+            if (!c->enable.empty())
+                o.enable = ref(s, c->enable, "counter enable", true, {ObjectType::BO});
         } else if (auto* sp = std::get_if<SetpointSpec>(&s.behaviour)) {
             std::fill(o.values.begin(), o.values.end(), std::clamp(sp->initial, sp->min, sp->max));
         } else if (auto* m = std::get_if<MotorSpec>(&s.behaviour)) {
@@ -441,7 +529,8 @@ void Model::step(double dt) {
         } else if (auto* p = std::get_if<PlantSpec>(&s.behaviour)) {
             if (enabled(o.enable) && dt > 0) {
                 double u = objs_[std::size_t(o.input)].values[0];
-                o.plant_state += (p->gain * u - o.plant_state) * (1 - std::exp(-dt / p->time_constant_s));
+                o.plant_state +=
+                    (p->gain * u - o.plant_state) * (1 - std::exp(-dt / p->time_constant_s));
             }
             o.values[0] = representable(s.data_type, o.plant_state);
         } else if (auto* c = std::get_if<CounterSpec>(&s.behaviour)) {
@@ -464,7 +553,8 @@ void Model::step(double dt) {
     }
     for (Obj& o : objs_)
         if (auto* w = std::get_if<WithinSpec>(&o.spec.behaviour)) {
-            double a = objs_[std::size_t(o.input)].values[0], b = objs_[std::size_t(o.target)].values[0];
+            double a = objs_[std::size_t(o.input)].values[0],
+                   b = objs_[std::size_t(o.target)].values[0];
             o.values[0] = std::fabs(a - b) <= w->tolerance ? 1 : 0;
         }
 }
@@ -501,7 +591,8 @@ void Model::step_motor(Obj& o, double dt) {
     MotorState& m = o.motor;
     const MotorSpec& spec = std::get<MotorSpec>(o.spec.behaviour);
     switch (m.mode) {
-    case MotorState::Mode::Idle: break;
+    case MotorState::Mode::Idle:
+        break;
     case MotorState::Mode::Moving:
         if (drive_toward(m, m.target, m.v_max, m.accel, dt)) m.mode = MotorState::Mode::Idle;
         break;
@@ -517,10 +608,12 @@ void Model::step_motor(Obj& o, double dt) {
         break;
     case MotorState::Mode::Jogging:
         if (spec.has_soft_limits) {
-            if (drive_toward(m, m.direction > 0 ? spec.soft_high : spec.soft_low, m.v_max, m.accel, dt))
+            if (drive_toward(m, m.direction > 0 ? spec.soft_high : spec.soft_low, m.v_max, m.accel,
+                             dt))
                 m.mode = MotorState::Mode::Idle;
         } else {
-            m.velocity += std::clamp(m.direction * m.v_max - m.velocity, -m.accel * dt, m.accel * dt);
+            m.velocity +=
+                std::clamp(m.direction * m.v_max - m.velocity, -m.accel * dt, m.accel * dt);
             m.position += m.velocity * dt;
         }
         break;
@@ -529,7 +622,8 @@ void Model::step_motor(Obj& o, double dt) {
         m.velocity += std::clamp(m.direction * m.v_max - m.velocity, -m.accel * dt, m.accel * dt);
         m.position += m.velocity * dt;
         double after = m.position - spec.home_position;
-        if (before == 0 || (before < 0) != (after < 0) || after == 0) m.mode = MotorState::Mode::HomeFinal;
+        if (before == 0 || (before < 0) != (after < 0) || after == 0)
+            m.mode = MotorState::Mode::HomeFinal;
         break;
     }
     case MotorState::Mode::HomeFinal:
@@ -550,8 +644,10 @@ void Model::step_motor(Obj& o, double dt) {
         }
         if ((m.high_limit && m.velocity > 0) || (m.low_limit && m.velocity < 0)) {
             m.velocity = 0;
-            if (m.mode == MotorState::Mode::Homing) m.direction = -m.direction; // search back
-            else if (m.mode != MotorState::Mode::Idle) m.mode = MotorState::Mode::Idle;
+            if (m.mode == MotorState::Mode::Homing)
+                m.direction = -m.direction; // search back
+            else if (m.mode != MotorState::Mode::Idle)
+                m.mode = MotorState::Mode::Idle;
         }
     }
 }
@@ -559,18 +655,19 @@ void Model::step_motor(Obj& o, double dt) {
 void Model::motor_command(Obj& o, std::span<const double> v) {
     MotorState& m = o.motor;
     const MotorSpec& spec = std::get<MotorSpec>(o.spec.behaviour);
-    double seq = v[4];
-    if (seq == m.last_sequence) return; // a duplicate of the previous write
-    m.last_sequence = seq;
+    if (std::equal(v.begin(), v.end(), m.last_command.begin())) return; // a repeated datagram
+    std::copy(v.begin(), v.end(), m.last_command.begin());
     double cmd = v[0];
     auto refuse = [&](double code) { m.error_code = code; };
     if (!(cmd >= 0 && cmd <= 8) || cmd != std::floor(cmd)) return refuse(3);
     auto c = MotorCommand(uint8_t(cmd));
     double vel = v[2], acc = v[3];
     m.v_max = (vel > 0 && std::isfinite(vel)) ? std::min(vel, spec.max_velocity) : spec.velocity;
-    m.accel = (acc > 0 && std::isfinite(acc)) ? std::min(acc, spec.max_acceleration) : spec.acceleration;
+    m.accel =
+        (acc > 0 && std::isfinite(acc)) ? std::min(acc, spec.max_acceleration) : spec.acceleration;
     switch (c) {
-    case MotorCommand::None: return;
+    case MotorCommand::None:
+        return;
     case MotorCommand::Enable:
         m.enabled = true;
         m.error_code = 0;
@@ -584,14 +681,16 @@ void Model::motor_command(Obj& o, std::span<const double> v) {
         m.error_code = 0;
         if (m.mode != MotorState::Mode::Idle) m.mode = MotorState::Mode::Stopping;
         return;
-    default: break;
+    default:
+        break;
     }
     if (!m.enabled) return refuse(2);
     switch (c) {
     case MotorCommand::MoveAbsolute: {
         double target = v[1];
         if (!std::isfinite(target)) return refuse(4);
-        if (spec.has_soft_limits && (target < spec.soft_low || target > spec.soft_high)) return refuse(1);
+        if (spec.has_soft_limits && (target < spec.soft_low || target > spec.soft_high))
+            return refuse(1);
         m.target = target;
         m.mode = MotorState::Mode::Moving;
         break;
@@ -599,36 +698,46 @@ void Model::motor_command(Obj& o, std::span<const double> v) {
     case MotorCommand::HomeForward:
     case MotorCommand::HomeReverse:
         m.direction = c == MotorCommand::HomeForward ? 1 : -1;
-        m.v_max = (vel > 0 && std::isfinite(vel)) ? std::min(vel, spec.max_velocity) : spec.home_velocity;
+        m.v_max =
+            (vel > 0 && std::isfinite(vel)) ? std::min(vel, spec.max_velocity) : spec.home_velocity;
         m.homed = false;
-        m.mode = m.position == spec.home_position ? MotorState::Mode::HomeFinal : MotorState::Mode::Homing;
+        m.mode = m.position == spec.home_position ? MotorState::Mode::HomeFinal
+                                                  : MotorState::Mode::Homing;
         break;
     case MotorCommand::JogForward:
     case MotorCommand::JogReverse:
         m.direction = c == MotorCommand::JogForward ? 1 : -1;
         m.mode = MotorState::Mode::Jogging;
         break;
-    default: break;
+    default:
+        break;
     }
     m.error_code = 0;
     m.busy_steps = 1;
 }
 
-Malformed Model::apply_write(const DataEntry& e) {
+Malformed Model::check_write(const DataEntry& e) const {
     int16_t i = by_id_[e.id];
     if (i < 0) return Malformed::UnknownObject;
-    Obj& o = objs_[std::size_t(i)];
-    const ObjectSpec& s = o.spec;
+    const ObjectSpec& s = objs_[std::size_t(i)].spec;
     if (e.type != s.type || e.data_type != s.data_type) return Malformed::TypeMismatch;
     if (e.name != s.name) return Malformed::NameMismatch;
     if (e.count != s.count || e.values.size() != e.count) return Malformed::CountMismatch;
+    if (s.type != ObjectType::Motor && !std::holds_alternative<SetpointSpec>(s.behaviour))
+        return Malformed::NotWritable;
+    return Malformed::None;
+}
+
+Malformed Model::apply_write(const DataEntry& e) {
+    if (Malformed m = check_write(e); m != Malformed::None) return m;
+    Obj& o = objs_[std::size_t(by_id_[e.id])];
+    const ObjectSpec& s = o.spec;
     if (s.type == ObjectType::Motor) {
         motor_command(o, e.values);
         refresh_motor_values(o);
         return Malformed::None;
     }
     auto* sp = std::get_if<SetpointSpec>(&s.behaviour);
-    if (!sp) return Malformed::NotWritable;
     for (std::size_t k = 0; k < o.values.size(); ++k)
         o.values[k] = representable(s.data_type, std::clamp(e.values[k], sp->min, sp->max));
     return Malformed::None;
@@ -674,8 +783,9 @@ void Model::data_packets(std::vector<Packet>& out) const {
     for (const Obj& o : objs_) {
         std::size_t size = entry_wire_size(o.spec.data_type, uint16_t(o.values.size()));
         if (n == batch.size() || bytes + size > kPacketSize) flush();
-        batch[n++] = DataEntry{o.spec.id, o.spec.type, o.spec.data_type, uint16_t(o.values.size()), o.spec.name,
-                               std::span<const double>(o.values)};
+        batch[n++] = DataEntry{o.spec.id,        o.spec.type,
+                               o.spec.data_type, uint16_t(o.values.size()),
+                               o.spec.name,      std::span<const double>(o.values)};
         bytes += size;
     }
     flush();

@@ -30,7 +30,8 @@
 // direction, reverse at a hard limit, stop on the home position, set homed), jog (to the soft
 // limit in that direction, if any), enable, disable. Velocity/acceleration <= 0 or NaN take the
 // configured defaults, larger ones are clamped to the maxima. A hard limit switch stops the axis
-// on the switch. A write with the sequence number of the previous one is a duplicate and ignored.
+// on the switch. A write equal to the previous one (sequence number included) is a duplicate and
+// ignored.
 // Every accepted motion command shows done=0 in at least one data packet. Error codes (bit 5
 // set): 1 target outside the soft limits, 2 motor disabled, 3 unknown command, 4 bad parameter;
 // cleared by the next accepted command. Position error [3] is always 0 (ideal tracking).
@@ -74,17 +75,18 @@ struct SetpointSpec {
     double min = -1e300, max = 1e300;
 };
 struct MotorSpec {
-    double position = 0;                           // start [EGU]
-    double velocity = 1, max_velocity = 10;        // [EGU/s]
+    double position = 0;                              // start [EGU]
+    double velocity = 1, max_velocity = 10;           // [EGU/s]
     double acceleration = 10, max_acceleration = 100; // [EGU/s^2]
     bool has_soft_limits = false;
-    double soft_low = 0, soft_high = 0;            // [EGU]
+    double soft_low = 0, soft_high = 0; // [EGU]
     bool has_hard_limits = false;
-    double hard_low = 0, hard_high = 0;            // switch positions [EGU]
-    double home_position = 0, home_velocity = 1;   // [EGU], [EGU/s]
+    double hard_low = 0, hard_high = 0;          // switch positions [EGU]
+    double home_position = 0, home_velocity = 1; // [EGU], [EGU/s]
     bool enabled = true;
 };
-using Behaviour = std::variant<SignalSpec, PlantSpec, WithinSpec, CounterSpec, SetpointSpec, MotorSpec>;
+using Behaviour =
+    std::variant<SignalSpec, PlantSpec, WithinSpec, CounterSpec, SetpointSpec, MotorSpec>;
 
 struct ObjectSpec {
     uint8_t id = 0;
@@ -116,15 +118,15 @@ struct ModelConfig {
 struct MotorState {
     enum class Mode : uint8_t { Idle, Moving, Stopping, Jogging, Homing, HomeFinal };
     Mode mode = Mode::Idle;
-    double position = 0, velocity = 0;      // [EGU], [EGU/s]
-    double target = 0;                      // [EGU]
-    double v_max = 0, accel = 0;            // of the present motion
-    int direction = 1;                      // jog/home search direction
+    double position = 0, velocity = 0; // [EGU], [EGU/s]
+    double target = 0;                 // [EGU]
+    double v_max = 0, accel = 0;       // of the present motion
+    int direction = 1;                 // jog/home search direction
     bool enabled = true, homed = false;
     bool high_limit = false, low_limit = false;
     double error_code = 0;
-    int busy_steps = 0;                     // steps still shown not done after a command
-    double last_sequence = -1;
+    int busy_steps = 0; // steps still shown not done after a command
+    std::array<double, 5> last_command{-1, -1, -1, -1, -1}; // the previous write (duplicates)
     uint32_t status_bits() const;
 };
 
@@ -140,6 +142,8 @@ public:
     // A write entry from the IOC: None when applied, else why not (UnknownObject,
     // TypeMismatch, NameMismatch, CountMismatch, NotWritable).
     Malformed apply_write(const DataEntry& e);
+    // The same checks without applying (a packet is applied only if all its entries pass).
+    Malformed check_write(const DataEntry& e) const;
 
     // Beacon packets (17 objects each; continuations after the first). `port_rcp` announced is
     // config().listen_port unless set_listen_port() changed it.

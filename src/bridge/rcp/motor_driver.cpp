@@ -12,8 +12,10 @@ log::Logger lg("rcp.motor");
 }
 
 RcpMotorDriver::RcpMotorDriver(std::string name, SendFn send, Clock clock, double ack_timeout_s)
-    : name_(std::move(name)), send_(std::move(send)), clock_(std::move(clock)),
-      ack_timeout_s_(ack_timeout_s) {}
+    : name_(std::move(name))
+    , send_(std::move(send))
+    , clock_(std::move(clock))
+    , ack_timeout_s_(ack_timeout_s) {}
 
 bool RcpMotorDriver::send(MotorCommand c, double target, double velocity, double acceleration) {
     if (!send_) {
@@ -78,8 +80,10 @@ bool RcpMotorDriver::on_readback(const double* v, double now_s) {
     bits_ = b >= 0 && b < 4294967296.0 ? uint32_t(b) : motor_status::kError;
     has_readback_ = true;
     bool done = bits_ & motor_status::kDone, moving = bits_ & motor_status::kMoving;
-    if (phase_ == Phase::Sent && (!done || moving)) phase_ = Phase::Acknowledged;
-    else if (phase_ == Phase::Acknowledged && done && !moving) phase_ = Phase::Idle;
+    if (phase_ == Phase::Sent && (!done || moving))
+        phase_ = Phase::Acknowledged;
+    else if (phase_ == Phase::Acknowledged && done && !moving)
+        phase_ = Phase::Idle;
     check_timeout(now_s);
     return changed || phase_ != before;
 }
@@ -117,6 +121,10 @@ pv::MotorDriver::Status RcpMotorDriver::status() {
     s.enabled = bits_ & motor_status::kEnabled;
     s.home_switch = false;
     s.comm_error = comm_error_ || !has_readback_;
+    if (comm_error_) { // nothing is known: stopped as far as the record is concerned
+        s.done = true;
+        s.moving = false;
+    }
     return s;
 }
 

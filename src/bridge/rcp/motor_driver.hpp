@@ -11,7 +11,9 @@
 // an RCP that only sends on change), the driver falls back to Idle once ack_timeout_s has passed
 // since the command and the latest readback says done=1. While Sent, stale problem bits are not
 // reported (problem=false) so an old error cannot end a new move. Stop and enable/disable do not
-// start a new wait when the motor is idle (so STOP on a motor at rest never drops DMOV).
+// start a new wait when the motor is idle (so STOP on a motor at rest never drops DMOV). While
+// the application is silent (set_comm_error) status() says done, not moving, comm_error: a
+// waiting put-callback completes and the record shows INVALID/COMM.
 // set_position has no command in the protocol: it is refused (logged, nothing sent, the
 // readback unchanged).
 //
@@ -58,9 +60,9 @@ public:
     void detach() { send_ = nullptr; }
 
     Phase phase() const { return phase_; }
-    uint32_t sequence() const { return sequence_; }     // of the last command sent
+    uint32_t sequence() const { return sequence_; } // of the last command sent
     bool has_readback() const { return has_readback_; }
-    double position_error() const { return rb_[3]; }  // [EGU]
+    double position_error() const { return rb_[3]; } // [EGU]
     double error_code() const { return rb_[4]; }
 
 private:

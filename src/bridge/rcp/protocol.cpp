@@ -10,11 +10,15 @@ namespace beamctl::bridge::rcp {
 namespace {
 
 // Little-endian field access, independent of the host byte order.
-uint16_t rd16(const uint8_t* p) { return uint16_t(p[0] | (p[1] << 8)); }
+uint16_t rd16(const uint8_t* p) {
+    return uint16_t(p[0] | (p[1] << 8));
+}
 uint32_t rd32(const uint8_t* p) {
     return uint32_t(p[0]) | (uint32_t(p[1]) << 8) | (uint32_t(p[2]) << 16) | (uint32_t(p[3]) << 24);
 }
-uint64_t rd64(const uint8_t* p) { return uint64_t(rd32(p)) | (uint64_t(rd32(p + 4)) << 32); }
+uint64_t rd64(const uint8_t* p) {
+    return uint64_t(rd32(p)) | (uint64_t(rd32(p + 4)) << 32);
+}
 double rdf64(const uint8_t* p) {
     uint64_t u = rd64(p);
     double d;
@@ -37,8 +41,12 @@ void wrf64(uint8_t* p, double d) {
     wr64(p, u);
 }
 
-bool valid_object_type(uint8_t t) { return t >= 1 && t <= 7; }
-bool valid_data_type(uint8_t t) { return t <= 8; }
+bool valid_object_type(uint8_t t) {
+    return t >= 1 && t <= 7;
+}
+bool valid_data_type(uint8_t t) {
+    return t <= 8;
+}
 
 // Checks name[40] at p (offset `at` in the packet); on success sets `out` to its text.
 ParseResult check_name(const uint8_t* p, std::size_t at, std::string_view& out) {
@@ -74,28 +82,44 @@ template <typename T> bool encode_int(double v, uint8_t* dst, std::size_t n) {
 
 const char* to_string(ObjectType t) {
     switch (t) {
-    case ObjectType::AI: return "AI";
-    case ObjectType::AO: return "AO";
-    case ObjectType::BI: return "BI";
-    case ObjectType::BO: return "BO";
-    case ObjectType::LI: return "LI";
-    case ObjectType::LO: return "LO";
-    case ObjectType::Motor: return "MOTOR";
+    case ObjectType::AI:
+        return "AI";
+    case ObjectType::AO:
+        return "AO";
+    case ObjectType::BI:
+        return "BI";
+    case ObjectType::BO:
+        return "BO";
+    case ObjectType::LI:
+        return "LI";
+    case ObjectType::LO:
+        return "LO";
+    case ObjectType::Motor:
+        return "MOTOR";
     }
     return "?";
 }
 
 const char* to_string(DataType t) {
     switch (t) {
-    case DataType::Bool: return "bool";
-    case DataType::Int8: return "int8";
-    case DataType::UInt8: return "uint8";
-    case DataType::Int16: return "int16";
-    case DataType::UInt16: return "uint16";
-    case DataType::Int32: return "int32";
-    case DataType::UInt32: return "uint32";
-    case DataType::Float32: return "float32";
-    case DataType::Float64: return "float64";
+    case DataType::Bool:
+        return "bool";
+    case DataType::Int8:
+        return "int8";
+    case DataType::UInt8:
+        return "uint8";
+    case DataType::Int16:
+        return "int16";
+    case DataType::UInt16:
+        return "uint16";
+    case DataType::Int32:
+        return "int32";
+    case DataType::UInt32:
+        return "uint32";
+    case DataType::Float32:
+        return "float32";
+    case DataType::Float64:
+        return "float64";
     }
     return "?";
 }
@@ -135,57 +159,86 @@ std::size_t data_type_size(DataType t) {
     switch (t) {
     case DataType::Bool:
     case DataType::Int8:
-    case DataType::UInt8: return 1;
+    case DataType::UInt8:
+        return 1;
     case DataType::Int16:
-    case DataType::UInt16: return 2;
+    case DataType::UInt16:
+        return 2;
     case DataType::Int32:
     case DataType::UInt32:
-    case DataType::Float32: return 4;
-    case DataType::Float64: return 8;
+    case DataType::Float32:
+        return 4;
+    case DataType::Float64:
+        return 8;
     }
     return 1;
 }
 
 const char* to_string(Malformed m) {
     switch (m) {
-    case Malformed::None: return "None";
-    case Malformed::Short: return "Short";
-    case Malformed::Long: return "Long";
-    case Malformed::WrongVersion: return "WrongVersion";
-    case Malformed::UnknownType: return "UnknownType";
-    case Malformed::UnterminatedName: return "UnterminatedName";
-    case Malformed::BadName: return "BadName";
-    case Malformed::ZeroCount: return "ZeroCount";
-    case Malformed::CountOverflow: return "CountOverflow";
-    case Malformed::Truncated: return "Truncated";
-    case Malformed::DuplicateObject: return "DuplicateObject";
-    case Malformed::BadMotor: return "BadMotor";
-    case Malformed::UnknownApplication: return "UnknownApplication";
-    case Malformed::UnknownObject: return "UnknownObject";
-    case Malformed::TypeMismatch: return "TypeMismatch";
-    case Malformed::NameMismatch: return "NameMismatch";
-    case Malformed::CountMismatch: return "CountMismatch";
-    case Malformed::NotWritable: return "NotWritable";
+    case Malformed::None:
+        return "None";
+    case Malformed::Short:
+        return "Short";
+    case Malformed::Long:
+        return "Long";
+    case Malformed::WrongVersion:
+        return "WrongVersion";
+    case Malformed::UnknownType:
+        return "UnknownType";
+    case Malformed::UnterminatedName:
+        return "UnterminatedName";
+    case Malformed::BadName:
+        return "BadName";
+    case Malformed::ZeroCount:
+        return "ZeroCount";
+    case Malformed::CountOverflow:
+        return "CountOverflow";
+    case Malformed::Truncated:
+        return "Truncated";
+    case Malformed::DuplicateObject:
+        return "DuplicateObject";
+    case Malformed::BadMotor:
+        return "BadMotor";
+    case Malformed::UnknownApplication:
+        return "UnknownApplication";
+    case Malformed::UnknownObject:
+        return "UnknownObject";
+    case Malformed::TypeMismatch:
+        return "TypeMismatch";
+    case Malformed::NameMismatch:
+        return "NameMismatch";
+    case Malformed::CountMismatch:
+        return "CountMismatch";
+    case Malformed::NotWritable:
+        return "NotWritable";
     }
     return "?";
 }
 
 const char* to_string(WriteStatus s) {
     switch (s) {
-    case WriteStatus::Ok: return "ok";
-    case WriteStatus::NoRoom: return "does not fit one packet";
-    case WriteStatus::BadName: return "bad name";
-    case WriteStatus::BadId: return "object id 0";
-    case WriteStatus::BadType: return "bad object or data type";
-    case WriteStatus::BadCount: return "bad value count";
-    case WriteStatus::BadValue: return "value not representable in the data type";
+    case WriteStatus::Ok:
+        return "ok";
+    case WriteStatus::NoRoom:
+        return "does not fit one packet";
+    case WriteStatus::BadName:
+        return "bad name";
+    case WriteStatus::BadId:
+        return "object id 0";
+    case WriteStatus::BadType:
+        return "bad object or data type";
+    case WriteStatus::BadCount:
+        return "bad value count";
+    case WriteStatus::BadValue:
+        return "value not representable in the data type";
     }
     return "?";
 }
 
 bool is_name_char(uint8_t c) {
-    return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
-           c == '_' || c == ':' || c == '.' || c == '-';
+    return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' ||
+           c == ':' || c == '.' || c == '-';
 }
 
 bool valid_name(std::string_view name) {
@@ -251,20 +304,28 @@ ParseResult parse_beacon(std::span<const uint8_t> packet, Beacon& out) {
 
 double decode_value(DataType t, const uint8_t* s) noexcept {
     switch (t) {
-    case DataType::Bool: return s[0] ? 1.0 : 0.0;
-    case DataType::Int8: return double(int8_t(s[0]));
-    case DataType::UInt8: return double(s[0]);
-    case DataType::Int16: return double(int16_t(rd16(s)));
-    case DataType::UInt16: return double(rd16(s));
-    case DataType::Int32: return double(int32_t(rd32(s)));
-    case DataType::UInt32: return double(rd32(s));
+    case DataType::Bool:
+        return s[0] ? 1.0 : 0.0;
+    case DataType::Int8:
+        return double(int8_t(s[0]));
+    case DataType::UInt8:
+        return double(s[0]);
+    case DataType::Int16:
+        return double(int16_t(rd16(s)));
+    case DataType::UInt16:
+        return double(rd16(s));
+    case DataType::Int32:
+        return double(int32_t(rd32(s)));
+    case DataType::UInt32:
+        return double(rd32(s));
     case DataType::Float32: {
         uint32_t u = rd32(s);
         float f;
         std::memcpy(&f, &u, 4);
         return double(f);
     }
-    case DataType::Float64: return rdf64(s);
+    case DataType::Float64:
+        return rdf64(s);
     }
     return 0;
 }
@@ -275,12 +336,18 @@ bool encode_value(DataType t, double v, uint8_t* dst) noexcept {
         if (v != 0 && v != 1) return false;
         dst[0] = v != 0 ? 1 : 0;
         return true;
-    case DataType::Int8: return encode_int<int8_t>(v, dst, 1);
-    case DataType::UInt8: return encode_int<uint8_t>(v, dst, 1);
-    case DataType::Int16: return encode_int<int16_t>(v, dst, 2);
-    case DataType::UInt16: return encode_int<uint16_t>(v, dst, 2);
-    case DataType::Int32: return encode_int<int32_t>(v, dst, 4);
-    case DataType::UInt32: return encode_int<uint32_t>(v, dst, 4);
+    case DataType::Int8:
+        return encode_int<int8_t>(v, dst, 1);
+    case DataType::UInt8:
+        return encode_int<uint8_t>(v, dst, 1);
+    case DataType::Int16:
+        return encode_int<int16_t>(v, dst, 2);
+    case DataType::UInt16:
+        return encode_int<uint16_t>(v, dst, 2);
+    case DataType::Int32:
+        return encode_int<int32_t>(v, dst, 4);
+    case DataType::UInt32:
+        return encode_int<uint32_t>(v, dst, 4);
     case DataType::Float32: {
         if (std::isfinite(v) && std::fabs(v) > double(std::numeric_limits<float>::max()))
             return false;
@@ -290,7 +357,9 @@ bool encode_value(DataType t, double v, uint8_t* dst) noexcept {
         wr32(dst, u);
         return true;
     }
-    case DataType::Float64: wrf64(dst, v); return true;
+    case DataType::Float64:
+        wrf64(dst, v);
+        return true;
     }
     return false;
 }
@@ -324,12 +393,14 @@ ParseResult parse_data(std::span<const uint8_t> packet, DataPacket& out) noexcep
         if (values_at + bytes >= kPacketSize) return {Malformed::CountOverflow, uint16_t(at + 3)};
         if (d.type == ObjectType::Motor &&
             (d.data_type != DataType::Float64 || d.count != kMotorValueCount))
-            return {Malformed::BadMotor, uint16_t(d.data_type != DataType::Float64 ? at + 2 : at + 3)};
+            return {Malformed::BadMotor,
+                    uint16_t(d.data_type != DataType::Float64 ? at + 2 : at + 3)};
         // Cannot overflow: every entry takes at least 46 bytes and one byte per value.
         if (out.entry_count >= kMaxDataEntries || used + d.count > kMaxValues)
             return {Malformed::CountOverflow, uint16_t(at + 3)};
         double* v = out.values.data() + used;
-        for (std::size_t i = 0; i < d.count; ++i) v[i] = decode_value(d.data_type, p + values_at + i * size);
+        for (std::size_t i = 0; i < d.count; ++i)
+            v[i] = decode_value(d.data_type, p + values_at + i * size);
         d.values = std::span<const double>(v, d.count);
         used += d.count;
         out.entries[out.entry_count++] = d;
@@ -400,7 +471,8 @@ WriteResult write_data(Packet& out, double timestamp, std::span<const DataEntry>
         std::memcpy(e + 5, d.name.data(), d.name.size());
         uint8_t* v = e + kEntryHeaderSize;
         for (std::size_t k = 0; k < d.count; ++k)
-            if (!encode_value(d.data_type, d.values[k], v + k * size)) return fail(WriteStatus::BadValue);
+            if (!encode_value(d.data_type, d.values[k], v + k * size))
+                return fail(WriteStatus::BadValue);
         at += kEntryHeaderSize + std::size_t(d.count) * size;
     }
     return {};

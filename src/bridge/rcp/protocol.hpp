@@ -22,39 +22,55 @@
 
 namespace beamctl::bridge::rcp {
 
-inline constexpr std::size_t kPacketSize = 1000;      // every packet, exactly [bytes]
-inline constexpr uint8_t kVersion = 1;                // beacon byte 8
-inline constexpr uint8_t kContinuationFlag = 0x80;    // beacon byte 8 = 1 | 0x80
-inline constexpr std::size_t kNameSize = 40;          // name[40]: at most 39 characters + NUL
-inline constexpr std::size_t kBeaconHeaderSize = 49;  // timestamp, version, application
-inline constexpr std::size_t kBeaconObjectSize = 55;  // one object record in a beacon
-inline constexpr std::size_t kDataHeaderSize = 8;     // timestamp
-inline constexpr std::size_t kEntryHeaderSize = 45;   // id, type, data type, count, name
-inline constexpr std::size_t kMaxBeaconObjects = 17;  // per beacon packet
-inline constexpr std::size_t kMaxDataEntries = 21;    // (1000 - 8 - 1) / (45 + 1)
-inline constexpr std::size_t kMaxValues = 946;        // 1000 - 8 - 45 - 1 one-byte values
-inline constexpr uint16_t kMotorValueCount = 5;       // MOTOR entries, both directions
-inline constexpr uint16_t kDefaultPort = 18065;       // the IOC's beacon port
+inline constexpr std::size_t kPacketSize = 1000;     // every packet, exactly [bytes]
+inline constexpr uint8_t kVersion = 1;               // beacon byte 8
+inline constexpr uint8_t kContinuationFlag = 0x80;   // beacon byte 8 = 1 | 0x80
+inline constexpr std::size_t kNameSize = 40;         // name[40]: at most 39 characters + NUL
+inline constexpr std::size_t kBeaconHeaderSize = 49; // timestamp, version, application
+inline constexpr std::size_t kBeaconObjectSize = 55; // one object record in a beacon
+inline constexpr std::size_t kDataHeaderSize = 8;    // timestamp
+inline constexpr std::size_t kEntryHeaderSize = 45;  // id, type, data type, count, name
+inline constexpr std::size_t kMaxBeaconObjects = 17; // per beacon packet
+inline constexpr std::size_t kMaxDataEntries = 21;   // (1000 - 8 - 1) / (45 + 1)
+inline constexpr std::size_t kMaxValues = 946;       // 1000 - 8 - 45 - 1 one-byte values
+inline constexpr uint16_t kMotorValueCount = 5;      // MOTOR entries, both directions
+inline constexpr uint16_t kDefaultPort = 18065;      // the IOC's beacon port
 
 using Packet = std::array<uint8_t, kPacketSize>;
 
 enum class ObjectType : uint8_t { AI = 1, AO = 2, BI = 3, BO = 4, LI = 5, LO = 6, Motor = 7 };
 enum class DataType : uint8_t {
-    Bool = 0, Int8 = 1, UInt8 = 2, Int16 = 3, UInt16 = 4, Int32 = 5, UInt32 = 6, Float32 = 7,
+    Bool = 0,
+    Int8 = 1,
+    UInt8 = 2,
+    Int16 = 3,
+    UInt16 = 4,
+    Int32 = 5,
+    UInt32 = 6,
+    Float32 = 7,
     Float64 = 8,
 };
 
-const char* to_string(ObjectType t);   // "AI" ... "MOTOR"; "?" for values outside the enum
-const char* to_string(DataType t);     // "bool" ... "float64"
+const char* to_string(ObjectType t); // "AI" ... "MOTOR"; "?" for values outside the enum
+const char* to_string(DataType t);   // "bool" ... "float64"
 bool parse_object_type(std::string_view s, ObjectType& out); // "AI" ... "MOTOR" (any case)
 bool parse_data_type(std::string_view s, DataType& out);     // "bool" ... "float64" (any case)
-std::size_t data_type_size(DataType t); // bytes of one value
-inline bool is_output(ObjectType t) { return t == ObjectType::AO || t == ObjectType::BO || t == ObjectType::LO; }
+std::size_t data_type_size(DataType t);                      // bytes of one value
+inline bool is_output(ObjectType t) {
+    return t == ObjectType::AO || t == ObjectType::BO || t == ObjectType::LO;
+}
 
 // MOTOR command (IOC -> RCP, value [0]).
 enum class MotorCommand : uint8_t {
-    None = 0, MoveAbsolute = 1, Stop = 2, HomeForward = 3, HomeReverse = 4, JogForward = 5,
-    JogReverse = 6, Enable = 7, Disable = 8,
+    None = 0,
+    MoveAbsolute = 1,
+    Stop = 2,
+    HomeForward = 3,
+    HomeReverse = 4,
+    JogForward = 5,
+    JogReverse = 6,
+    Enable = 7,
+    Disable = 8,
 };
 // MOTOR status bits (RCP -> IOC, value [2]).
 namespace motor_status {
@@ -100,11 +116,11 @@ struct BeaconObject {
     uint8_t id = 0; // 1..255
     ObjectType type = ObjectType::AI;
     DataType data_type = DataType::Float64;
-    uint32_t ip_rcp = 0;   // IPv4 as a number (192.168.167.42 = 0xC0A8A72A); where writes go
+    uint32_t ip_rcp = 0; // IPv4 as a number (192.168.167.42 = 0xC0A8A72A); where writes go
     uint16_t port_rcp = 0;
-    uint32_t ip_ioc = 0;   // where the RCP sends this object's data
+    uint32_t ip_ioc = 0; // where the RCP sends this object's data
     uint16_t port_ioc = 0;
-    std::string name;      // PV name suffix, 1..39 characters of [A-Za-z0-9_:.-]
+    std::string name; // PV name suffix, 1..39 characters of [A-Za-z0-9_:.-]
     bool operator==(const BeaconObject&) const = default;
 };
 
@@ -121,9 +137,9 @@ struct DataEntry {
     uint8_t id = 0;
     ObjectType type = ObjectType::AI;
     DataType data_type = DataType::Float64;
-    uint16_t count = 0;               // value_count (>= 1)
+    uint16_t count = 0; // value_count (>= 1)
     std::string_view name;
-    std::span<const double> values;   // `count` values, converted from/to the wire type
+    std::span<const double> values; // `count` values, converted from/to the wire type
 };
 
 // A parsed data packet with fixed storage (no allocation). Not copyable: entries point into it.
@@ -152,12 +168,12 @@ ParseResult parse_data(std::span<const uint8_t> packet, DataPacket& out) noexcep
 // Encoder results: the first entry/object (index) that could not be written, and why.
 enum class WriteStatus : uint8_t {
     Ok,
-    NoRoom,    // the objects/entries do not fit one packet (with the terminating id 0)
-    BadName,   // application or object name not 1..39 characters of [A-Za-z0-9_:.-]
-    BadId,     // object id 0
-    BadType,   // object/data type outside the enums, or a MOTOR object that is not float64
-    BadCount,  // count 0, values.size() != count, or a MOTOR entry with count != 5
-    BadValue,  // a value the data type cannot represent (out of range, NaN for an integer)
+    NoRoom,   // the objects/entries do not fit one packet (with the terminating id 0)
+    BadName,  // application or object name not 1..39 characters of [A-Za-z0-9_:.-]
+    BadId,    // object id 0
+    BadType,  // object/data type outside the enums, or a MOTOR object that is not float64
+    BadCount, // count 0, values.size() != count, or a MOTOR entry with count != 5
+    BadValue, // a value the data type cannot represent (out of range, NaN for an integer)
 };
 const char* to_string(WriteStatus s);
 struct WriteResult {
