@@ -73,10 +73,14 @@ build) deps; build release ;;
 demo)
     deps; build release
     export EPICS_CAS_SERVER_PORT=${EPICS_CAS_SERVER_PORT:-5064}
-    echo "== demo beamline IOC: a simulated EtherCAT segment of 14 terminals + soft records (Ctrl-C to stop)"
+    echo "== demo beamline IOC: 25 simulated EtherCAT terminals, slit, sample stage, mirror, soft records,"
+    echo "   and an RCP machine (beamctl rcp-sim examples/rcp/model.yaml) on the UDP bridge (Ctrl-C to stop)"
     echo "   from another shell, with pyepics:"
-    echo "   /usr/bin/python3 -c \"import epics; print(epics.caget('DEMO:m0-Stat-OK', as_string=True), epics.caget('DEMO:temperature'))\""
-    exec build/release/beamctl run examples/demo/ioc.yaml ;;
+    echo "   /usr/bin/python3 -c \"import epics; print(epics.caget('DEMO:m0-Stat-OK', as_string=True), epics.caget('DEMO:RCP:sgDemo:Sine'))\""
+    build/release/beamctl rcp-sim examples/rcp/model.yaml &
+    sim=$!
+    trap 'kill $sim 2>/dev/null; wait $sim 2>/dev/null' EXIT INT TERM
+    build/release/beamctl run examples/demo/ioc.yaml ;;
 unit) deps test; build release; unit ;;
 system) deps test; build release; shift; system "$@" ;;
 fuzz) deps test; fuzz ;;

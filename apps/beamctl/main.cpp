@@ -15,6 +15,7 @@
 #include "pv/db_file.hpp"
 #include "config/ioc_config.hpp"
 #include "ethercat/catalog.hpp"
+#include "bridge/rcp/rcp_sim.hpp"
 #include "ioc/ioc.hpp"
 #include "plc/runtime.hpp"
 #include "rt/engine.hpp"
@@ -211,6 +212,16 @@ int main(int argc, char** argv) {
     plccheck->add_option("--ioc", plco.ioc_file, "Bind names against this IOC configuration (buses, axes, plugins)");
     plccheck->add_option("files", plco.files, "PLC files")->required();
 
+    std::string rcp_model;
+    bridge::rcp::RcpSimOptions rcpo;
+    auto* rcpcmd = app.add_subcommand("rcp-sim", "Stand in for a rapid-control-prototyping machine: run MODEL.yaml, send beacons and data, take writes");
+    rcpcmd->add_option("model", rcp_model, "Model file (examples/rcp/model.yaml)")->required();
+    rcpcmd->add_option("--ioc-host", rcpo.ioc_host, "IPv4 address of the IOC's bridge (overrides ioc.host)");
+    rcpcmd->add_option("--ioc-port", rcpo.ioc_port, "UDP port of the IOC's bridge (overrides ioc.port)")->check(CLI::Range(1, 65535));
+    rcpcmd->add_option("--port", rcpo.listen_port, "UDP port this machine takes writes on (0: any free port)")->check(CLI::Range(0, 65535));
+    rcpcmd->add_option("--rate", rcpo.rate_hz, "Model rate [Hz] (overrides rate_hz)")->check(CLI::Range(1.0, 100000.0));
+    rcpcmd->add_option("--duration", rcpo.duration_s, "Stop after this many seconds (default: until SIGINT/SIGTERM)");
+
     std::string sim_file, sim_bind = "127.0.0.1", sim_iface;
     int sim_port = 0x88A4;
     bool sim_busy_poll = false;
@@ -232,6 +243,7 @@ int main(int argc, char** argv) {
     try {
         if (*softioc) return run_softioc(soft, acf);
         if (*plccheck) return run_plc_check(plco);
+        if (*rcpcmd) return bridge::rcp::run_rcp_sim(rcp_model, rcpo);
         if (*simcmd) return run_sim(sim_file, sim_bind, sim_port, sim_iface, sim_busy_poll);
         if (*runcmd) {
             rt::MonotonicClock clock;

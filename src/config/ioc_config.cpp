@@ -279,7 +279,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
     if (auto bridges = root["bridges"]) {
         only_keys(c, bridges, "bridges", {"rcp"});
         if (auto r = bridges["rcp"]) {
-            only_keys(c, r, "bridges.rcp", {"listen", "port", "prefix", "timeout_s", "db_out", "pv_pattern"});
+            only_keys(c, r, "bridges.rcp", {"listen", "port", "prefix", "timeout_s", "db_out", "pv_pattern", "motor_fields"});
             RcpBridgeEntry e;
             e.prefix = cfg.prefix + "RCP:";
             if (r["listen"]) e.listen = get<std::string>(c, r["listen"], "bridges.rcp.listen");
@@ -292,6 +292,10 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
             }
             if (r["db_out"]) e.db_out = c.resolve(get<std::string>(c, r["db_out"], "bridges.rcp.db_out"));
             if (r["pv_pattern"]) e.pv_pattern = get<std::string>(c, r["pv_pattern"], "bridges.rcp.pv_pattern");
+            if (auto m = r["motor_fields"]) {
+                if (!m.IsMap()) throw Error(SB() << c.at(m) << ": bridges.rcp.motor_fields should be a mapping of motor record fields, e.g. {DHLM: 45, DLLM: -45}");
+                for (auto kv : m) e.motor_fields.emplace_back(kv.first.as<std::string>(), get<std::string>(c, kv.second, "bridges.rcp.motor_fields"));
+            }
             e.where = c.at(r);
             cfg.rcp = e;
         }

@@ -86,6 +86,9 @@ struct RcpBridgeEntry {
     double timeout_s = 3;           // [s] silence before an application's PVs go INVALID/COMM
     std::string db_out;             // resolved path of the generated .db file; empty: none
     std::string pv_pattern;         // object PV names; empty: "<prefix><application>:<name>"
+    // Fields of every generated motor record, added to (or replacing) the bridge's defaults,
+    // e.g. {DHLM: 45, DLLM: -45}: the protocol does not carry limits.
+    std::vector<std::pair<std::string, std::string>> motor_fields;
     std::string where;
 };
 

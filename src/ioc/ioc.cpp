@@ -2,6 +2,8 @@
 
 #include "ioc/pv_util.hpp"
 
+#include "bridge/rcp/bridge.hpp"
+
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "core/signals.hpp"
@@ -356,14 +358,35 @@ int Ioc::run() {
     ca::Server server(loop, db_, sc);
     if (!cfg_.acf.empty()) server.set_access_security(ca::AccessSecurity::load_file(cfg_.acf));
     server.start();
+    std::unique_ptr<bridge::rcp::RcpBridge> rcp;
+    if (cfg_.rcp) {
+        bridge::rcp::BridgeConfig bc;
+        bc.listen_address = cfg_.rcp->listen;
+        bc.port = cfg_.rcp->port;
+        bc.prefix = cfg_.rcp->prefix;
+        bc.timeout_s = cfg_.rcp->timeout_s;
+        bc.db_out = cfg_.rcp->db_out;
+        if (!cfg_.rcp->pv_pattern.empty()) bc.pv_pattern = cfg_.rcp->pv_pattern;
+        for (const auto& [field, value] : cfg_.rcp->motor_fields) {
+            auto same = [&](const auto& f) { return f.first == field; };
+            bc.motor_fields.erase(std::remove_if(bc.motor_fields.begin(), bc.motor_fields.end(), same), bc.motor_fields.end());
+            bc.motor_fields.emplace_back(field, value);
+        }
+        try {
+            rcp = std::make_unique<bridge::rcp::RcpBridge>(db_, loop, bc);
+        } catch (const Error& e) {
+            throw Error(SB() << cfg_.rcp->where << ": bridges.rcp: " << e.what());
+        }
+    }
     engine_->start();
     for (auto& b : buses_) b.bus->start_health();
     std::string acf = cfg_.acf;
     LoopSignals signals(loop, acf.empty() ? std::function<void()>() : [&] { server.reload_access_security(acf); });
     loop.call_every(0.01, [this] { publish(); });
     loop.call_every(0.01, [this] { db_.scan_periodic(EventLoop::now_s()); });
-    std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)\n", server.listen_description().c_str(),
-                db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str());
+    std::string rcp_text = rcp ? std::string(SB() << ", RCP bridge on udp " << cfg_.rcp->listen << ":" << rcp->port()) : std::string();
+    std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)%s\n", server.listen_description().c_str(),
+                db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str(), rcp_text.c_str());
     std::fflush(stdout);
     loop.run();
     for (auto& b : buses_) b.bus->stop_health();

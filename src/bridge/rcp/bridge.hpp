@@ -29,7 +29,7 @@ public:
     BridgeCore& core() { return *core_; }
 
 private:
-    int open_socket(uint16_t port); // bound, non-blocking; -1 (logged) on failure
+    int open_socket(uint16_t port); // bound, non-blocking; -1 with errno on failure
     void on_readable(int fd);
     void sync_ports();
 

@@ -1,0 +1,255 @@
+"""The RCP UDP bridge (specs/rcp-udp.md) seen by pyepics, against two kinds of RCP machine:
+an independent packet writer written here from the spec (struct layouts, not beamctl's code),
+and `beamctl rcp-sim examples/rcp/model.yaml`. PVs appear from beacons with the right types
+and counts, values stream, writes reach the machine with the spec's byte layout, beacon changes
+add and retire PVs, silence raises INVALID/COMM and data clears it, malformed packets change no
+PV, and the MOTOR object is a motor record that pyepics moves, stops and keeps in its limits."""
+
+import contextlib
+import socket
+import struct
+import subprocess
+import time
+
+import epics
+import pytest
+from epics import ca
+
+from conftest import BEAMCTL, REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port, wait_for
+
+LOCAL = 0x7F000001  # 127.0.0.1 as the spec's u32
+AI, AO, BI, BO, LI, LO, MOTOR = 1, 2, 3, 4, 5, 6, 7
+BOOL, INT16, INT32, FLOAT32, FLOAT64 = 0, 3, 5, 7, 8
+FMT = {BOOL: "B", INT16: "h", INT32: "i", FLOAT32: "f", FLOAT64: "d"}
+
+
+def free_udp_port():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def name40(text):
+    b = text.encode()
+    assert len(b) <= 39
+    return b + b"\0" * (40 - len(b))
+
+
+def beacon(app, objects, version=1, ts=1.0):
+    """objects: (id, type, data_type, port_rcp, port_ioc, name) on 127.0.0.1."""
+    p = struct.pack("<dB", ts, version) + name40(app)
+    for oid, otype, dtype, port_rcp, port_ioc, name in objects:
+        p += struct.pack("<BBBIHIH", oid, otype, dtype, LOCAL, port_rcp, LOCAL, port_ioc) + name40(name)
+    p += b"\0"
+    assert len(p) <= 1000
+    return p.ljust(1000, b"\0")
+
+
+def data(entries, ts=2.0):
+    """entries: (id, type, data_type, name, [values])."""
+    p = struct.pack("<d", ts)
+    for oid, otype, dtype, name, values in entries:
+        p += struct.pack("<BBBH", oid, otype, dtype, len(values)) + name40(name)
+        p += struct.pack("<%d%s" % (len(values), FMT[dtype]), *values)
+    p += b"\0"
+    assert len(p) <= 1000
+    return p.ljust(1000, b"\0")
+
+
+def parse_data(packet):
+    """The spec's data packet, parsed independently: (timestamp, [(id, type, dtype, name, values)])."""
+    assert len(packet) == 1000
+    ts, = struct.unpack_from("<d", packet, 0)
+    at, entries = 8, []
+    while packet[at] != 0:
+        oid, otype, dtype, count = struct.unpack_from("<BBBH", packet, at)
+        raw = packet[at + 5:at + 45]
+        assert b"\0" in raw
+        name = raw.split(b"\0")[0].decode()
+        fmt = "<%d%s" % (count, FMT[dtype])
+        values = struct.unpack_from(fmt, packet, at + 45)
+        entries.append((oid, otype, dtype, name, list(values)))
+        at += 45 + struct.calcsize(fmt)
+    assert not any(packet[at:])  # zero padding after the terminating id 0
+    return ts, entries
+
+
+@contextlib.contextmanager
+def bridge_ioc(tmp_path, prefix, timeout_s=1.0):
+    """A bus-less IOC: only ioc:, bridges: and ca: (valid per the issue)."""
+    port = acquire_port()
+    rcp_port = free_udp_port()
+    cfg = tmp_path / "ioc.yaml"
+    cfg.write_text(f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}\n'
+                   f'bridges:\n  rcp: {{listen: 127.0.0.1, port: {rcp_port}, prefix: "{prefix}RCP:", '
+                   f'timeout_s: {timeout_s}, db_out: rcp.db, motor_fields: {{DHLM: 45, DLLM: -45}}}}\n')
+    srv = RunServer(tmp_path, cfg, port).start()
+    try:
+        yield srv, rcp_port
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)
+
+
+def exists(name, timeout=0.5):
+    chid = ca.create_channel(name, connect=False, auto_cb=False)
+    return ca.connect_channel(chid, timeout=timeout)
+
+
+OBJECTS = [
+    (1, AI, FLOAT64, 0, 0, "Temp"),
+    (2, AO, FLOAT64, 0, 0, "Set"),
+    (3, BI, BOOL, 0, 0, "Ready"),
+    (4, BO, BOOL, 0, 0, "Go"),
+    (5, LI, INT32, 0, 0, "Count"),
+    (6, LO, INT16, 0, 0, "Mode"),
+    (7, AI, FLOAT64, 0, 0, "Wave"),
+    (8, MOTOR, FLOAT64, 0, 0, "Axis"),
+]
+
+
+def test_packets_from_an_independent_writer(tmp_path, prefix):
+    with bridge_ioc(tmp_path, prefix) as (srv, rcp_port):
+        rcp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        rcp.bind(("127.0.0.1", 0))
+        rcp.settimeout(2)
+        my_port = rcp.getsockname()[1]
+        objs = [(i, t, d, my_port, rcp_port, n) for i, t, d, _, _, n in OBJECTS]
+        bridge = ("127.0.0.1", rcp_port)
+        p = f"{prefix}RCP:pyRcp:"
+        t0 = time.monotonic()
+        rcp.sendto(beacon("pyRcp", objs), bridge)
+        # PVs within 2 s of the first beacon, with the types of the spec's table
+        assert wait_for(lambda: exists(p + "Axis"), timeout=2)
+        assert time.monotonic() - t0 < 2
+        want = {"Temp": "ai", "Set": "ao", "Set_RBV": "ai", "Ready": "bi", "Go": "bo", "Go_RBV": "bi",
+                "Count": "longin", "Mode": "longout", "Mode_RBV": "longin", "Wave": "ai", "Axis": "motor"}
+        for n, rtype in want.items():
+            assert ca.get(connect(p + n + ".RTYP")) == rtype, n
+
+        # data: values (and a count of 8 turns Wave into a waveform)
+        rcp.sendto(data([(1, AI, FLOAT64, "Temp", [21.5]), (3, BI, BOOL, "Ready", [1]),
+                         (5, LI, INT32, "Count", [-7]), (7, AI, FLOAT64, "Wave", [float(i) for i in range(8)]),
+                         (8, MOTOR, FLOAT64, "Axis", [1.25, 0, 1 | 16 | 64, 0, 0])]), bridge)
+        assert wait_for(lambda: ca.get(connect(p + "Temp")) == 21.5, timeout=2)
+        assert ca.get(connect(p + "Ready")) == 1
+        assert ca.get(connect(p + "Count")) == -7
+        forget_pvs(p + "Wave")
+        assert wait_for(lambda: exists(p + "Wave") and ca.get(connect(p + "Wave.RTYP")) == "waveform", timeout=3)
+        wave = epics.PV(p + "Wave")
+        assert wait_for(lambda: wave.get() is not None and len(wave.get()) == 8, timeout=3)
+        assert list(wave.get()) == [float(i) for i in range(8)]
+        assert wait_for(lambda: abs(ca.get(connect(p + "Axis.RBV")) - 1.25) < 1e-9, timeout=3)
+
+        # writes: one packet to ip_rcp:port_rcp per put, in the spec's layout
+        ca.put(connect(p + "Set"), 3.25, wait=True)
+        pkt, _ = rcp.recvfrom(2000)
+        ts, entries = parse_data(pkt)
+        assert entries == [(2, AO, FLOAT64, "Set", [3.25])]
+        ca.put(connect(p + "Mode"), 2, wait=True)
+        pkt, _ = rcp.recvfrom(2000)
+        assert parse_data(pkt)[1] == [(6, LO, INT16, "Mode", [2])]
+        ca.put(connect(p + "Go"), 1, wait=True)
+        pkt, _ = rcp.recvfrom(2000)
+        assert parse_data(pkt)[1] == [(4, BO, BOOL, "Go", [1])]
+        # a motor move is a MOTOR command entry: [command 1 = move absolute, target, velocity,
+        # acceleration, sequence number]
+        ca.put(connect(p + "Axis"), 4.0)
+        pkt, _ = rcp.recvfrom(2000)
+        (oid, otype, dtype, name, v), = parse_data(pkt)[1]
+        assert (oid, otype, dtype, name) == (8, MOTOR, FLOAT64, "Axis")
+        assert v[0] == 1 and abs(v[1] - 4.0) < 1e-9 and v[2] > 0 and v[4] >= 1
+
+        # malformed packets are counted and change no PV
+        bad = {
+            "Short": data([(1, AI, FLOAT64, "Temp", [99.0])])[:100],
+            "WrongVersion": beacon("pyRcp", objs, version=2),
+            "UnknownType": data([(1, 9, FLOAT64, "Temp", [99.0])]),
+            "UnterminatedName": data([(1, AI, FLOAT64, "Temp", [99.0])])[:13] + b"T" * 40 + data([(1, AI, FLOAT64, "Temp", [99.0])])[53:],
+            "CountOverflow": struct.pack("<dBBBH", 2.0, 1, AI, FLOAT64, 500) + name40("Temp") + b"\0" * 947,
+            "TypeMismatch": data([(1, AI, INT32, "Temp", [99])]),
+        }
+        for reason, pkt in bad.items():
+            assert len(pkt) == (100 if reason == "Short" else 1000), reason
+            rcp.sendto(pkt, bridge)
+        for reason in bad:
+            assert wait_for(lambda: (ca.get(connect(f"{prefix}RCP:Malformed-{reason}")) or 0) >= 1, timeout=3), reason
+        assert ca.get(connect(p + "Temp")) == 21.5
+        assert ca.get(connect(p + "Count")) == -7
+
+        # a changed beacon: Go is retired, New appears, the .db is rewritten
+        objs2 = [o for o in objs if o[5] != "Go"] + [(9, AI, FLOAT64, my_port, rcp_port, "New")]
+        rcp.sendto(beacon("pyRcp", objs2), bridge)
+        assert wait_for(lambda: exists(p + "New"), timeout=2)
+        forget_pvs(p + "Go")
+        assert wait_for(lambda: not exists(p + "Go", timeout=0.3), timeout=3)
+        db = (tmp_path / "rcp.db").read_text()
+        assert f'"{p}New"' in db and f'"{p}Go"' not in db
+
+        # silence (timeout 1 s): INVALID/COMM; the next packet clears it
+        temp = epics.PV(p + "Temp", form="ctrl")
+        assert wait_for(lambda: temp.get_ctrlvars() and temp.severity == 3 and temp.status == 9, timeout=4)
+        rcp.sendto(data([(1, AI, FLOAT64, "Temp", [22.0])]), bridge)
+        assert wait_for(lambda: temp.get(use_monitor=False) == 22.0 and temp.severity == 0, timeout=3)
+        rcp.close()
+
+
+@contextlib.contextmanager
+def rcp_sim(rcp_port, extra=()):
+    sim_port = free_udp_port()
+    proc = subprocess.Popen([str(BEAMCTL), "rcp-sim", str(REPO_ROOT / "examples" / "rcp" / "model.yaml"),
+                             "--ioc-port", str(rcp_port), "--port", str(sim_port), *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL)
+    try:
+        line = proc.stdout.readline().decode()
+        assert line.startswith("ready:"), line + proc.stderr.read().decode()
+        yield proc
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def test_rcp_sim_values_writes_and_motor(tmp_path, prefix):
+    with bridge_ioc(tmp_path, prefix, timeout_s=3) as (srv, rcp_port), rcp_sim(rcp_port):
+        p = f"{prefix}RCP:sgDemo:"
+        assert wait_for(lambda: exists(p + "Stage"), timeout=3)
+        # values stream at the model's rate (100 Hz): the int32 counter advances with it
+        c0 = ca.get(connect(p + "Counter"))
+        time.sleep(1.0)
+        c1 = ca.get(connect(p + "Counter"))
+        assert 50 <= c1 - c0 <= 150, (c0, c1)
+        updates = []
+        sine = epics.PV(p + "Sine", callback=lambda value=None, **kw: updates.append(value))
+        time.sleep(1.0)
+        assert len(updates) >= 50, len(updates)
+        sine.clear_callbacks()
+        assert ca.get(connect(p + "Spectrum.NELM")) == 16
+        # a write reaches the model: its readback comes back in the model's data
+        ca.put(connect(p + "Setpoint"), 2.0, wait=True)
+        assert wait_for(lambda: ca.get(connect(p + "Setpoint_RBV")) == 2.0, timeout=2)
+        assert wait_for(lambda: abs(ca.get(connect(p + "PlantOut")) - 2.0) < 0.05, timeout=5)
+        assert wait_for(lambda: ca.get(connect(p + "InTolerance")) == 1, timeout=5)
+        # the motor record on the MOTOR object
+        m = epics.Motor(p + "Stage", timeout=5)
+        assert m.move(5.0, wait=True, timeout=20) == 0
+        assert abs(m.get("RBV") - 5.0) < 0.01
+        assert m.get("DMOV") == 1
+        m.move(40.0)
+        assert wait_for(lambda: m.get("MOVN") == 1, timeout=3)
+        m.stop()
+        assert wait_for(lambda: m.get("DMOV") == 1, timeout=5)
+        stopped = m.get("RBV")
+        assert 5.0 < stopped < 40.0
+        time.sleep(0.3)
+        assert m.get("RBV") == stopped
+        assert m.move(100.0, wait=True) == -12  # beyond the record's high limit (45)
+        assert ca.get(connect(p + "Stage.HLM")) == 45
+        # diagnostics
+        assert ca.get(connect(p + "RxCount")) > 100
+        assert ca.get(connect(p + "Online")) == 1
