@@ -99,7 +99,8 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
 }
 
 IocPlcs::~IocPlcs() {
-    for (auto& p : plugins_) (void)p->rt_exit();
+    if (runtime_) // entered at bind(); the engine has stopped (Ioc's destructor)
+        for (auto& p : plugins_) (void)p->rt_exit();
 }
 
 plc::PlcRuntime::Options IocPlcs::check_options() const {
