@@ -367,10 +367,11 @@ int Ioc::run() {
         bc.timeout_s = cfg_.rcp->timeout_s;
         bc.db_out = cfg_.rcp->db_out;
         if (!cfg_.rcp->pv_pattern.empty()) bc.pv_pattern = cfg_.rcp->pv_pattern;
-        for (const auto& [field, value] : cfg_.rcp->motor_fields) {
-            auto same = [&](const auto& f) { return f.first == field; };
+        for (const auto& fv : cfg_.rcp->motor_fields) { // replaces a default of the same field
+            const std::string& field = fv.first;
+            auto same = [&field](const auto& f) { return f.first == field; };
             bc.motor_fields.erase(std::remove_if(bc.motor_fields.begin(), bc.motor_fields.end(), same), bc.motor_fields.end());
-            bc.motor_fields.emplace_back(field, value);
+            bc.motor_fields.push_back(fv);
         }
         try {
             rcp = std::make_unique<bridge::rcp::RcpBridge>(db_, loop, bc);
