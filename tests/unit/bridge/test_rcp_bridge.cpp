@@ -119,7 +119,7 @@ TEST(RcpBridge, ContinuationsJoinTheBeaconWithinTheWindow) {
     Harness h;
     std::vector<BeaconObject> objs;
     for (int i = 1; i <= 20; ++i)
-        objs.push_back(obj(uint8_t(i), OT::AI, DT::Float64, "s" + std::to_string(i)));
+        objs.push_back(obj(uint8_t(i), OT::AI, DT::Float64, std::string("s").append(std::to_string(i))));
     std::vector<BeaconObject> first(objs.begin(), objs.begin() + 17),
         rest(objs.begin() + 17, objs.end());
     h.feed(beacon("app", first));

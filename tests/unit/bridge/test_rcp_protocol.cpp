@@ -293,7 +293,7 @@ TEST(RcpMalformed, TruncatedListWithoutTerminator) {
     std::vector<BeaconObject> objs;
     for (int i = 1; i <= 17; ++i)
         objs.push_back(
-            object(uint8_t(i), ObjectType::AI, DataType::Float64, "o" + std::to_string(i)));
+            object(uint8_t(i), ObjectType::AI, DataType::Float64, std::string("o").append(std::to_string(i))));
     Packet out;
     ASSERT_TRUE(write_beacon(out, 0, "app", false, objs).ok());
     Bytes b(out.begin(), out.end());
@@ -469,7 +469,7 @@ TEST(RcpProtocol, RandomDataPacketsRoundTrip) {
             if (used + entry_wire_size(w.dt, count) > kPacketSize) break;
             used += entry_wire_size(w.dt, count);
             w.id = uint8_t(rng() % 255 + 1);
-            w.name = "n" + std::to_string(rng() % 1000000) + (rng() % 2 ? ":x.y-z_" : "");
+            w.name = std::string("n").append(std::to_string(rng() % 1000000)).append(rng() % 2 ? ":x.y-z_" : "");
             for (uint16_t k = 0; k < count; ++k) w.v.push_back(random_value(w.dt));
             want.push_back(std::move(w));
         }
