@@ -483,6 +483,18 @@ private:
     void start_move(bool retry);
     void start_home(bool forward);
     void start_jog(bool forward);
+    // A home or jog asked for while the motor moves: ramp down first and start `next` when the
+    // stop is done (true); false when nothing moves (a settling move counts as done).
+    bool stop_first(After next) {
+        if (phase_ == Phase::Settling) phase_ = Phase::Idle;
+        if (phase_ == Phase::Idle) return false;
+        halt(move_accel());
+        backlash_pending_ = false;
+        after_ = next;
+        phase_ = Phase::Stopping;
+        dmov = 0;
+        return true;
+    }
     double jog_velocity() const { return jvel * dirs() * (jog_fwd_ ? 1 : -1); }
     void stop_all();
     void pause();
@@ -1008,15 +1020,7 @@ void MotorRecordImpl::do_work() {
             dmov = 0; // starts on Go
             return;
         }
-        if (phase_ == Phase::Settling) phase_ = Phase::Idle;
-        if (phase_ != Phase::Idle) {
-            halt(move_accel());
-            backlash_pending_ = false;
-            after_ = fwd ? After::HomeF : After::HomeR;
-            phase_ = Phase::Stopping;
-            dmov = 0;
-            return;
-        }
+        if (stop_first(fwd ? After::HomeF : After::HomeR)) return;
         return start_home(fwd);
     }
 
@@ -1031,15 +1035,7 @@ void MotorRecordImpl::do_work() {
                 jogf = jogr = 0;
                 return;
             }
-            if (phase_ == Phase::Settling) phase_ = Phase::Idle;
-            if (phase_ != Phase::Idle) {
-                halt(move_accel());
-                backlash_pending_ = false;
-                after_ = fwd ? After::JogF : After::JogR;
-                phase_ = Phase::Stopping;
-                dmov = 0;
-                return;
-            }
+            if (stop_first(fwd ? After::JogF : After::JogR)) return;
             return start_jog(fwd);
         }
     }
