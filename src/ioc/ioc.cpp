@@ -114,17 +114,14 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
         make_bus_pvs(b, bc);
         buses_.push_back(std::move(b));
     }
-    axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, known_signals(), db_);
+    SignalDirectory signals = signal_directory();
+    std::set<std::string> names;
+    for (const auto& entry : signals) names.insert(entry.first);
+    axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, names, db_);
     std::vector<motion::AxisConfig> axis_configs;
     for (std::size_t i = 0; i < axes_->size(); ++i) axis_configs.push_back(axes_->config(i));
-    plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, signal_directory(), db_);
+    plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, std::move(signals), db_);
     for (const auto& d : cfg_.db) db_.load(pv::load_db_file(d.file, d.macros));
-}
-
-std::set<std::string> Ioc::known_signals() const {
-    std::set<std::string> names;
-    for (const auto& [name, desc] : signal_directory()) names.insert(name);
-    return names;
 }
 
 SignalDirectory Ioc::signal_directory() const {

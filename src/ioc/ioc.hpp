@@ -70,7 +70,6 @@ private:
     };
     void make_bus_pvs(BusRt& b, const config::BusConfig& bc);
     void make_entry_pvs(BusRt& b);
-    std::set<std::string> known_signals() const; // every signal name the buses will have
 
     config::IocConfig cfg_;
     rt::Clock& clock_;

@@ -157,7 +157,8 @@ void IocPlcs::make_pvs(const std::string& prefix, pv::Database& db) {
         };
         pvs_.push_back(v);
     }
-    last_faults_.assign(sources_.size(), std::string());
+    seen_faults_.assign(sources_.size(), 0);
+    last_fault_.assign(sources_.size(), std::string());
 }
 
 void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, const EcResolver& ec,
@@ -206,12 +207,16 @@ void IocPlcs::publish() {
             if (get_value(*v.ena_cmd) != double(s.enabled)) set_value(db_, *v.ena_cmd, s.enabled, false);
         }
     }
+    // A fault is logged with its place when it differs from the last one logged (a PLC that
+    // faults every scan logs once); the place is looked up only when the fault count moved.
     for (std::size_t i = 0; i < sources_.size(); ++i) {
+        std::uint64_t faults = runtime_->status(i).faults;
+        if (faults == seen_faults_[i]) continue;
+        seen_faults_[i] = faults;
         std::string f = runtime_->fault(i);
-        if (f != last_faults_[i]) {
-            if (!f.empty()) LOG_ERR(lg, runtime_->prefix(i) << ": run-time fault at " << f);
-            last_faults_[i] = f;
-        }
+        if (f.empty() || f == last_fault_[i]) continue;
+        last_fault_[i] = f;
+        LOG_ERR(lg, runtime_->prefix(i) << ": run-time fault at " << f);
     }
 }
 

@@ -73,7 +73,8 @@ private:
     std::unique_ptr<plc::PlcRuntime> runtime_;
     std::vector<Pvs> pvs_;
     pv::Database& db_;
-    std::vector<std::string> last_faults_;
+    std::vector<std::uint64_t> seen_faults_; // fault counts already looked at, per PLC
+    std::vector<std::string> last_fault_;    // the last fault logged, per PLC
 };
 
 // Reads a general PLC entry or an axis file's `plc:` into a source (file text + code lines,

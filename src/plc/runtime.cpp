@@ -283,11 +283,8 @@ struct Builtins {
 
     // The axis with ECMC index `id` (the axis id), as its AxisGroup index; -1 if none.
     static int axis_index(PlcRuntime& rt, double id) noexcept {
-        if (!(id >= 0 && id < 1e6)) return -1;
-        int n = int(id);
-        for (std::size_t i = 0; i < rt.opt_.axes.size(); ++i)
-            if (rt.opt_.axes[i]->params().id == n) return int(i);
-        return -1;
+        if (!(id >= 0 && id < double(rt.axis_by_id_.size()))) return -1;
+        return rt.axis_by_id_[std::size_t(id)];
     }
     static double result(PlcRuntime& rt, uint32_t code) noexcept {
         rt.mc_error_ = code;
@@ -498,6 +495,12 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
 PlcRuntime::PlcRuntime(Options options) : opt_(std::move(options)), output_(256) {
     axis_plcs_.assign(opt_.axes.size(), nullptr);
     mc_.assign(opt_.axes.size(), McMemory{});
+    for (std::size_t i = 0; i < opt_.axes.size(); ++i) {
+        int id = opt_.axes[i]->params().id;
+        if (id < 0) continue;
+        if (std::size_t(id) >= axis_by_id_.size()) axis_by_id_.resize(std::size_t(id) + 1, -1);
+        axis_by_id_[std::size_t(id)] = int(i);
+    }
 }
 
 PlcRuntime::~PlcRuntime() = default;

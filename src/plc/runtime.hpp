@@ -32,7 +32,6 @@
 #include "registry/signal.hpp"
 #include "rt/engine.hpp"
 
-#include <array>
 #include <atomic>
 #include <deque>
 #include <functional>
@@ -133,6 +132,7 @@ private:
     Options opt_;
     std::vector<std::unique_ptr<Plc>> plcs_;
     std::vector<Plc*> axis_plcs_; // by AxisGroup index
+    std::vector<int> axis_by_id_; // axis id (mc_* first argument) -> AxisGroup index, -1 none
     std::deque<double> globals_cells_;
     std::map<std::string, double*> globals_;
     bool started_ = false; // every bus was OK once
