@@ -10,11 +10,14 @@ JOBS=${JOBS:-$(nproc)}
 
 # Debian packages the build, the tests and the demo need.
 BUILD_PKGS="g++ cmake ninja-build pkgconf libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libyaml-cpp-dev libtinyxml2-dev libmuparser-dev"
-TEST_PKGS="python3 python3-pytest python3-pyepics python3-numpy iproute2 procps clang-14 libclang-rt-14-dev"
+# The client command that the demo prints (pyepics imports only under Debian's /usr/bin/python3).
+DEMO_PKGS="python3 python3-pyepics"
+TEST_PKGS="$DEMO_PKGS python3-pytest python3-numpy iproute2 procps clang-14 libclang-rt-14-dev tshark"
 
 deps() {
     local want="$BUILD_PKGS"
     [ "${1:-}" = test ] && want="$want $TEST_PKGS"
+    [ "${1:-}" = demo ] && want="$want $DEMO_PKGS"
     local missing=""
     for p in $want; do
         dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
@@ -23,9 +26,23 @@ deps() {
         echo "== installing Debian packages:$missing"
         local SUDO=""
         [ "$(id -u)" = 0 ] || SUDO=sudo
+        # tshark asks whether non-root users may capture: no (the tests capture as root).
+        echo "wireshark-common wireshark-common/install-setuid boolean false" | $SUDO debconf-set-selections
         $SUDO apt-get update -qq
         DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing >/dev/null
     fi
+    ca_repeater_link
+}
+
+# EPICS libca (pyepics) runs `caRepeater` from PATH when no CA repeater holds UDP port
+# EPICS_CA_REPEATER_PORT (5065) and warns when there is none. As root, and when PATH has no
+# caRepeater yet, link /usr/local/bin/caRepeater to this tree's beamctl, which serves as one.
+ca_repeater_link() {
+    [ "$(id -u)" = 0 ] || return 0
+    command -v caRepeater >/dev/null 2>&1 && return 0
+    mkdir -p /usr/local/bin
+    ln -sfn "$ROOT/build/release/beamctl" /usr/local/bin/caRepeater
+    echo "== /usr/local/bin/caRepeater -> $ROOT/build/release/beamctl (the CA repeater libca starts)"
 }
 
 build() {
@@ -71,7 +88,7 @@ case "${1:-}" in
 deps) deps test ;;
 build) deps; build release ;;
 demo)
-    deps; build release
+    deps demo; build release
     export EPICS_CAS_SERVER_PORT=${EPICS_CAS_SERVER_PORT:-5064}
     echo "== demo beamline IOC: 25 simulated EtherCAT terminals, slit, sample stage, mirror, soft records,"
     echo "   and an RCP machine (beamctl rcp-sim examples/rcp/model.yaml) on the UDP bridge (Ctrl-C to stop)"
@@ -79,7 +96,10 @@ demo)
     echo "   /usr/bin/python3 -c \"import epics; print(epics.caget('DEMO:m0-Stat-OK', as_string=True), epics.caget('DEMO:RCP:sgDemo:Sine'))\""
     build/release/beamctl rcp-sim examples/rcp/model.yaml &
     sim=$!
-    trap 'kill $sim 2>/dev/null; wait $sim 2>/dev/null' EXIT INT TERM
+    # The CA repeater for the clients (exits at once, quietly, if one already serves the port).
+    build/release/beamctl ca-repeater >/dev/null &
+    rep=$!
+    trap 'kill $sim $rep 2>/dev/null; wait $sim $rep 2>/dev/null' EXIT INT TERM
     build/release/beamctl run examples/demo/ioc.yaml ;;
 unit) deps test; build release; unit ;;
 system) deps test; build release; shift; system "$@" ;;

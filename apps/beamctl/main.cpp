@@ -4,7 +4,9 @@
 //   softioc  serve EPICS database files over Channel Access (like EPICS softIoc)
 //   db       print the loaded database as .db text
 //   sim      run a simulated EtherCAT segment behind a UDP socket or on a network interface
+//   ca-repeater  the Channel Access repeater (also when invoked as `caRepeater`, EPICS's name)
 #include "ca/access_security.hpp"
+#include "ca/repeater.hpp"
 #include "ca/server.hpp"
 #include "core/error.hpp"
 #include "core/event_loop.hpp"
@@ -167,6 +169,9 @@ int run_sim(const std::string& file, const std::string& bind, int port, const st
 } // namespace
 
 int main(int argc, char** argv) {
+    // libca spawns `caRepeater` from PATH; a symlink of that name to beamctl serves it.
+    if (argc > 0 && std::filesystem::path(argv[0]).filename() == "caRepeater")
+        return ca::ca_repeater_main(argc, argv);
     CLI::App app{"beamctl: beamline control engine (EPICS Channel Access server, PV database)"};
     app.set_version_flag("--version", std::string("beamctl ") + BEAMCTL_VERSION);
     app.require_subcommand(1);
@@ -239,11 +244,19 @@ int main(int argc, char** argv) {
                      "With --iface: spin on the socket instead of sleeping (answers at once like hardware; keeps a CPU busy)")
         ->needs(sim_iface_opt);
 
+    int repeater_port = 0;
+    auto* repcmd = app.add_subcommand(
+        "ca-repeater", "Run the Channel Access repeater (EPICS caRepeater): fan CA server beacons out to this host's clients");
+    repcmd->add_option("--port", repeater_port, "UDP port (default: EPICS_CA_REPEATER_PORT, else 5065)")
+        ->check(CLI::Range(1, 65535));
+
     CLI11_PARSE(app, argc, argv);
     try {
         if (*softioc) return run_softioc(soft, acf);
         if (*plccheck) return run_plc_check(plco);
         if (*rcpcmd) return bridge::rcp::run_rcp_sim(rcp_model, rcpo);
+        if (*repcmd)
+            return ca::run_ca_repeater(repeater_port ? uint16_t(repeater_port) : ca::repeater_port_from_env());
         if (*simcmd) return run_sim(sim_file, sim_bind, sim_port, sim_iface, sim_busy_poll);
         if (*runcmd) {
             rt::MonotonicClock clock;

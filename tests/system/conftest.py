@@ -487,3 +487,63 @@ def demo(tmp_path):
         srv.kill()
         forget_pvs("DEMO:")
         release_port(port)
+
+
+# ---------------------------------------------------------------------------------------------
+# Network namespaces (tests across simulated hosts and raw links over veth pairs)
+# ---------------------------------------------------------------------------------------------
+def probe_netns():
+    """None if network namespaces joined by veth pairs can be made here, else why not. Really
+    does it: adds a namespace, runs a command in it (`ip netns exec` needs "/" to be a mount
+    point, which it is not in a plain chroot), moves one end of a veth pair into it, and removes
+    everything again."""
+    if shutil.which("ip") is None:
+        return "the 'ip' command is not installed (Debian package iproute2)"
+    tag = "%06x" % random.randrange(1 << 24)
+    ns, veth = f"bcprobe{tag}", f"bcprobe{tag}"
+
+    def ip(*args):
+        return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=20)
+
+    def failed(what, r):
+        return f"{what}: " + (r.stderr.strip() or f"exit code {r.returncode}")
+
+    made_ns = made_link = False
+    try:
+        r = ip("netns", "add", ns)
+        if r.returncode != 0:
+            return failed("ip netns add", r)
+        made_ns = True
+        r = ip("netns", "exec", ns, "ip", "link", "set", "lo", "up")
+        if r.returncode != 0:
+            return failed("ip netns exec", r)
+        r = ip("link", "add", veth, "type", "veth", "peer", "name", "eth0", "netns", ns)
+        if r.returncode != 0:
+            return failed("ip link add type veth", r)
+        made_link = True
+        return None
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return f"cannot run ip: {e}"
+    finally:
+        try:
+            if made_link:
+                ip("link", "del", veth)
+            if made_ns:
+                ip("netns", "del", ns)
+        except (OSError, subprocess.TimeoutExpired):
+            pass
+
+
+@pytest.fixture(scope="session")
+def netns_unavailable():
+    """Why network namespaces with veth pairs cannot be made here (None if they can); probed once."""
+    return probe_netns()
+
+
+@pytest.fixture
+def require_netns(netns_unavailable):
+    """Skips the test, saying why, where network namespaces and veth pairs cannot be made (a chroot
+    whose "/" is not a mount point, no CAP_SYS_ADMIN/CAP_NET_ADMIN, no iproute2)."""
+    if netns_unavailable:
+        pytest.skip(f"network namespaces cannot be made here ({netns_unavailable}); "
+                    "this test needs root or CAP_SYS_ADMIN + CAP_NET_ADMIN, outside a plain chroot")

@@ -196,7 +196,12 @@ def test_timestamps(srv, rawc):
     egu = rawc.create(srv.pv("ts.EGU"))
     _m, dv = rawc.read(val, dtype=raw.TIME_DOUBLE)
     _m, de = rawc.read(egu, dtype=raw.TIME_STRING)
-    assert abs(dv["secs"] + raw.EPICS_EPOCH + dv["nsec"] * 1e-9 - md2["timestamp"]) < 1e-6
+    # pyepics passes the stamp on as integers and as a float of whole microseconds
+    # (posix secs + 1e-6 * int(nsec / 1000)); compare exactly, in integers (the double resolves
+    # 0.24 us at today's epoch, so the microseconds round back without error)
+    assert (md2["posixseconds"], md2["nanoseconds"]) == (dv["secs"] + raw.EPICS_EPOCH, dv["nsec"])
+    frac_us = round((md2["timestamp"] - md2["posixseconds"]) * 1e6)
+    assert frac_us == dv["nsec"] // 1000, (md2, dv)
     assert 0 <= dv["nsec"] < 1_000_000_000
     assert (de["secs"], de["nsec"]) == (dv["secs"], dv["nsec"])
     assert de["value"] == ["s"]

@@ -1,8 +1,8 @@
 """The raw Ethernet link end to end: `beamctl sim --iface` serves a simulated segment on one end of
 a veth pair inside a network namespace, `beamctl run` drives it through `link: {type: raw}` on the
 other end, and the bus is checked through PVs (status, a DO->DI wire) and on the wire (tshark
-decodes the master's LRW and FPRD datagrams). Skipped where namespaces or veth pairs cannot be
-created (needs root or CAP_SYS_ADMIN + CAP_NET_ADMIN + CAP_NET_RAW)."""
+decodes the master's LRW and FPRD datagrams). Skipped, with the reason, where namespaces or veth
+pairs cannot be made (needs root or CAP_SYS_ADMIN + CAP_NET_ADMIN + CAP_NET_RAW, outside a chroot)."""
 
 import random
 import shutil
@@ -82,7 +82,7 @@ class SimServer(IocServer):
 
 
 @pytest.fixture
-def veth_bus(tmp_path, prefix):
+def veth_bus(require_netns, tmp_path, prefix):
     require_binary()
     net = VethPair()
     sim = run = None
