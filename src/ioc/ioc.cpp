@@ -41,6 +41,27 @@ double to_double(uint64_t raw, uint8_t bits, bool sign) {
     return double(raw);
 }
 
+// A counter as a 32-bit LONG PV value: saturates instead of wrapping.
+double clamp_long(uint64_t v) { return double(std::min<uint64_t>(v, 0x7FFFFFFF)); }
+
+// Sets an array record's elements (and NORD) and processes it, if they differ from `v`.
+void set_array_if_changed(pv::Database& db, pv::Record& r, const double* v, uint32_t n) {
+    const pv::FieldDesc* f = r.type().find("VAL");
+    pv::Elements e = r.elements(*f);
+    n = std::min(n, e.capacity);
+    bool same = !r.udf && e.count == n;
+    for (uint32_t i = 0; same && i < n; ++i) {
+        double cur = 0;
+        pv::get_element(r, *f, e, i, pv::Prim::Double, &cur);
+        same = cur == v[i];
+    }
+    if (same) return;
+    for (uint32_t i = 0; i < n; ++i) pv::put_element(r, *f, e, i, pv::Prim::Double, &v[i]);
+    r.set_count(*f, n);
+    r.udf = 0;
+    db.process(r);
+}
+
 } // namespace
 
 std::string entry_pv_suffix(const std::string& e) {
@@ -171,6 +192,15 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
     li(m + "-WkcErrors", "Cycles with a wrong working counter");
     f.records.push_back(record("ai", m + "-ThdLatMax", {{"DESC", "RT wake-up latency max"}, {"EGU", "us"}, {"PREC", "1"}}));
     f.records.push_back(record("ai", m + "-ThdExeMax", {{"DESC", "RT cycle execution time max"}, {"EGU", "us"}, {"PREC", "1"}}));
+    f.records.push_back(record("ai", m + "-ThdLatMean", {{"DESC", "RT wake-up latency mean"}, {"EGU", "us"}, {"PREC", "1"}}));
+    std::string nb = std::to_string(rt::kLatencyBuckets);
+    f.records.push_back(record("waveform", m + "-ThdLatHist", {{"DESC", "RT wake-up latency: cycles per bucket"}, {"FTVL", "LONG"}, {"NELM", nb}}));
+    f.records.push_back(record("waveform", m + "-ThdLatHistEdges",
+                               {{"DESC", "Lower edges of the ThdLatHist buckets"}, {"FTVL", "DOUBLE"}, {"NELM", nb}, {"EGU", "us"}}));
+    li(m + "-ThdCycles", "RT cycles measured since the reset");
+    li(m + "-ThdMissedCycles", "RT cycle slots missed since the reset");
+    f.records.push_back(record("bo", m + "-ThdStat-Reset",
+                               {{"DESC", "Clear RT max times, counters, histogram"}, {"ZNAM", "Done"}, {"ONAM", "Reset"}}));
     for (const auto& s : bc.slaves) {
         char sp[16];
         std::snprintf(sp, sizeof sp, "s%03d", s.position);
@@ -222,6 +252,18 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
     b.wkc_errors = find(m + "-WkcErrors");
     b.lat_max = find(m + "-ThdLatMax");
     b.exe_max = find(m + "-ThdExeMax");
+    b.lat_mean = find(m + "-ThdLatMean");
+    b.lat_hist = find(m + "-ThdLatHist");
+    b.lat_edges = find(m + "-ThdLatHistEdges");
+    b.stat_cycles = find(m + "-ThdCycles");
+    b.missed_cycles = find(m + "-ThdMissedCycles");
+    b.stat_reset = find(m + "-ThdStat-Reset");
+    rt::Engine* engine = engine_.get();
+    b.stat_reset->put_hook = [engine](pv::Record& r, const pv::FieldDesc& fd) {
+        // A put of 1 asks the RT thread for a reset; publish() puts 0 back once it is done.
+        if (std::string_view(fd.name) == "VAL" && get_value(r) != 0) engine->request_reset();
+        return pv::PutStatus::Ok;
+    };
     for (const auto& s : bc.slaves) {
         char sp[16];
         std::snprintf(sp, sizeof sp, "s%03d", s.position);
@@ -330,6 +372,17 @@ void Ioc::publish() {
         upd(b.wkc_errors, double(s.wkc_errors));
         upd(b.lat_max, double(es.latency_max_ns) / 1000.0);
         upd(b.exe_max, double(es.exec_max_ns) / 1000.0);
+        upd(b.lat_mean, es.latency_mean_ns() / 1000.0);
+        upd(b.stat_cycles, clamp_long(es.latency_samples));
+        upd(b.missed_cycles, clamp_long(es.missed));
+        double hist[rt::kLatencyBuckets], edges[rt::kLatencyBuckets];
+        for (std::size_t i = 0; i < rt::kLatencyBuckets; ++i) {
+            hist[i] = clamp_long(es.latency_hist[i]);
+            edges[i] = rt::kLatencyEdgesUs[i];
+        }
+        set_array_if_changed(db_, *b.lat_hist, hist, rt::kLatencyBuckets);
+        set_array_if_changed(db_, *b.lat_edges, edges, rt::kLatencyBuckets);
+        if (get_value(*b.stat_reset) != 0 && es.resets >= engine_->resets_requested()) set_value(db_, *b.stat_reset, 0, false);
         for (std::size_t i = 0; i < b.slave_status.size() && i < s.slave_al.size(); ++i) {
             bool online = s.slave_online[i];
             upd(b.slave_status[i].first, online ? 1 : 0);
@@ -351,7 +404,7 @@ int Ioc::run() {
     if (!brought_up_) bring_up();
     EventLoop loop;
     ca::ServerConfig sc = ca::ServerConfig::from_env();
-    if (cfg_.ca_port) sc.port = *cfg_.ca_port;
+    if (cfg_.ca_port) sc.set_port(*cfg_.ca_port, cfg_.path + ": ca: port");
     ca::Server server(loop, db_, sc);
     if (!cfg_.acf.empty()) server.set_access_security(ca::AccessSecurity::load_file(cfg_.acf));
     server.start();

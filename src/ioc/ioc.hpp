@@ -66,6 +66,9 @@ private:
         pv::Record *stat_ok = nullptr, *link_up = nullptr, *slave_count = nullptr, *wc = nullptr,
                    *wc_expected = nullptr, *wc_complete = nullptr, *missed = nullptr, *late = nullptr,
                    *wkc_errors = nullptr, *lat_max = nullptr, *exe_max = nullptr;
+        // Engine statistics (the engine's, served under every bus like ecmc's thread PVs).
+        pv::Record *lat_mean = nullptr, *lat_hist = nullptr, *lat_edges = nullptr, *stat_cycles = nullptr,
+                   *missed_cycles = nullptr, *stat_reset = nullptr;
         std::vector<std::pair<pv::Record*, pv::Record*>> slave_status; // Online, Operational
     };
     void make_bus_pvs(BusRt& b, const config::BusConfig& bc);

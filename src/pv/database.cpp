@@ -374,11 +374,18 @@ PutStatus Database::do_put(const Address& a, Prim t, const void* data, uint32_t 
         s.data = scratch.data();
         for (uint32_t k = 0; k < m; ++k)
             if (!put_element(r, f, s, k, t, src + k * esz)) return fail(PutStatus::BadValue);
+        std::vector<char> old(scratch.size()); // a refused put changes nothing
+        std::memcpy(old.data(), e.data, old.size());
+        uint32_t old_count = e.count;
         std::memcpy(e.data, scratch.data(), scratch.size());
         r.set_count(f, m);
         PutStatus st = r.special(f);
         if (st == PutStatus::Ok && r.put_hook) st = r.put_hook(r, f);
-        if (st != PutStatus::Ok) return fail(st);
+        if (st != PutStatus::Ok) {
+            std::memcpy(e.data, old.data(), old.size());
+            r.set_count(f, old_count);
+            return fail(st);
+        }
     } else {
         Elements e = r.elements(f);
         char old[64];
