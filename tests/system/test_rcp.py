@@ -3,9 +3,12 @@ an independent packet writer written here from the spec (struct layouts, not bea
 and `beamctl rcp-sim examples/rcp/model.yaml`. PVs appear from beacons with the right types
 and counts, values stream, writes reach the machine with the spec's byte layout, beacon changes
 add and retire PVs, silence raises INVALID/COMM and data clears it, malformed packets change no
-PV, and the MOTOR object is a motor record that pyepics moves, stops and keeps in its limits."""
+PV, and the MOTOR object is a motor record that pyepics moves, stops and keeps in its limits.
+With rcp-sim stopped (offline) puts fail and change nothing, motor moves end in alarm and are
+never replayed, and when it runs again the setpoints show the machine's values."""
 
 import contextlib
+import ctypes
 import socket
 import struct
 import subprocess
@@ -196,10 +199,13 @@ def test_packets_from_an_independent_writer(tmp_path, prefix):
         rcp.close()
 
 
+MODEL = REPO_ROOT / "examples" / "rcp" / "model.yaml"
+
+
 @contextlib.contextmanager
-def rcp_sim(rcp_port, extra=()):
-    sim_port = free_udp_port()
-    proc = subprocess.Popen([str(BEAMCTL), "rcp-sim", str(REPO_ROOT / "examples" / "rcp" / "model.yaml"),
+def rcp_sim(rcp_port, extra=(), sim_port=None, model=MODEL):
+    sim_port = sim_port or free_udp_port()
+    proc = subprocess.Popen([str(BEAMCTL), "rcp-sim", str(model),
                              "--ioc-port", str(rcp_port), "--port", str(sim_port), *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL)
     try:
@@ -253,3 +259,130 @@ def test_rcp_sim_values_writes_and_motor(tmp_path, prefix):
         # diagnostics
         assert ca.get(connect(p + "RxCount")) > 100
         assert ca.get(connect(p + "Online")) == 1
+
+
+ECA_NORMAL = 1
+INVALID, COMM = 3, 9  # severity, status
+
+
+def put_callback_status(name, value, timeout=5.0):
+    """A CA put-callback of one double through pyepics' libca; returns the ECA status the server
+    completed it with (pyepics' own put(wait=True) does not report it)."""
+    chid = connect(name)
+    done = {}
+
+    def on_done(args):
+        done["status"] = args.status
+
+    cb = epics.dbr.make_callback(on_done, epics.dbr.event_handler_args)
+    value_buf = (ctypes.c_double * 1)(value)
+    usr = ctypes.py_object(done)
+    ret = ca.libca.ca_array_put_callback(epics.dbr.DOUBLE, 1, chid, value_buf, cb, usr)
+    assert ret == ECA_NORMAL, ret
+    ca.flush_io()
+    assert wait_for(lambda: "status" in done, timeout=timeout), f"no put-callback from {name}"
+    return done["status"]
+
+
+def alarm(name):
+    """(severity, status) read now."""
+    chid = connect(name)
+    md = ca.get_with_metadata(chid, ftype=ca.promote_type(chid, use_time=True))
+    return md["severity"], md["status"]
+
+
+def test_rcp_sim_offline_refuses_writes_and_setpoints_follow_it_back(tmp_path, prefix):
+    with bridge_ioc(tmp_path, prefix, timeout_s=1.0) as (srv, rcp_port):
+        p = f"{prefix}RCP:sgDemo:"
+        sim_port = free_udp_port()  # the restarted machine listens where it did
+        with rcp_sim(rcp_port, sim_port=sim_port):
+            assert wait_for(lambda: exists(p + "Stage"), timeout=3)
+            assert epics.caput(p + "Setpoint", 2.0, wait=True) == 1
+            assert wait_for(lambda: ca.get(connect(p + "Setpoint_RBV")) == 2.0, timeout=2)
+            m = epics.Motor(p + "Stage", timeout=5)
+            m.put("VELO", 10.0, wait=True)
+            assert m.move(5.0, wait=True, timeout=20) == 0
+            assert abs(m.get("RBV") - 5.0) < 0.01
+            # a long move (VELO 1: 35 s) in progress when the machine stops
+            m.put("VELO", 1.0, wait=True)
+            m.move(40.0)
+            assert wait_for(lambda: m.get("MOVN") == 1, timeout=3)
+            time.sleep(0.5)
+        # rcp-sim stopped: within timeout_s every PV is INVALID/COMM; the move in progress ended
+        # (DMOV 1) in alarm, its target dropped (VAL = RBV), the MSTA problem bit set
+        assert wait_for(lambda: alarm(p + "Setpoint") == (INVALID, COMM), timeout=4)
+        assert wait_for(lambda: m.get("DMOV") == 1, timeout=2)
+        assert alarm(p + "Stage") == (INVALID, COMM)
+        stopped = m.get("RBV")
+        assert 5.0 < stopped < 40.0
+        assert abs(m.get("VAL") - stopped) < 1e-3
+        assert int(m.get("MSTA")) & (1 << 9), "MSTA problem: the move failed"
+
+        # puts fail: the put-callback reports an error, the value does not change
+        assert put_callback_status(p + "Setpoint", 7.0) != ECA_NORMAL
+        epics.caput(p + "Setpoint", 7.0, wait=True)
+        epics.caput(p + "Setpoint", 8.0)
+        time.sleep(0.2)
+        assert ca.get(connect(p + "Setpoint")) == 2.0
+        assert alarm(p + "Setpoint") == (INVALID, COMM)
+        assert put_callback_status(p + "Mode", 2) != ECA_NORMAL
+        assert ca.get(connect(p + "Mode")) == 0
+
+        # a motor move while offline fails: it ends at once in alarm and keeps no target
+        m.move(-20.0, wait=True, timeout=5)
+        assert m.get("DMOV") == 1
+        assert abs(m.get("VAL") - stopped) < 1e-3
+        assert alarm(p + "Stage") == (INVALID, COMM)
+
+        # the machine restarts (its initial values: Setpoint 0, Stage at 0)
+        with rcp_sim(rcp_port, sim_port=sim_port):
+            assert wait_for(lambda: alarm(p + "Setpoint") == (0, 0), timeout=4)
+            assert wait_for(lambda: alarm(p + "Stage")[0] == 0, timeout=2)
+            sp, rbv = connect(p + "Setpoint"), connect(p + "Setpoint_RBV")
+            assert wait_for(lambda: ca.get(sp) == ca.get(rbv),
+                            timeout=2)
+            assert ca.get(sp) == 0.0
+            assert abs(m.get("VAL") - m.get("RBV")) < 1e-3
+            # nothing refused or interrupted is sent now: the machine stays where it started
+            time.sleep(1.5)
+            assert ca.get(rbv) == 0.0
+            assert abs(m.get("RBV")) < 1e-3
+            assert m.get("DMOV") == 1
+            assert ca.get(connect(p + "Mode_RBV")) == 0
+            # and writes work again
+            assert put_callback_status(p + "Setpoint", 1.5) == ECA_NORMAL
+            assert wait_for(lambda: ca.get(rbv) == 1.5, timeout=2)
+            assert m.move(1.0, wait=True, timeout=20) == 0
+            assert abs(m.get("RBV") - 1.0) < 0.01
+
+
+def test_rcp_sim_data_before_its_beacon_is_not_malformed(tmp_path, prefix):
+    """rcp-sim runs before the IOC (as in the demo): the IOC gets its data before a beacon. That
+    is counted in DataBeforeBeacon, not as malformed, and not logged at warn."""
+    model = tmp_path / "model.yaml"
+    text = MODEL.read_text()
+    assert "beacon_period_s: 1\n" in text
+    model.write_text(text.replace("beacon_period_s: 1\n", "beacon_period_s: 3\n"))
+    port = acquire_port()
+    rcp_port = free_udp_port()
+    with rcp_sim(rcp_port, model=model):  # its first beacon goes unheard; the next is 3 s later
+        cfg = tmp_path / "ioc.yaml"
+        cfg.write_text(f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}\n'
+                       f'bridges:\n  rcp: {{listen: 127.0.0.1, port: {rcp_port}, prefix: "{prefix}RCP:"}}\n')
+        srv = RunServer(tmp_path, cfg, port).start()
+        try:
+            p = f"{prefix}RCP:"
+            assert ca.get(connect(p + "Applications")) == 0
+            assert wait_for(lambda: exists(p + "sgDemo:Stage"), timeout=5)
+            time.sleep(1.1)  # the counters are published once a second
+            assert ca.get(connect(p + "DataBeforeBeacon")) >= 50  # 100 Hz for about 2 s
+            for reason in ("UnknownApplication", "UnknownObject", "TypeMismatch"):
+                assert ca.get(connect(p + "Malformed-" + reason)) == 0, reason
+            assert ca.get(connect(p + "sgDemo:Online")) == 1
+            assert "malformed" not in srv.stderr()
+            assert "before any beacon" not in srv.stderr()  # debug only
+        finally:
+            srv.stop()
+            srv.kill()
+            forget_pvs(prefix)
+            release_port(port)

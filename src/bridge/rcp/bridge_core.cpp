@@ -127,6 +127,8 @@ struct BridgeCore::Impl {
         bool waveform = false;
         bool valued = false;     // a value arrived (input main, output readback, motor)
         bool out_valued = false; // the output record has a value (written or initialised)
+        // Back from offline: the next readback becomes the setpoint (output VAL, motor VAL).
+        bool take_readback = false;
         pv::Record *main = nullptr, *rb = nullptr, *pos_err = nullptr, *err_code = nullptr;
         const pv::FieldDesc *main_val = nullptr, *rb_val = nullptr, *pos_err_val = nullptr,
                             *err_code_val = nullptr;
@@ -138,7 +140,7 @@ struct BridgeCore::Impl {
     // Diagnostic records of one application or of the whole bridge.
     struct Diag {
         pv::Record *rx = nullptr, *tx = nullptr, *age = nullptr, *online = nullptr,
-                   *count = nullptr;
+                   *count = nullptr, *before_beacon = nullptr;
         std::array<pv::Record*, kMalformedReasons> malformed{};
         std::vector<pv::DbRecord> defs;
     };
@@ -180,7 +182,9 @@ struct BridgeCore::Impl {
     Diag global;
     Counters totals;
     std::array<LogLimit, kMalformedReasons> limits;
-    LogLimit send_limit;
+    LogLimit send_limit, refused_limit, early_limit;
+    // Data before a beacon: since when it has gone on (-1: not now), and the latest [s].
+    double early_first_s = -1, early_last_s = -1;
     // Scratch space of the packet path (no allocation per packet).
     Beacon beacon;
     DataPacket data;
@@ -399,6 +403,7 @@ struct BridgeCore::Impl {
         } else {
             d.defs.push_back(
                 make_record("longin", base + "Applications", {{"DESC", "RCP applications"}}));
+            counter("DataBeforeBeacon", "Data before a beacon (ignored)");
         }
         for (std::size_t m = 0; m < kMalformedReasons; ++m)
             if (has_pv(Malformed(m), per_app))
@@ -430,6 +435,7 @@ struct BridgeCore::Impl {
             d.count = db.find(base + "Objects");
         } else {
             d.count = db.find(base + "Applications");
+            d.before_beacon = db.find(base + "DataBeforeBeacon");
         }
         for (std::size_t m = 0; m < kMalformedReasons; ++m)
             if (has_pv(Malformed(m), per_app))
@@ -509,6 +515,18 @@ struct BridgeCore::Impl {
 
     pv::PutStatus on_put(Object& o, pv::Record& r, const pv::FieldDesc& f) {
         if (&f != o.main_val) return pv::PutStatus::Ok;
+        if (!o.app->online) {
+            if (now >= refused_limit.next_s) {
+                LOG_WARN(lg, "put to " << o.pv << " refused: application " << o.app->name
+                                       << " is offline (" << refused_limit.suppressed
+                                       << " more refused since the last report)");
+                refused_limit.next_s = now + 1;
+                refused_limit.suppressed = 0;
+            } else {
+                ++refused_limit.suppressed;
+            }
+            return pv::PutStatus::Failed;
+        }
         uint16_t n = 1;
         pv::Elements e = r.elements(f);
         if (o.waveform) {
@@ -534,7 +552,7 @@ struct BridgeCore::Impl {
         }
         if (!send_packet(*o.app, o.write_to)) return pv::PutStatus::Failed;
         o.out_valued = true;
-        if (!o.app->online) r.set_sevr(pv::kStatComm, pv::kInvalid);
+        o.take_readback = false; // the operator's value, sent, wins over an older readback
         return pv::PutStatus::Ok;
     }
 
@@ -543,7 +561,9 @@ struct BridgeCore::Impl {
                     DataType::Float64, kMotorValueCount,
                     o.desc.name,       std::span<const double>(c.data(), c.size())};
         if (!write_data(tx, o.app->model_time, std::span<const DataEntry>(&d, 1))) return false;
-        return send_packet(*o.app, o.write_to);
+        if (!send_packet(*o.app, o.write_to)) return false;
+        if (o.app->online) o.take_readback = false; // the record has a new target
+        return true;
     }
 
     // ---------------------------------------------------------------- malformed input
@@ -625,6 +645,7 @@ struct BridgeCore::Impl {
         }
         db.init_records();
         LOG_INFO(lg, "application " << name << " announced from " << from.str());
+        early_first_s = -1; // data before a beacon: explained, maybe
         apps.push_back(std::move(a));
         App* app = apps.back().get();
         set_if_changed(global.count, double(apps.size()));
@@ -817,7 +838,36 @@ struct BridgeCore::Impl {
                     fault = f;
                 }
             }
+        if (!fault_app) return data_before_beacon(from);
         report(fault_app, fault, from);
+    }
+
+    // Well-formed data from an address no application has announced itself from: usually the
+    // machine started before the IOC (or the IOC restarted) and its next beacon is on the way.
+    // Counted, ignored, logged at debug; at warn once it has gone on for timeout_s (beacons sent
+    // elsewhere?).
+    void data_before_beacon(const Endpoint& from) {
+        totals.before_beacon++;
+        if (early_first_s < 0 || now - early_last_s > cfg.timeout_s) early_first_s = now;
+        early_last_s = now;
+        if (now < early_limit.next_s) {
+            ++early_limit.suppressed;
+            return;
+        }
+        double since = now - early_first_s;
+        log::Level level = since >= cfg.timeout_s ? log::Level::warn : log::Level::debug;
+        if (lg.enabled(level)) {
+            SB m;
+            m << "data from " << from.str() << " before any beacon from that address: ignored";
+            if (level == log::Level::warn)
+                m << " for " << since << " s (are its beacons sent to udp port " << cfg.port
+                  << "?)";
+            if (early_limit.suppressed)
+                m << " (" << early_limit.suppressed << " more since the last report)";
+            lg.write(level, m.str());
+        }
+        early_limit.next_s = now + 1;
+        early_limit.suppressed = 0;
     }
 
     void learn(Object& o, uint16_t count) {
@@ -856,9 +906,12 @@ struct BridgeCore::Impl {
             case ObjectType::LO:
                 set_values(*o.rb, o.rb_val, o.waveform, e.values, binary);
                 o.valued = true;
-                if (!o.out_valued) { // bumpless: the setpoint starts at the RCP's value
+                // Bumpless: the setpoint starts at the RCP's value, and takes it again once
+                // after the application was offline (it may have restarted). Nothing is sent.
+                if (!o.out_valued || o.take_readback) {
                     set_values(*o.main, o.main_val, o.waveform, e.values, binary);
                     o.out_valued = true;
+                    o.take_readback = false;
                 }
                 break;
             case ObjectType::Motor: {
@@ -866,6 +919,16 @@ struct BridgeCore::Impl {
                 set_scalar(*o.pos_err, o.pos_err_val, e.values[3]);
                 set_scalar(*o.err_code, o.err_code_val, e.values[4]);
                 o.valued = true;
+                if (o.take_readback) {
+                    o.take_readback = false;
+                    // Back from offline and at rest: targets := readback (VAL = RBV), as when
+                    // the driver was attached. Nothing is sent.
+                    if (o.driver->phase() == RcpMotorDriver::Phase::Idle &&
+                        read_field(*o.main, "DMOV") == 1) {
+                        o.motor->set_driver(o.driver);
+                        break;
+                    }
+                }
                 if (changed) o.motor->poll();
                 break;
             }
@@ -881,6 +944,7 @@ struct BridgeCore::Impl {
 
     void go_offline_object(Object& o) {
         if (o.failed) return;
+        o.take_readback = is_output(o.desc.type) || o.driver != nullptr;
         if (o.driver) {
             o.driver->set_comm_error(true);
             o.motor->poll();
@@ -933,6 +997,7 @@ struct BridgeCore::Impl {
             set_if_changed(d.count, double(a->object_count));
         } else {
             set_if_changed(d.count, double(apps.size()));
+            set_if_changed(d.before_beacon, double(c.before_beacon));
         }
     }
 
@@ -972,8 +1037,10 @@ struct BridgeCore::Impl {
             if (a->assembling && now - a->assembly_start_s >= cfg.continuation_window_s)
                 apply_model(*a, true);
             if (a->online && now - a->last_rx_s >= cfg.timeout_s) go_offline(*a);
+            // Sent: the acknowledge time-out; offline: a refused command ends at once.
             for (auto& o : a->objects)
-                if (o && o->driver && o->driver->phase() == RcpMotorDriver::Phase::Sent)
+                if (o && o->driver &&
+                    (!a->online || o->driver->phase() == RcpMotorDriver::Phase::Sent))
                     o->motor->poll();
         }
         if (now >= next_diag_s) {

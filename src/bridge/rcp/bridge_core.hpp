@@ -13,11 +13,19 @@
 //   per application: $(P)APP:RxCount TxCount BeaconAge (ai), Online (bi), Objects (longin),
 //     Malformed-<Reason> (ai) for every reason of protocol.hpp but None, NotWritable and
 //     UnknownApplication.
-//   bridge-wide: $(P)RxCount TxCount (ai), Applications (longin), Malformed-<Reason> (ai, all
-//     but None and NotWritable).
+//   bridge-wide: $(P)RxCount TxCount DataBeforeBeacon (ai), Applications (longin),
+//     Malformed-<Reason> (ai, all but None and NotWritable).
 // Counters and BeaconAge are published once per second by tick(). A PV whose name would be
 // longer than 60 characters is left out (logged); an object whose PV names are taken or too long
 // gets no PVs (logged) and its data is accepted and ignored.
+//
+// Offline (no beacon and no data for timeout_s): every object PV is INVALID/COMM, puts to
+// outputs fail (PutStatus::Failed, nothing sent, the value unchanged), motor commands other
+// than stop are refused by the motor driver (motor_driver.hpp) and nothing is kept to be sent
+// later. Back online: each output (and each idle motor record) takes the machine's first
+// readback as its setpoint once, without sending it. Data from an address with no announced
+// application (a machine whose beacon has not been seen yet) is counted in before_beacon and
+// logged at debug (at warn once it has gone on for timeout_s).
 //
 // Threading: one thread (the IOC loop, owner of the Database) makes every call. The Database
 // must outlive the core; the destructor removes every record the core created.
@@ -75,6 +83,9 @@ public:
         uint64_t rx = 0; // packets accepted (bridge-wide: every datagram handed in)
         uint64_t tx = 0; // packets sent
         std::array<uint64_t, kMalformedReasons> malformed{};
+        // Bridge-wide only: well-formed data packets from an address that no application has
+        // announced itself from (yet): ignored, not malformed.
+        uint64_t before_beacon = 0;
     };
     struct AppInfo {
         std::string name;

@@ -9,13 +9,50 @@
 namespace beamctl::bridge::rcp {
 namespace {
 log::Logger lg("rcp.motor");
+
+const char* command_name(MotorCommand c) {
+    switch (c) {
+    case MotorCommand::None:
+        return "none";
+    case MotorCommand::MoveAbsolute:
+        return "move";
+    case MotorCommand::Stop:
+        return "stop";
+    case MotorCommand::HomeForward:
+        return "home forward";
+    case MotorCommand::HomeReverse:
+        return "home reverse";
+    case MotorCommand::JogForward:
+        return "jog forward";
+    case MotorCommand::JogReverse:
+        return "jog reverse";
+    case MotorCommand::Enable:
+        return "enable";
+    case MotorCommand::Disable:
+        return "disable";
+    }
+    return "?";
 }
+
+} // namespace
 
 RcpMotorDriver::RcpMotorDriver(std::string name, SendFn send, Clock clock, double ack_timeout_s)
     : name_(std::move(name))
     , send_(std::move(send))
     , clock_(std::move(clock))
     , ack_timeout_s_(ack_timeout_s) {}
+
+bool RcpMotorDriver::refused_offline(MotorCommand c) {
+    if (!comm_error_ || c == MotorCommand::Stop) return false;
+    LOG_WARN(lg, "motor " << name_ << ": " << command_name(c)
+                          << " refused: the application is offline (nothing sent)");
+    return true;
+}
+
+void RcpMotorDriver::set_comm_error(bool on) {
+    comm_error_ = on;
+    if (on) phase_ = Phase::Idle; // nothing more to wait for
+}
 
 bool RcpMotorDriver::send(MotorCommand c, double target, double velocity, double acceleration) {
     if (!send_) {
@@ -33,6 +70,7 @@ void RcpMotorDriver::begin_wait() {
 }
 
 void RcpMotorDriver::move(double target, double velocity, double acceleration) {
+    if (refused_offline(MotorCommand::MoveAbsolute)) return;
     last_dir_positive_ = target >= rb_[0];
     send(MotorCommand::MoveAbsolute, target, velocity, acceleration);
     begin_wait();
@@ -40,16 +78,18 @@ void RcpMotorDriver::move(double target, double velocity, double acceleration) {
 
 void RcpMotorDriver::move_velocity(double velocity, double acceleration) {
     if (velocity == 0) return stop(acceleration);
+    MotorCommand c = velocity > 0 ? MotorCommand::JogForward : MotorCommand::JogReverse;
+    if (refused_offline(c)) return;
     last_dir_positive_ = velocity > 0;
-    send(velocity > 0 ? MotorCommand::JogForward : MotorCommand::JogReverse, rb_[0],
-         std::fabs(velocity), acceleration);
+    send(c, rb_[0], std::fabs(velocity), acceleration);
     begin_wait();
 }
 
 void RcpMotorDriver::home(bool forward, double velocity, double acceleration) {
+    MotorCommand c = forward ? MotorCommand::HomeForward : MotorCommand::HomeReverse;
+    if (refused_offline(c)) return;
     last_dir_positive_ = forward;
-    send(forward ? MotorCommand::HomeForward : MotorCommand::HomeReverse, rb_[0],
-         std::fabs(velocity), acceleration);
+    send(c, rb_[0], std::fabs(velocity), acceleration);
     begin_wait();
 }
 
@@ -65,6 +105,7 @@ void RcpMotorDriver::set_position(double dial_position) {
 }
 
 void RcpMotorDriver::set_closed_loop(bool on) {
+    if (refused_offline(on ? MotorCommand::Enable : MotorCommand::Disable)) return;
     send(on ? MotorCommand::Enable : MotorCommand::Disable, rb_[0], 0, 0);
 }
 
@@ -95,7 +136,6 @@ void RcpMotorDriver::check_timeout(double now_s) {
 }
 
 pv::MotorDriver::Status RcpMotorDriver::status() {
-    if (comm_error_ && phase_ != Phase::Idle) phase_ = Phase::Idle; // nothing more to wait for
     if (clock_) check_timeout(clock_());
     Status s;
     s.position = rb_[0];
@@ -121,9 +161,10 @@ pv::MotorDriver::Status RcpMotorDriver::status() {
     s.enabled = bits_ & motor_status::kEnabled;
     s.home_switch = false;
     s.comm_error = comm_error_ || !has_readback_;
-    if (comm_error_) { // nothing is known: stopped as far as the record is concerned
+    if (comm_error_) { // nothing is known: stopped, and a motion in progress failed
         s.done = true;
         s.moving = false;
+        s.problem = true;
     }
     return s;
 }

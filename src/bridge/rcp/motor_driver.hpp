@@ -11,9 +11,13 @@
 // an RCP that only sends on change), the driver falls back to Idle once ack_timeout_s has passed
 // since the command and the latest readback says done=1. While Sent, stale problem bits are not
 // reported (problem=false) so an old error cannot end a new move. Stop and enable/disable do not
-// start a new wait when the motor is idle (so STOP on a motor at rest never drops DMOV). While
-// the application is silent (set_comm_error) status() says done, not moving, comm_error: a
-// waiting put-callback completes and the record shows INVALID/COMM.
+// start a new wait when the motor is idle (so STOP on a motor at rest never drops DMOV).
+// Offline (set_comm_error(true): the application timed out): any wait ends, and status() says
+// done, not moving, problem and comm_error, so the record ends a motion in progress at once in
+// INVALID/COMM with its target set to the readback and no retries. Move, jog, home and
+// enable/disable are refused while offline (logged, nothing sent, nothing kept to send later),
+// so a move ends like an interrupted one at the record's next poll; only stop is still sent (it
+// can only make a machine safer). Nothing is ever re-sent when the application comes back.
 // set_position has no command in the protocol: it is refused (logged, nothing sent, the
 // readback unchanged).
 //
@@ -54,8 +58,8 @@ public:
     // Bridge side: a readback entry's five values arrived at now_s [s]. True if the values or
     // the phase changed (the motor record should poll).
     bool on_readback(const double* values, double now_s);
-    // The application went silent (true) or came back (false): status().comm_error.
-    void set_comm_error(bool on) { comm_error_ = on; }
+    // The application went offline (true) or came back (false); see the top of this file.
+    void set_comm_error(bool on);
     // No more sends (the object is retired); later commands are dropped.
     void detach() { send_ = nullptr; }
 
@@ -67,7 +71,8 @@ public:
 
 private:
     bool send(MotorCommand c, double target, double velocity, double acceleration);
-    void begin_wait(); // a motion command was sent
+    bool refused_offline(MotorCommand c); // true (logged) if c may not be sent now
+    void begin_wait();                    // a motion command was sent
     void check_timeout(double now_s);
 
     std::string name_;

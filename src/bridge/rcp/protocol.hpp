@@ -94,7 +94,8 @@ enum class Malformed : uint8_t {
     Truncated,          // a record/entry header runs past the packet: no terminating id 0
     DuplicateObject,    // an object id or name twice in one beacon (or beacon + continuation)
     BadMotor,           // MOTOR object not float64, or a MOTOR entry with count != 5
-    UnknownApplication, // data from an address without a (matching) announced application
+    UnknownApplication, // a beacon refused: name used by another address, or too many
+                        // applications (data before any beacon is counted apart, not here)
     UnknownObject,      // data entry for an id the application's beacon does not list
     TypeMismatch,       // entry object/data type differs from the beacon's
     NameMismatch,       // entry name differs from the beacon's name for that id

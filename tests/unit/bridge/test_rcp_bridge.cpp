@@ -356,14 +356,19 @@ TEST(RcpBridge, MalformedInputNeverChangesAPv) {
     wrong[8] = 3;
     h.feed(wrong);
     EXPECT_EQ(app_count(Malformed::WrongVersion), 1u);
-    // From an address without an application.
+    // From an address without an application: data before its beacon, not malformed.
     h.feed(good, Endpoint{0x0A000063, 5000});
     unchanged("unknown source");
+    EXPECT_EQ(h.core->totals().malformed[size_t(Malformed::UnknownApplication)], 0u);
+    EXPECT_EQ(h.core->totals().before_beacon, 1u);
+    // A beacon refused (its name is taken by another address) is.
+    h.feed(beacon("app", standard()), Endpoint{0x0A000063, 5000});
     EXPECT_EQ(h.core->totals().malformed[size_t(Malformed::UnknownApplication)], 1u);
     h.advance(1);
     EXPECT_EQ(h.get("T:app:Malformed-TypeMismatch"), 3);
     EXPECT_EQ(h.get("T:Malformed-TypeMismatch"), 3);
     EXPECT_EQ(h.get("T:Malformed-UnknownApplication"), 1);
+    EXPECT_EQ(h.get("T:DataBeforeBeacon"), 1);
     EXPECT_FALSE(h.exists("T:app:Malformed-UnknownApplication"))
         << "never attributed to an application";
     EXPECT_EQ(h.alarm("T:app:Temp"), "NO_ALARM/NO_ALARM");
@@ -484,9 +489,9 @@ TEST(RcpBridge, SilenceMakesEveryPvInvalidCommUntilTheNextPacket) {
     EXPECT_EQ(h.get("T:app:Online"), 0);
     EXPECT_FALSE(h.core->applications()[0].online);
     EXPECT_EQ(h.alarm("T:app:RxCount"), "NO_ALARM/NO_ALARM") << "diagnostics describe the link";
-    // Writes still go out, and the setpoint keeps the alarm.
-    ASSERT_EQ(h.put("T:app:Set", 5), pv::PutStatus::Ok);
-    EXPECT_EQ(h.sent.size(), 1u);
+    // Writes are refused (test_rcp_offline.cpp), and the setpoint keeps the alarm.
+    EXPECT_EQ(h.put("T:app:Set", 5), pv::PutStatus::Failed);
+    EXPECT_TRUE(h.sent.empty());
     EXPECT_EQ(h.alarm("T:app:Set"), "INVALID/COMM");
     h.advance(0.1);
     // The next packet clears it; objects that never had a value go back to UDF.

@@ -1,6 +1,7 @@
 // The bridge against the rcp-sim model of examples/rcp/model.yaml, packets passed in memory in
 // virtual time: the demo's PVs, a setpoint driving the plant, the motor record moving, homing
-// and refused by the model's soft limit, and the model falling silent.
+// and refused by the model's soft limit, the model falling silent, and, while it is silent,
+// nothing reaching it; restarted, its values become the setpoints.
 #include "rcp_harness.hpp"
 
 #include "bridge/rcp/model.hpp"
@@ -142,4 +143,46 @@ TEST_F(Loop, ASilentModelTurnsItsPvsInvalidAndComesBack) {
     run(0.05);
     EXPECT_EQ(h.alarm("T:sgDemo:Sine"), "NO_ALARM/NO_ALARM");
     EXPECT_EQ(h.alarm("T:sgDemo:Stage"), "NO_ALARM/NO_ALARM");
+}
+
+TEST_F(Loop, OfflineNothingReachesTheModelAndARestartedModelsValuesBecomeTheSetpoints) {
+    ASSERT_EQ(h.put("T:sgDemo:Setpoint", 2.0), pv::PutStatus::Ok);
+    ASSERT_EQ(h.put("T:sgDemo:Stage.VELO", 5), pv::PutStatus::Ok);
+    ASSERT_EQ(h.put("T:sgDemo:Stage", 5), pv::PutStatus::Ok);
+    run(3);
+    ASSERT_EQ(h.get("T:sgDemo:Setpoint_RBV"), 2.0);
+    ASSERT_NEAR(h.get("T:sgDemo:Stage.RBV"), 5, 1e-4);
+    ASSERT_EQ(h.get("T:sgDemo:Stage.DMOV"), 1);
+
+    running = false; // its data stops; anything sent would still reach it
+    run(3.1);
+    ASSERT_EQ(h.alarm("T:sgDemo:Setpoint"), "INVALID/COMM");
+    EXPECT_EQ(h.put("T:sgDemo:Setpoint", 3.0), pv::PutStatus::Failed);
+    EXPECT_EQ(h.get("T:sgDemo:Setpoint"), 2.0);
+    int done = 0;
+    ASSERT_EQ(h.put("T:sgDemo:Stage", 20, [&](pv::PutStatus) { ++done; }), pv::PutStatus::Ok);
+    run(0.1);
+    EXPECT_EQ(done, 1);
+    EXPECT_EQ(h.get("T:sgDemo:Stage.DMOV"), 1);
+    EXPECT_NEAR(h.get("T:sgDemo:Stage.VAL"), 5, 1e-4);
+    EXPECT_EQ(h.alarm("T:sgDemo:Stage"), "INVALID/COMM");
+    run(1);
+    EXPECT_EQ(m.value("Setpoint"), 2.0) << "no write reached the model";
+    EXPECT_NEAR(m.value("Stage"), 5, 1e-9) << "no move reached the model";
+
+    // The model restarts with its initial values (Setpoint 0, Offset 0.5, Stage at 0).
+    m = Model(ModelConfig::load(kExample.string()));
+    running = true;
+    run(0.5);
+    EXPECT_EQ(h.alarm("T:sgDemo:Setpoint"), "NO_ALARM/NO_ALARM");
+    EXPECT_EQ(h.get("T:sgDemo:Setpoint"), 0);
+    EXPECT_EQ(h.get("T:sgDemo:Setpoint_RBV"), 0);
+    EXPECT_EQ(h.get("T:sgDemo:Offset"), h.get("T:sgDemo:Offset_RBV"));
+    EXPECT_NEAR(h.get("T:sgDemo:Stage.VAL"), 0, 1e-4);
+    EXPECT_NEAR(h.get("T:sgDemo:Stage.RBV"), 0, 1e-4);
+    EXPECT_EQ(h.alarm("T:sgDemo:Stage"), "NO_ALARM/NO_ALARM");
+    run(2);
+    EXPECT_EQ(m.value("Setpoint"), 0) << "nothing is replayed";
+    EXPECT_NEAR(m.value("Stage"), 0, 1e-9);
+    EXPECT_EQ(h.get("T:sgDemo:Stage.DMOV"), 1);
 }

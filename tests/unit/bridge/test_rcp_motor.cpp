@@ -140,6 +140,35 @@ TEST_F(DriverFixture, CommErrorEndsAWait) {
     EXPECT_TRUE(s.done) << "the record finishes (with an INVALID alarm) instead of waiting forever";
 }
 
+TEST_F(DriverFixture, OfflineRefusesEveryCommandButStopAndKeepsNothing) {
+    readback(0, kDone | kEnabled);
+    drv.move(5, 1, 1);
+    readback(1, kMoving | kEnabled, 1);
+    drv.set_comm_error(true);
+    auto s = drv.status();
+    EXPECT_TRUE(s.done);
+    EXPECT_TRUE(s.problem) << "the move in progress failed: no retries, targets := readback";
+    drv.move(3, 1, 1);
+    drv.home(true, 1, 1);
+    drv.move_velocity(2, 1);
+    drv.set_closed_loop(false);
+    EXPECT_EQ(sent.size(), 1u) << "nothing sent while offline";
+    EXPECT_TRUE(drv.status().done) << "a refused command starts no wait";
+    drv.stop(1);
+    ASSERT_EQ(sent.size(), 2u) << "a stop still goes out";
+    EXPECT_EQ(sent[1][0], 2);
+    drv.set_comm_error(false);
+    readback(1, kDone | kEnabled);
+    s = drv.status();
+    EXPECT_TRUE(s.done);
+    EXPECT_FALSE(s.problem);
+    EXPECT_FALSE(s.comm_error);
+    EXPECT_EQ(sent.size(), 2u) << "nothing refused is sent later";
+    drv.move(3, 1, 1);
+    ASSERT_EQ(sent.size(), 3u);
+    EXPECT_EQ(sent[2], (RcpMotorDriver::Command{1, 3, 1, 1, 3}));
+}
+
 TEST_F(DriverFixture, StatusBitsMapToTheRecordsStatus) {
     EXPECT_TRUE(drv.status().comm_error) << "no readback yet";
     readback(-3, kDone | kEnabled | kHomed | kHigh, -0.5);
