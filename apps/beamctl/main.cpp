@@ -252,6 +252,7 @@ int main(int argc, char** argv) {
 
     CLI11_PARSE(app, argc, argv);
     try {
+        log::validate(); // BEAMCTL_LOG, against the loggers registered during static initialisation
         if (*softioc) return run_softioc(soft, acf);
         if (*plccheck) return run_plc_check(plco);
         if (*rcpcmd) return bridge::rcp::run_rcp_sim(rcp_model, rcpo);

@@ -109,10 +109,16 @@ std::vector<in_addr> all_broadcasts() {
 ServerConfig ServerConfig::from_env() {
     ServerConfig c;
     c.port = env_port("EPICS_CAS_SERVER_PORT", env_port("EPICS_CA_SERVER_PORT", kDefaultServerPort));
+    for (const char* var : {"EPICS_CAS_SERVER_PORT", "EPICS_CA_SERVER_PORT"})
+        if (env(var)) {
+            c.port_source = SB() << var << "=" << env(var);
+            break;
+        }
     for (auto& s : split_ws(env("EPICS_CAS_INTF_ADDR_LIST"))) {
         sockaddr_in a = parse_addr(s, c.port, "EPICS_CAS_INTF_ADDR_LIST");
         c.interfaces.push_back(a.sin_addr);
     }
+    if (!c.interfaces.empty()) c.interfaces_source = SB() << "EPICS_CAS_INTF_ADDR_LIST='" << env("EPICS_CAS_INTF_ADDR_LIST") << "'";
     if (c.interfaces.size() > 1)
         for (auto& i : c.interfaces)
             if (i.s_addr == INADDR_ANY)
@@ -189,6 +195,20 @@ std::string Server::listen_description() const {
     return sb;
 }
 
+std::string Server::bind_context(const char* proto, in_addr ip, uint16_t port) const {
+    sockaddr_in a{};
+    a.sin_addr = ip;
+    a.sin_port = htons(port);
+    SB sb;
+    sb << proto << " " << addr_str(a) << " (address from ";
+    if (cfg_.interfaces_source.empty()) sb << "the default, all interfaces: EPICS_CAS_INTF_ADDR_LIST is not set";
+    else sb << cfg_.interfaces_source;
+    if (port == cfg_.port) sb << "; port from " << cfg_.port_source;
+    else if (port == 0) sb << "; any free port, as " << cfg_.port << " from " << cfg_.port_source << " is in use";
+    sb << ")";
+    return sb;
+}
+
 void Server::start() {
     std::vector<in_addr> ifs = cfg_.interfaces;
     if (ifs.empty()) {
@@ -197,21 +217,28 @@ void Server::start() {
         ifs.push_back(any);
     }
     // TCP: the configured port, or any free one if it is taken (clients learn it from searches).
+    // Any other failure (an address that is not this host's, no permission) is an error.
     uint16_t tcp_port = cfg_.port;
     for (int attempt = 0; attempt < 2; ++attempt) {
-        bool ok = true;
+        int err = 0;
+        const char* call = "bind";
+        in_addr failed{};
         std::vector<int> fds;
         for (in_addr ip : ifs) {
             int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+            if (fd < 0) throw Error(SB() << "CA server: cannot create a TCP socket: " << std::strerror(errno));
             int one = 1;
             setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
             sockaddr_in a{};
             a.sin_family = AF_INET;
             a.sin_addr = ip;
             a.sin_port = htons(tcp_port);
-            if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 || listen(fd, 128) != 0) {
+            bool bound = bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+            if (!bound || listen(fd, 128) != 0) {
+                err = errno;
+                call = bound ? "listen on" : "bind";
+                failed = ip;
                 ::close(fd);
-                ok = false;
                 break;
             }
             if (tcp_port == 0) {
@@ -221,16 +248,18 @@ void Server::start() {
             }
             fds.push_back(fd);
         }
-        if (ok) {
+        if (!err) {
             tcp_fds_ = fds;
             break;
         }
         for (int fd : fds) ::close(fd);
-        if (attempt == 0) {
-            LOG_WARN(lg, "TCP port " << cfg_.port << " is in use; taking a free port instead");
+        if (attempt == 0 && err == EADDRINUSE && tcp_port != 0) {
+            LOG_WARN(lg, bind_context("TCP", failed, tcp_port) << ": " << std::strerror(err)
+                                                               << "; taking a free port instead");
             tcp_port = 0;
         } else {
-            throw Error(SB() << "CA server: cannot bind a TCP port: " << std::strerror(errno));
+            throw Error(SB() << "CA server: cannot " << call << " " << bind_context("TCP", failed, tcp_port) << ": "
+                             << std::strerror(err));
         }
     }
     ctx_.tcp_port = tcp_port;
@@ -251,7 +280,7 @@ void Server::start() {
         if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
             int e = errno;
             ::close(fd);
-            throw Error(SB() << "CA server: cannot bind UDP " << addr_str(a) << ": " << std::strerror(e));
+            throw Error(SB() << "CA server: cannot bind " << bind_context("UDP", ip, cfg_.port) << ": " << std::strerror(e));
         }
         udp_fds_.push_back(fd);
         loop_.add_fd(fd, EPOLLIN, [this, fd](uint32_t) { on_udp(fd); });
@@ -264,7 +293,7 @@ void Server::start() {
                 try {
                     open_udp(b);
                 } catch (const Error& e) {
-                    LOG_WARN(lg, e.what());
+                    LOG_WARN(lg, "no searches by broadcast on this interface: " << e.what());
                 }
             }
         }

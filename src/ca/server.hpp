@@ -26,8 +26,16 @@ struct ServerConfig {
     uint16_t beacon_port = kDefaultRepeaterPort;    // [EPICS_CAS_BEACON_PORT]
     std::vector<in_addr> ignore_addrs;              // searches from these are dropped [EPICS_CAS_IGNORE_ADDR_LIST]
     std::size_t max_array_bytes = 64u << 20;        // largest payload [EPICS_CA_MAX_ARRAY_BYTES]
+    // Where `port` and `interfaces` came from, for error messages ("EPICS_CAS_SERVER_PORT=5064").
+    std::string port_source = "the default port";
+    std::string interfaces_source;                  // empty: not configured (all interfaces)
     // Reads the environment; throws Error naming the variable on a malformed value.
     static ServerConfig from_env();
+    // Sets the port from another source, e.g. ("ioc.yaml: ca: port").
+    void set_port(uint16_t p, std::string source) {
+        port = p;
+        port_source = std::move(source);
+    }
 };
 
 // Beacon timing (ca-protocol.md §8): beacons at +0, 20, 60, 140, 300 ms, ... (the interval starts
@@ -77,6 +85,8 @@ private:
     void close_conn(int fd);
     void send_beacons();
     void refresh_all_rights();
+    // "TCP 127.0.0.1:5064 (address from ..., port from ...)" for bind errors.
+    std::string bind_context(const char* proto, in_addr ip, uint16_t port) const;
 
     EventLoop& loop_;
     ServerContext ctx_;

@@ -1,5 +1,8 @@
 #include "core/log.hpp"
 
+#include "core/error.hpp"
+
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -23,8 +26,10 @@ Registry& registry() {
     return r;
 }
 
+const char* const kLevelNames[] = {"trace", "debug", "info", "warn", "error", "off"};
+
 bool parse_level(const std::string& s, Level& out) {
-    static const char* names[] = {"trace", "debug", "info", "warn", "error", "off"};
+    const auto& names = kLevelNames;
     for (int i = 0; i < 6; ++i)
         if (s == names[i]) {
             out = Level(i);
@@ -69,9 +74,12 @@ Level level_for(const std::string& spec, const std::string& name) {
     return have_best ? best : def;
 }
 
-const char* level_name(Level l) {
-    static const char* names[] = {"trace", "debug", "info", "warn", "error", "off"};
-    return names[int(l)];
+const char* level_name(Level l) { return kLevelNames[int(l)]; }
+
+std::string level_list() {
+    std::string s;
+    for (const char* n : kLevelNames) s += s.empty() ? n : std::string(" ") + n;
+    return s + " (err = error)";
 }
 
 } // namespace
@@ -107,6 +115,58 @@ void configure(const char* spec) {
     r.spec = env ? env : "";
     r.spec_loaded = true;
     for (Logger* lg : r.loggers) lg->set_level(level_for(r.spec, lg->name()));
+}
+
+std::vector<std::string> logger_names() {
+    auto& r = registry();
+    std::vector<std::string> names;
+    {
+        std::lock_guard<std::mutex> g(r.mu);
+        for (const Logger* lg : r.loggers) names.push_back(lg->name());
+    }
+    std::sort(names.begin(), names.end());
+    names.erase(std::unique(names.begin(), names.end()), names.end());
+    return names;
+}
+
+void validate(const char* spec) {
+    const char* env = spec ? spec : std::getenv("BEAMCTL_LOG");
+    std::string text = env ? env : "";
+    std::vector<std::string> names = logger_names();
+    auto known = [&](const std::string& key) {
+        for (const auto& n : names)
+            if (n == key || (n.size() > key.size() && n.compare(0, key.size(), key) == 0 && n[key.size()] == '.'))
+                return true;
+        return false;
+    };
+    auto known_list = [&] {
+        std::string s;
+        for (const auto& n : names) s += s.empty() ? n : " " + n;
+        return s;
+    };
+    const char* what = spec ? "log spec" : "BEAMCTL_LOG";
+    size_t pos = 0;
+    while (pos <= text.size()) {
+        size_t end = text.find(',', pos);
+        if (end == std::string::npos) end = text.size();
+        std::string item = text.substr(pos, end - pos);
+        pos = end + 1;
+        if (item.empty()) continue;
+        size_t eq = item.find('=');
+        std::string level = eq == std::string::npos ? item : item.substr(eq + 1);
+        Level l;
+        if (!parse_level(level, l))
+            throw Error(SB() << what << "='" << text << "': unknown level '" << level << "' in '" << item
+                             << "'; levels: " << level_list());
+        if (eq == std::string::npos) continue;
+        std::string key = item.substr(0, eq);
+        if (key.empty())
+            throw Error(SB() << what << "='" << text << "': no logger name before '=' in '" << item
+                             << "'; known loggers (or a dotted prefix of one): " << known_list());
+        if (!known(key))
+            throw Error(SB() << what << "='" << text << "': unknown logger '" << key << "' in '" << item
+                             << "'; known loggers (or a dotted prefix of one): " << known_list());
+    }
 }
 
 bool RateLimit::allow() {

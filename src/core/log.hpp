@@ -1,5 +1,6 @@
 // Named loggers. Levels come from one environment variable, BEAMCTL_LOG, e.g.
 //   BEAMCTL_LOG=info            (all loggers)      BEAMCTL_LOG=warn,ca=debug,ca.circuit=trace
+// A key names a logger or a dotted prefix of one (`ca` covers `ca.server` and `ca.circuit`).
 // A logger's level is checked before any formatting (LOG_DEBUG(log, "x=" << x) costs one compare
 // when disabled). Thread-safe; never call from the RT cycle (RT code queues events instead).
 #pragma once
@@ -7,6 +8,7 @@
 #include <atomic>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace beamctl::log {
 
@@ -27,6 +29,12 @@ private:
 
 // Re-reads BEAMCTL_LOG (or `spec` when given) and applies it to every logger.
 void configure(const char* spec = nullptr);
+// Checks BEAMCTL_LOG (or `spec` when given) against the level names and the loggers registered so
+// far; loggers are static objects, so call it after static initialisation (first thing in main).
+// Throws Error naming the bad item and listing the valid levels or the known loggers.
+void validate(const char* spec = nullptr);
+// Names of the registered loggers, sorted and without duplicates.
+std::vector<std::string> logger_names();
 // Rate limiter for logging bad input: true at most `per_s` times per second per limiter.
 class RateLimit {
 public:

@@ -19,6 +19,22 @@ namespace beamctl::ethercat {
 namespace {
 log::Logger lg("ethercat.master");
 
+// Adds to a counter only the RT thread writes (other threads read whole values).
+void bump(std::atomic<uint64_t>& a, uint64_t v) noexcept {
+    a.store(a.load(std::memory_order_relaxed) + v, std::memory_order_relaxed);
+}
+
+const char* al_state_name(uint8_t al) {
+    switch (al & 0x0F) {
+    case 1: return "INIT";
+    case 2: return "PREOP";
+    case 3: return "BOOT";
+    case 4: return "SAFEOP";
+    case 8: return "OP";
+    default: return "an unknown state";
+    }
+}
+
 constexpr uint16_t kAlControl = 0x0120, kAlStatus = 0x0130, kSiiControl = 0x0502,
                    kSiiAddress = 0x0504, kSiiData = 0x0508, kFmmu = 0x0600, kSm = 0x0800;
 constexpr uint16_t kStationBase = 0x1001;
@@ -90,7 +106,7 @@ std::string al_code_text(uint16_t c) {
 } // namespace
 
 Master::Master(Link& link, int bus_id, std::vector<SlaveConfig> cfg, const Catalog& catalog)
-    : link_(link), bus_(bus_id), cfg_(std::move(cfg)), catalog_(catalog) {
+    : link_(link), bus_(bus_id), cfg_(std::move(cfg)), catalog_(catalog), outage_(SB() << "ec" << bus_id) {
     std::sort(cfg_.begin(), cfg_.end(),
               [](const SlaveConfig& a, const SlaveConfig& b) { return a.position < b.position; });
     for (std::size_t i = 1; i < cfg_.size(); ++i)
@@ -546,6 +562,7 @@ CycleStatus Master::send_process_data() noexcept {
         if (dc_frame_ >= 0 && &cf == &cyclic_[std::size_t(dc_frame_)]) std::memset(f + dc_offset_, 0, 10);
         if (!link_.send(f, cf.frame.size())) st = CycleStatus::LinkError;
     }
+    send_ok_.store(st == CycleStatus::Ok, std::memory_order_relaxed);
     if (!acyc_in_flight_ && acyc_req_.pop(acyc_cur_)) {
         acyc_frame_.reset();
         int at = acyc_frame_.add(acyc_cur_.cmd, kAcyclicIdx, acyc_cur_.addr, acyc_cur_.len, acyc_cur_.data);
@@ -569,7 +586,7 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
         std::size_t n = link_.receive(rx_.data(), rx_.size(), timeout_us);
         if (n == 0) {
             if (got < cyclic_.size()) {
-                frames_lost_ += cyclic_.size() - got;
+                bump(frames_lost_, cyclic_.size() - got);
                 st = CycleStatus::FrameLost;
             }
             break;
@@ -616,7 +633,7 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
             }
         });
         if (!ok) {
-            frames_lost_++;
+            bump(frames_lost_, 1);
             st = CycleStatus::FrameLost;
         }
         ++got;
@@ -627,9 +644,10 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
         acyc_rep_.push(r);
         acyc_in_flight_ = false;
     }
-    wkc_ = uint16_t(wkc);
-    if (st == CycleStatus::Ok && wkc_ != expected_wkc_) {
-        wkc_errors_++;
+    wkc_.store(uint16_t(wkc), std::memory_order_relaxed);
+    frames_back_.store(st == CycleStatus::Ok, std::memory_order_relaxed);
+    if (st == CycleStatus::Ok && uint16_t(wkc) != expected_wkc_) {
+        bump(wkc_errors_, 1);
         st = CycleStatus::WkcMismatch;
     }
     uint32_t ok = st == CycleStatus::Ok ? 1 : 0;
@@ -969,7 +987,36 @@ void Master::recover_slave(std::size_t i) {
     request_state({i}, 8, "OP");
 }
 
+std::string Master::check_outage(double now_s) {
+    BusSample smp;
+    smp.send_ok = send_ok_.load(std::memory_order_relaxed);
+    smp.frames_back = frames_back_.load(std::memory_order_relaxed);
+    smp.wkc = wkc();
+    smp.expected_wkc = expected_wkc_;
+    smp.frames_lost = frames_lost();
+    smp.wkc_errors = wkc_errors();
+    if (smp.frames_back) {
+        SB sb;
+        const char* sep = "";
+        for (std::size_t i = 0; i < slaves_.size(); ++i) {
+            uint8_t al = slave_al_status(i);
+            if (!slave_online(i)) sb << sep << "slave " << slaves_[i].position << " (" << slaves_[i].type << ") not answering";
+            else if (al != 8)
+                sb << sep << "slave " << slaves_[i].position << " (" << slaves_[i].type << ") in " << al_state_name(al)
+                   << (al & 0x10 ? " with an error" : "") << " (AL status " << hex(al, 2) << ")";
+            else continue;
+            sep = ", ";
+        }
+        smp.slaves = sb;
+    }
+    std::optional<OutageMonitor::Report> r = outage_.update(smp, now_s);
+    if (!r) return {};
+    BEAMCTL_LOG_AT(lg, r->level, r->text);
+    return r->text;
+}
+
 int Master::check_and_recover() {
+    check_outage(std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count());
     int recovered = 0;
     for (std::size_t i = 0; i < slaves_.size(); ++i) {
         SlaveInfo& s = slaves_[i];

@@ -12,6 +12,7 @@
 #include "ethercat/frame.hpp"
 #include "registry/signal.hpp"
 #include "ethercat/link.hpp"
+#include "ethercat/outage.hpp"
 #include "core/spsc_queue.hpp"
 #include "ethercat/sii.hpp"
 
@@ -93,6 +94,9 @@ public:
 
     // Brings every configured slave to OP. Throws Error naming the bus, position and cause.
     void bring_up();
+    // Takes every slave back to SAFEOP (outputs safe, inputs still read), after the cycle has
+    // stopped (a clean shutdown). Non-RT. Throws Error naming the slave that did not get there.
+    void to_safe_op() { request_state(4, "SAFEOP"); }
     // Counts the slaves on the segment (BRD); -1 if the link did not answer.
     int count_slaves();
 
@@ -107,10 +111,11 @@ public:
     std::size_t image_size() const { return image_.size(); }
     std::size_t bus_bytes() const { return bus_bytes_; }
     uint32_t outputs_size() const { return outputs_bytes_; }
-    uint16_t wkc() const { return wkc_; }
+    // The last cycle's working counter and the error counters; any thread (relaxed atomics).
+    uint16_t wkc() const { return wkc_.load(std::memory_order_relaxed); }
     uint16_t expected_wkc() const { return expected_wkc_; }
-    uint64_t frames_lost() const { return frames_lost_; }
-    uint64_t wkc_errors() const { return wkc_errors_; }
+    uint64_t frames_lost() const { return frames_lost_.load(std::memory_order_relaxed); }
+    uint64_t wkc_errors() const { return wkc_errors_.load(std::memory_order_relaxed); }
     // Cyclic frames that came back after their cycle's receive time-out (dropped as too old).
     uint64_t frames_late() const { return frames_late_; }
     // AL status byte (state | 0x10 error) and presence of slave i, from the rotating poll: each
@@ -127,8 +132,13 @@ public:
     // once; a slave that answers again at its position (power-cycled: INIT, no station address)
     // or left OP is configured again and brought back to OP while the others keep cycling.
     // Returns the number of slaves brought back.
+    // Each pass also watches for bus outages (check_outage()).
     int check_and_recover();
     uint64_t recoveries() const { return recoveries_.load(); }
+    // Logs a bus outage (no frames back, a wrong working counter) when it begins, at most every
+    // 5 s while it lasts with what is wrong, and when it ends with its duration (OutageMonitor).
+    // `now_s`: monotonic time [s]. Returns the line logged, or "". Health thread, while cycling.
+    std::string check_outage(double now_s);
 
     // ---- distributed clocks ----
     // Cycle time for SYNC0 of DC slaves [ns]; set before bring_up() (default 1 ms).
@@ -242,6 +252,7 @@ private:
     AcyclicRequest acyc_cur_;
     bool acyc_in_flight_ = false;
     std::vector<uint8_t> lost_; // health thread: slaves reported lost
+    OutageMonitor outage_;      // health thread
     std::atomic<uint64_t> recoveries_{0};
     uint64_t cycle_ns_ = 1'000'000;
     uint8_t seq_ = 0;          // cycle sequence (mod 16) carried in the cyclic datagram index
@@ -250,8 +261,11 @@ private:
     int dc_frame_ = -1;             // frame holding the FRMW 0x0910
     uint32_t dc_offset_ = 0;        // its data offset in that frame
     std::atomic<uint64_t> dc_time_{0};
-    uint16_t wkc_ = 0, expected_wkc_ = 0;
-    uint64_t frames_lost_ = 0, wkc_errors_ = 0;
+    uint16_t expected_wkc_ = 0;
+    // Written by the RT thread only, read by the health thread.
+    std::atomic<uint16_t> wkc_{0};
+    std::atomic<uint64_t> frames_lost_{0}, wkc_errors_{0};
+    std::atomic<bool> send_ok_{true}, frames_back_{true}; // of the last cycle
     uint8_t next_idx_ = 0x80; // acyclic indices 0x80..0xFF; cyclic 0..0x7F
     std::map<int, uint8_t> mbx_counter_; // position -> last mailbox counter sent (1..7)
     int sdo_timeout_ms_ = 1000;

@@ -20,7 +20,18 @@ void atomic_max(std::atomic<uint64_t>& a, uint64_t v) noexcept {
     while (v > cur && !a.compare_exchange_weak(cur, v, std::memory_order_relaxed)) {
     }
 }
+
+// Adds to a counter only the RT thread writes (readers see whole values).
+void bump(std::atomic<uint64_t>& a, uint64_t v) noexcept {
+    a.store(a.load(std::memory_order_relaxed) + v, std::memory_order_relaxed);
+}
 } // namespace
+
+std::size_t latency_bucket(uint64_t latency_ns) noexcept {
+    std::size_t i = kLatencyBuckets - 1;
+    while (i > 0 && latency_ns < uint64_t(kLatencyEdgesUs[i]) * 1000u) --i;
+    return i;
+}
 
 uint64_t MonotonicClock::now_ns() noexcept {
     timespec ts{};
@@ -54,9 +65,18 @@ void Engine::add_stage(StageOrder order, Stage& s) {
 
 void Engine::cycle(uint64_t scheduled) noexcept {
     uint64_t start = clock_.now_ns();
+    uint64_t req = reset_req_.load(std::memory_order_acquire);
+    if (req != reset_done_.load(std::memory_order_relaxed)) {
+        clear_stats();
+        reset_done_.store(req, std::memory_order_release);
+    }
     uint64_t n = cycles_.load(std::memory_order_relaxed);
     if (n > 0) {
-        atomic_max(lat_max_, start > scheduled ? start - scheduled : 0);
+        uint64_t latency = start > scheduled ? start - scheduled : 0;
+        atomic_max(lat_max_, latency);
+        bump(lat_hist_[latency_bucket(latency)], 1);
+        bump(lat_total_, latency);
+        bump(lat_samples_, 1);
         int64_t jitter = int64_t(start - last_start_ns_) - int64_t(period_ns_);
         if (jitter < 0) jitter = -jitter;
         if (jitter > jitter_max_.load(std::memory_order_relaxed))
@@ -70,7 +90,7 @@ void Engine::cycle(uint64_t scheduled) noexcept {
         uint64_t t1 = clock_.now_ns();
         uint64_t dt = t1 - t0;
         e->last.store(dt, std::memory_order_relaxed);
-        e->total.fetch_add(dt, std::memory_order_relaxed);
+        bump(e->total, dt);
         atomic_max(e->max, dt);
         t0 = t1;
     }
@@ -91,7 +111,7 @@ void Engine::run_cycles(uint64_t n) noexcept {
             // Whole periods passed while this cycle ran: those slots are missed (counted), and the
             // schedule skips them instead of bursting to catch up.
             uint64_t skipped = (now - next_ns_) / period_ns_;
-            missed_.fetch_add(skipped, std::memory_order_relaxed);
+            bump(missed_, skipped);
             next_ns_ += skipped * period_ns_;
         }
     }
@@ -137,11 +157,19 @@ void Engine::stop() {
     running_ = false;
 }
 
-void Engine::reset_max() {
-    lat_max_ = 0;
-    exe_max_ = 0;
-    jitter_max_ = 0;
-    for (auto& e : stages_) e->max = 0;
+void Engine::clear_stats() noexcept {
+    constexpr auto r = std::memory_order_relaxed;
+    lat_max_.store(0, r);
+    exe_max_.store(0, r);
+    jitter_max_.store(0, r);
+    missed_.store(0, r);
+    lat_samples_.store(0, r);
+    lat_total_.store(0, r);
+    for (auto& b : lat_hist_) b.store(0, r);
+    for (auto& e : stages_) {
+        e->max.store(0, r);
+        e->total.store(0, r);
+    }
 }
 
 EngineStats Engine::stats() const {
@@ -152,6 +180,10 @@ EngineStats Engine::stats() const {
     s.exec_max_ns = exe_max_.load();
     s.exec_last_ns = exe_last_.load();
     s.jitter_max_ns = jitter_max_.load();
+    s.latency_samples = lat_samples_.load(std::memory_order_relaxed);
+    s.latency_total_ns = lat_total_.load(std::memory_order_relaxed);
+    for (std::size_t i = 0; i < kLatencyBuckets; ++i) s.latency_hist[i] = lat_hist_[i].load(std::memory_order_relaxed);
+    s.resets = reset_done_.load(std::memory_order_acquire);
     for (auto& e : stages_)
         s.stages.push_back(StageStats{e->stage->name(), e->last.load(), e->max.load(), e->total.load()});
     return s;

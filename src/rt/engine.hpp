@@ -2,11 +2,13 @@
 // order of ARCHITECTURE.md §2, with per-stage and cycle timing statistics. The clock is
 // injectable: tests run in virtual time (cycles back to back, deterministic), `run` uses the
 // monotonic clock with absolute sleeps, mlockall, SCHED_FIFO and CPU affinity when permitted.
-// Threading: stages run on the RT thread; stats() may be read from any thread.
+// Threading: stages run on the RT thread; stats() and request_reset() may be called from any thread.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -62,11 +64,21 @@ struct EngineConfig {
     bool lock_memory = true;
 };
 
+// Wake-up latency histogram (as cyclictest's, on a 1-2-5 scale): bucket i counts cycles that
+// started between kLatencyEdgesUs[i] and kLatencyEdgesUs[i + 1] µs late (lower edge included);
+// the last bucket counts everything from 50 ms up.
+inline constexpr std::array<uint32_t, 16> kLatencyEdgesUs = {0,   1,    2,    5,    10,    20,    50,    100,
+                                                             200, 500, 1000, 2000, 5000, 10000, 20000, 50000};
+inline constexpr std::size_t kLatencyBuckets = kLatencyEdgesUs.size();
+// The bucket of a latency [ns].
+std::size_t latency_bucket(uint64_t latency_ns) noexcept;
+
 struct StageStats {
     std::string name;
-    uint64_t last_ns = 0, max_ns = 0, total_ns = 0;
+    uint64_t last_ns = 0, max_ns = 0, total_ns = 0; // total: since the last reset
 };
 
+// Everything but `cycles`, `exec_last_ns` and `resets` counts from the last reset.
 struct EngineStats {
     uint64_t cycles = 0;
     uint64_t missed = 0;         // cycle slots skipped because earlier cycles overran
@@ -74,7 +86,12 @@ struct EngineStats {
     uint64_t exec_max_ns = 0;    // time of all stages of one cycle (ecmc ThdExeMax)
     uint64_t exec_last_ns = 0;
     int64_t jitter_max_ns = 0;   // largest |actual period - nominal|
+    uint64_t latency_samples = 0;  // cycles whose wake-up latency was measured (sum of the histogram)
+    uint64_t latency_total_ns = 0; // sum of those latencies
+    std::array<uint64_t, kLatencyBuckets> latency_hist{}; // counts per bucket of kLatencyEdgesUs
+    uint64_t resets = 0;           // resets the RT thread has applied so far
     std::vector<StageStats> stages;
+    double latency_mean_ns() const { return latency_samples ? double(latency_total_ns) / double(latency_samples) : 0.0; }
 };
 
 class Engine {
@@ -98,10 +115,15 @@ public:
     uint64_t period_ns() const { return period_ns_; }
     // What the RT setup achieved ("SCHED_FIFO 80 on CPU 1, memory locked" or the reasons not).
     const std::string& rt_setup() const { return rt_setup_; }
-    void reset_max();
+    // Asks the RT thread to clear the statistics (max times, jitter, missed cycles, stage totals,
+    // the latency histogram and mean) at the start of its next cycle; stats().resets counts the
+    // resets done. Any thread; the RT thread is the only one that writes the statistics.
+    void request_reset() noexcept { reset_req_.fetch_add(1, std::memory_order_release); }
+    uint64_t resets_requested() const noexcept { return reset_req_.load(std::memory_order_relaxed); }
 
 private:
     void cycle(uint64_t scheduled_ns) noexcept;
+    void clear_stats() noexcept; // RT thread
     void thread_main();
 
     struct Entry {
@@ -115,6 +137,9 @@ private:
     std::vector<std::unique_ptr<Entry>> stages_;
     std::atomic<uint64_t> cycles_{0}, missed_{0}, lat_max_{0}, exe_max_{0}, exe_last_{0};
     std::atomic<int64_t> jitter_max_{0};
+    std::atomic<uint64_t> lat_samples_{0}, lat_total_{0};
+    std::array<std::atomic<uint64_t>, kLatencyBuckets> lat_hist_{};
+    std::atomic<uint64_t> reset_req_{0}, reset_done_{0};
     uint64_t next_ns_ = 0, last_start_ns_ = 0;
     std::atomic<bool> running_{false}, stop_{false};
     std::thread thread_;

@@ -174,3 +174,127 @@ TEST(Engine, LostSlaveIsRecoveredWhileTheOthersKeepCycling) {
     EXPECT_EQ(seg.slave(2).al_state(), 8);
     EXPECT_EQ(seg.slave(2).station_address(), 0x1003);
 }
+
+namespace {
+
+// Wakes up late by a scripted amount each time the engine sleeps (cycle k is late by late[k]).
+struct LateWakeClock : rt::Clock {
+    uint64_t t = 1'000'000'000;
+    std::vector<uint64_t> late;
+    std::size_t k = 0;
+    uint64_t now_ns() noexcept override { return t; }
+    void sleep_until(uint64_t t_ns) noexcept override {
+        if (t_ns > t) t = t_ns;
+        t += k < late.size() ? late[k] : 0;
+        ++k;
+    }
+};
+
+} // namespace
+
+TEST(Engine, LatencyBucketsFollowTheDocumentedEdges) {
+    EXPECT_EQ(rt::latency_bucket(0), 0u);
+    EXPECT_EQ(rt::latency_bucket(999), 0u);       // [0, 1) us
+    EXPECT_EQ(rt::latency_bucket(1'000), 1u);     // [1, 2) us
+    EXPECT_EQ(rt::latency_bucket(9'999), 3u);     // [5, 10) us
+    EXPECT_EQ(rt::latency_bucket(10'000), 4u);    // [10, 20) us
+    EXPECT_EQ(rt::latency_bucket(499'999), 8u);   // [200, 500) us
+    EXPECT_EQ(rt::latency_bucket(50'000'000), rt::kLatencyBuckets - 1);
+    EXPECT_EQ(rt::latency_bucket(~uint64_t(0)), rt::kLatencyBuckets - 1);
+    for (std::size_t i = 0; i < rt::kLatencyBuckets; ++i)
+        EXPECT_EQ(rt::latency_bucket(uint64_t(rt::kLatencyEdgesUs[i]) * 1000), i);
+}
+
+TEST(Engine, LateWakeUpsFillTheLatencyHistogramMaxAndMean) {
+    LateWakeClock clock;
+    rt::Engine e({1000}, clock); // 1 ms period
+    struct Work : rt::Stage {
+        const char* name() const noexcept override { return "work"; }
+        void run(const rt::CycleInfo&) noexcept override {}
+    } stage;
+    e.add_stage(rt::StageOrder::Axes, stage);
+    // Cycle 0 is not measured (nothing to be late against yet); then 3 cycles on time, 2 late by
+    // 15 us, 1 by 120 us, 1 by 700 us.
+    clock.late = {0, 0, 0, 0, 15'000, 15'000, 120'000, 700'000};
+    e.run_cycles(8);
+    rt::EngineStats s = e.stats();
+    EXPECT_EQ(s.latency_samples, 7u);
+    EXPECT_EQ(s.latency_max_ns, 700'000u);
+    EXPECT_EQ(s.latency_total_ns, 850'000u);
+    EXPECT_DOUBLE_EQ(s.latency_mean_ns(), 850'000.0 / 7);
+    std::array<uint64_t, rt::kLatencyBuckets> expect{};
+    expect[rt::latency_bucket(0)] = 3;
+    expect[rt::latency_bucket(15'000)] = 2;      // [10, 20) us
+    expect[rt::latency_bucket(120'000)] = 1;     // [100, 200) us
+    expect[rt::latency_bucket(700'000)] = 1;     // [500, 1000) us
+    EXPECT_EQ(s.latency_hist, expect);
+    EXPECT_EQ(rt::latency_bucket(15'000), 4u);
+    EXPECT_EQ(rt::latency_bucket(700'000), 9u);
+}
+
+TEST(Engine, ResetClearsMaxTimesCountersAndHistogramInTheNextCycle) {
+    LateWakeClock clock;
+    rt::Engine e({1000}, clock);
+    struct Slow : rt::Stage {
+        LateWakeClock* c;
+        uint64_t work_ns = 0;
+        const char* name() const noexcept override { return "slow"; }
+        void run(const rt::CycleInfo&) noexcept override { c->t += work_ns; }
+    } slow;
+    slow.c = &clock;
+    e.add_stage(rt::StageOrder::Axes, slow);
+    slow.work_ns = 2'500'000; // overruns: missed slots
+    clock.late = {0, 300'000, 300'000};
+    e.run_cycles(4);
+    slow.work_ns = 100'000;
+    e.run_cycles(5); // back on schedule; the max times stay
+    rt::EngineStats before = e.stats();
+    EXPECT_GT(before.missed, 0u);
+    EXPECT_GT(before.latency_max_ns, 0u);
+    EXPECT_EQ(before.exec_max_ns, 2'500'000u);
+    EXPECT_GT(before.latency_samples, 0u);
+    EXPECT_EQ(before.stages[0].max_ns, 2'500'000u);
+    EXPECT_EQ(before.resets, 0u);
+
+    e.request_reset();
+    EXPECT_EQ(e.stats().latency_samples, before.latency_samples); // applied by the RT side, not here
+    e.run_cycles(1); // the reset happens first in this cycle, then the cycle is measured
+    rt::EngineStats after = e.stats();
+    EXPECT_EQ(after.resets, 1u);
+    EXPECT_EQ(after.missed, 0u);
+    EXPECT_EQ(after.exec_max_ns, 100'000u);
+    EXPECT_EQ(after.stages[0].max_ns, 100'000u);
+    EXPECT_EQ(after.stages[0].total_ns, 100'000u);
+    EXPECT_EQ(after.latency_samples, 1u);
+    EXPECT_EQ(after.jitter_max_ns, 0);
+    uint64_t sum = 0;
+    for (uint64_t c : after.latency_hist) sum += c;
+    EXPECT_EQ(sum, 1u);
+    EXPECT_EQ(after.cycles, before.cycles + 1); // the cycle number runs on
+
+    e.run_cycles(10); // and counts grow again
+    rt::EngineStats later = e.stats();
+    EXPECT_EQ(later.latency_samples, 11u);
+    EXPECT_EQ(later.latency_hist[0], 11u);
+    EXPECT_EQ(later.latency_max_ns, 0u);
+}
+
+TEST(Engine, CyclesWithTheHistogramAndAResetAllocateNothing) {
+    LateWakeClock clock;
+    rt::Engine e({1000}, clock);
+    struct Nop : rt::Stage {
+        const char* name() const noexcept override { return "nop"; }
+        void run(const rt::CycleInfo&) noexcept override {}
+    } nop;
+    e.add_stage(rt::StageOrder::Axes, nop);
+    clock.late.assign(2000, 0);
+    for (std::size_t i = 0; i < clock.late.size(); ++i) clock.late[i] = (i * 7919) % 2'000'000;
+    e.run_cycles(10);
+    test::count_allocations(true);
+    e.run_cycles(500);
+    e.request_reset();
+    e.run_cycles(500);
+    test::count_allocations(false);
+    EXPECT_EQ(test::allocations(), 0);
+    EXPECT_EQ(e.stats().latency_samples, 500u);
+}
