@@ -5,6 +5,7 @@
 
 #include <cerrno>
 #include <csignal>
+#include <pthread.h>
 #include <cstring>
 #include <sys/epoll.h>
 #include <sys/signalfd.h>
@@ -15,13 +16,29 @@ namespace {
 log::Logger lg("signals");
 }
 
+void block_stop_signals() {
+    sigset_t mask;
+    sigemptyset(&mask);
+    sigaddset(&mask, SIGTERM);
+    sigaddset(&mask, SIGINT);
+    sigaddset(&mask, SIGHUP);
+    pthread_sigmask(SIG_BLOCK, &mask, nullptr);
+}
+
+bool LoopSignals::stop_pending() {
+    signalfd_siginfo si;
+    bool stop = false;
+    while (::read(fd_, &si, sizeof si) == sizeof si) stop = stop || si.ssi_signo != SIGHUP;
+    return stop;
+}
+
 LoopSignals::LoopSignals(EventLoop& loop, std::function<void()> on_hup) : loop_(loop) {
     sigset_t mask;
     sigemptyset(&mask);
     sigaddset(&mask, SIGTERM);
     sigaddset(&mask, SIGINT);
     sigaddset(&mask, SIGHUP);
-    sigprocmask(SIG_BLOCK, &mask, nullptr);
+    pthread_sigmask(SIG_BLOCK, &mask, nullptr);
     fd_ = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC);
     if (fd_ < 0) throw Error(SB() << "signalfd: " << std::strerror(errno));
     loop_.add_fd(fd_, EPOLLIN, [this, hup = std::move(on_hup)](uint32_t) {

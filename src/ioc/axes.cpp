@@ -75,8 +75,14 @@ public:
         r.has_encoder = !p.virtual_axis;
         r.velocity = s.act_vel;
         bool taken = s.done_tag >= last_tag_ && !s.busy;
-        bool settled = s.at_target || !p.target_enable || s.error_id != 0 || !s.enabled || s.refused_tag == last_tag_;
-        r.done = last_tag_ == 0 ? !s.busy : taken && settled;
+        // The outcome belongs to this driver's last command only once the cycle has taken it
+        // (a stale failure must not end the next move before it starts).
+        bool failed = s.done_tag >= last_tag_ && s.move_failed;
+        bool settled = s.at_target || !p.target_enable || s.error_id != 0 || !s.enabled || s.refused_tag == last_tag_ || failed;
+        // Something else moves the axis (the PLC's setpoint, e.g. a virtual axis's kinematics):
+        // DMOV/MOVN follow it, as the motor record does for a move it did not start.
+        bool external = s.following && s.ext_moving && s.enabled;
+        r.done = (last_tag_ == 0 ? !s.busy : taken && settled) && !external;
         r.moving = !r.done;
         r.direction_positive = s.act_vel > 0 || (s.act_vel == 0 && last_dir_);
         if (s.act_vel != 0) last_dir_ = s.act_vel > 0;
@@ -84,9 +90,13 @@ public:
         r.low_limit = s.limit_bwd;
         r.home_switch = s.home_sensor;
         r.homed = s.homed;
-        // ECMC: PROBLEM on an axis error or a soft-limit interlock
-        r.problem = s.error_id != 0 || s.warning_id == motion::error_id::kSoftLimitFwd ||
-                    s.warning_id == motion::error_id::kSoftLimitBwd;
+        // ECMC: PROBLEM on an axis error or a soft-limit interlock; beamctl also on a refused
+        // command or a motion that ended short
+        bool soft = s.warning_id == motion::error_id::kSoftLimitFwd || s.warning_id == motion::error_id::kSoftLimitBwd;
+        r.failed = failed;
+        r.limit_violation = failed && soft;
+        r.problem = s.error_id != 0 || failed || (soft && s.done_tag >= last_tag_);
+        r.valid = s.position_valid;
         r.enabled = s.enabled;
         r.slip_stall = s.error_id == motion::error_id::kStall;
         return r;
@@ -393,13 +403,71 @@ void IocAxes::publish_one(Axis& a, const motion::AxisStatus& s) {
     }
 }
 
+void IocAxes::set_derived_limits(std::size_t i, double lo, double hi) {
+    pv::Record* m = db_.find(axes_.at(i).pv);
+    if (!pv::MotorRecord::from(m)) return;
+    auto put = [&](const char* field, double v) {
+        pv::Address a;
+        a.rec = m;
+        a.field = m->type().find(field);
+        double cur = 0;
+        db_.get(a, pv::Prim::Double, &cur, 1);
+        if (std::fabs(cur - v) > 1e-12 * std::max(1.0, std::fabs(v))) db_.put(a, pv::Prim::Double, &v, 1);
+    };
+    // widen first, so that DLLM <= DHLM holds after each put
+    double cur_hi = 0;
+    pv::Address a;
+    a.rec = m;
+    a.field = m->type().find("DHLM");
+    db_.get(a, pv::Prim::Double, &cur_hi, 1);
+    if (lo > cur_hi) {
+        put("DHLM", hi);
+        put("DLLM", lo);
+    } else {
+        put("DLLM", lo);
+        put("DHLM", hi);
+    }
+}
+
 void IocAxes::publish() {
     if (!group_) return;
     const auto& st = group_->snapshot();
     for (std::size_t i = 0; i < axes_.size() && i < st.size(); ++i) publish_one(axes_[i], st[i]);
     motion::AxisGroup::Result r;
     while (group_->pop_result(r)) {
-        if (r.code) LOG_INFO(lg, "command " << r.tag << " refused: " << motion::error_id::text(r.code) << " (0x" << std::hex << r.code << ")");
+        if (!r.code) continue;
+        std::string who = r.axis < axes_.size() ? axes_[r.axis].cfg.epics.name : std::string("?");
+        if (r.kinematics < 0) {
+            LOG_INFO(lg, who << ": command " << r.tag << " refused: " << motion::error_id::text(r.code) << " (0x" << std::hex << r.code << ")");
+            continue;
+        }
+        // A kinematics group refused or stopped a virtual move: say which real axis and why.
+        const motion::Kinematics& k = group_->kinematics(std::size_t(r.kinematics));
+        if (!r.tag) who = k.spec().name;
+        std::string real = r.verdict.real >= 0 ? axes_[k.spec().real[std::size_t(r.verdict.real)]].cfg.epics.name : std::string();
+        SB what;
+        if (r.tag) what << who << ": move refused by kinematics '" << k.spec().name << "': ";
+        else what << "kinematics '" << who << "': coupled move stopped: ";
+        if (real.empty()) what << "the inverse transform failed";
+        else if (motion::error_id::is_warning(r.code) && r.code != motion::error_id::kHardLimitFwd && r.code != motion::error_id::kHardLimitBwd && r.tag)
+            what << real << " would go to " << r.verdict.position << ", beyond its soft limit " << r.verdict.limit;
+        else
+            what << real << ": " << motion::error_id::text(r.code) << " (0x" << std::hex << r.code << std::dec << ")";
+        LOG_WARN(lg, what.str());
+        // MsgTxt (39 characters) of the refused virtual axis, or of every virtual axis of a
+        // stopped group: "W: <real> would pass a limit" / "W: <real> at a limit: stopped"
+        char text[64];
+        std::snprintf(text, sizeof text, "W: %s %s", real.empty() ? "inverse failed" : real.c_str(),
+                      r.tag ? "would pass a limit" : "at a limit: stopped");
+        text[pv::kStringSize - 1] = 0;
+        for (std::size_t v : r.tag ? std::vector<std::size_t>{r.axis} : k.spec().virt) {
+            Axis& a = axes_[v];
+            const pv::FieldDesc* f = a.msg->type().find("VAL");
+            pv::Elements e = a.msg->elements(*f);
+            pv::put_element(*a.msg, *f, e, 0, pv::Prim::String, text);
+            a.msg->udf = 0;
+            db_.process(*a.msg);
+        }
     }
 }
 

@@ -49,6 +49,10 @@ public:
     // The latest status of axis i (default before bring-up).
     const motion::AxisStatus& status(std::size_t i);
     const motion::AxisParams& params(std::size_t i) const { return axes_.at(i).params; }
+    const std::string& name(std::size_t i) const { return axes_.at(i).cfg.epics.name; }
+    // IOC loop: the soft limits of axis i's motor record (DLLM/DHLM, dial) become [lo, hi]: a
+    // virtual axis's range as its kinematics group derives it. No-op without a motor record.
+    void set_derived_limits(std::size_t i, double lo, double hi);
 
 private:
     struct Axis {

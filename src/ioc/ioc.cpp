@@ -142,6 +142,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     std::vector<motion::AxisConfig> axis_configs;
     for (std::size_t i = 0; i < axes_->size(); ++i) axis_configs.push_back(axes_->config(i));
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, std::move(signals), db_);
+    kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     for (const auto& d : cfg_.db) db_.load(pv::load_db_file(d.file, d.macros));
 }
 
@@ -326,6 +327,7 @@ void Ioc::bring_up() {
             throw Error(SB() << r.where.file << ":" << r.where.line << ":" << r.where.col << ": no bus ec" << r.bus);
         },
         *engine_);
+    kinematics_->bind();
     std::vector<registry::BoundSignal> bus_ok;
     for (auto& b : buses_) bus_ok.push_back(b.bus->master().bind(std::string(SB() << "ec" << b.bus->id() << ".masterstatus")));
     plcs_->bind(
@@ -349,6 +351,7 @@ void Ioc::bring_up() {
 
 void Ioc::publish() {
     axes_->publish();
+    kinematics_->publish();
     plcs_->publish();
     rt::EngineStats es = engine_->stats();
     for (auto& b : buses_) {
@@ -401,6 +404,7 @@ void Ioc::publish() {
 }
 
 int Ioc::run() {
+    block_stop_signals(); // before any thread starts: only the loop's signalfd sees them
     if (!brought_up_) bring_up();
     EventLoop loop;
     ca::ServerConfig sc = ca::ServerConfig::from_env();
@@ -440,9 +444,78 @@ int Ioc::run() {
                 db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str(), rcp_text.c_str());
     std::fflush(stdout);
     loop.run();
-    for (auto& b : buses_) b.bus->stop_health();
-    engine_->stop();
+    shutdown(&signals);
     return 0;
+}
+
+// A clean stop (the first SIGTERM/SIGINT): every moving axis stops with its emergency
+// deceleration (virtual axes first, so that the PLCs ramp the real axes down with them), then the
+// PLCs stop, the drives are disabled, the cycle stops and the buses go to SAFEOP. A second signal
+// meanwhile exits at once.
+void Ioc::shutdown(LoopSignals* signals) {
+    std::printf("stopping: stopping axes, disabling drives, buses to SAFEOP\n");
+    std::fflush(stdout);
+    LOG_INFO(lg, "stopping: stopping axes, disabling drives, buses to SAFEOP");
+    auto again = [&] {
+        if (signals && signals->stop_pending()) {
+            std::fprintf(stderr, "second signal: exiting at once\n");
+            std::_Exit(1);
+        }
+    };
+    auto wait_until = [&](auto done, double timeout_s) {
+        double end = EventLoop::now_s() + timeout_s;
+        while (!done() && EventLoop::now_s() < end) {
+            again();
+            ::usleep(2000);
+        }
+        return done();
+    };
+    IocAxes& ax = *axes_;
+    if (ax.group() && engine_->running()) {
+        double longest = 0; // [s] the longest emergency stop
+        for (std::size_t i = 0; i < ax.size(); ++i) {
+            const motion::AxisParams& p = ax.params(i);
+            double d = p.emergency_deceleration > 0 ? p.emergency_deceleration : 3 * (p.trajectory.deceleration > 0 ? p.trajectory.deceleration : p.trajectory.acceleration);
+            if (d > 0) longest = std::max(longest, std::fabs(ax.status(i).set_vel) / d);
+        }
+        for (bool virtual_pass : {true, false})
+            for (std::size_t i = 0; i < ax.size(); ++i)
+                if (ax.params(i).virtual_axis == virtual_pass && ax.status(i).busy) ax.send(i, motion::AxisCommand{motion::CommandType::Stop});
+        auto still = [&] {
+            for (std::size_t i = 0; i < ax.size(); ++i) {
+                const motion::AxisStatus& s = ax.status(i);
+                if (s.busy || (s.following && s.ext_moving)) return false;
+            }
+            return true;
+        };
+        if (!wait_until(still, longest + 2.0)) LOG_WARN(lg, "stopping: some axes still moved after " << longest + 2.0 << " s");
+        if (plc::PlcRuntime* rt = plcs_->runtime())
+            for (std::size_t i = 0; i < plcs_->size(); ++i) rt->request_enable(i, false);
+        for (std::size_t i = 0; i < ax.size(); ++i) {
+            motion::AxisCommand off{motion::CommandType::Power};
+            off.on = false;
+            ax.send(i, off);
+        }
+        auto disabled = [&] {
+            for (std::size_t i = 0; i < ax.size(); ++i)
+                if (ax.status(i).enabled) return false;
+            return true;
+        };
+        if (!wait_until(disabled, 2.0)) LOG_WARN(lg, "stopping: some drives still enabled after 2 s");
+    }
+    // SAFEOP while the cycle still runs (the requests ride in it), after the health thread that
+    // would take the slaves back to OP has stopped.
+    for (auto& b : buses_) b.bus->stop_health();
+    again();
+    for (auto& b : buses_) {
+        try {
+            if (engine_->running()) b.bus->master().to_safe_op();
+        } catch (const Error& e) {
+            LOG_WARN(lg, "stopping: ec" << b.bus->id() << ": " << e.what());
+        }
+    }
+    engine_->stop();
+    LOG_INFO(lg, "stopped");
 }
 
 } // namespace beamctl::ioc

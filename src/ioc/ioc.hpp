@@ -7,9 +7,11 @@
 #include "ca/server.hpp"
 #include "config/ioc_config.hpp"
 #include "core/event_loop.hpp"
+#include "core/signals.hpp"
 #include "ethercat/bus.hpp"
 #include "ethercat/catalog.hpp"
 #include "ioc/axes.hpp"
+#include "ioc/kinematics.hpp"
 #include "ioc/plcs.hpp"
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
@@ -43,12 +45,16 @@ public:
     const config::IocConfig& config() const { return cfg_; }
     IocAxes& axes() { return *axes_; }
     IocPlcs& plcs() { return *plcs_; }
+    IocKinematics& kinematics() { return *kinematics_; }
     // Every process-data entry the configured buses will have, with its direction and type.
     SignalDirectory signal_directory() const;
 
     // Runs the IOC: engine on its RT thread, CA server and publisher on the calling thread,
     // until SIGINT/SIGTERM. Prints the ready line.
     int run();
+    // The clean stop run() ends with (public for tests in virtual time); `signals` (may be null)
+    // is watched for a second signal, which exits at once.
+    void shutdown(LoopSignals* signals = nullptr);
 
 private:
     struct EntryPv {
@@ -82,6 +88,7 @@ private:
     std::vector<BusRt> buses_;
     std::unique_ptr<IocAxes> axes_;
     std::unique_ptr<IocPlcs> plcs_;
+    std::unique_ptr<IocKinematics> kinematics_;
     bool brought_up_ = false;
 };
 

@@ -118,10 +118,39 @@ void Axis::start_stop(double d) noexcept {
     seq_ = Seq::Stopping;
 }
 
+// An external (PLC) setpoint is held where it would cross an enabled soft limit or go further
+// into an active limit switch (the axis raises the interlock warning and reports ext_limited):
+// whatever the PLC computes, a real axis does not follow it past its limits.
+double Axis::hold_at_limits(double x) noexcept {
+    const double cur = traj_.state().position;
+    auto held = [&](double at, uint32_t warning, Interlock why) {
+        st_.ext_limited = true;
+        st_.warning_id = warning;
+        st_.last_interlock = why;
+        return at;
+    };
+    if (!std::isfinite(x)) return held(cur, error_id::kSoftLimitFwd, Interlock::Plc);
+    if (x > cur) {
+        if (st_.limit_fwd && !p_.virtual_axis) return held(cur, error_id::kHardLimitFwd, Interlock::HardFwd);
+        if (p_.soft_fwd_enable && x > p_.soft_fwd) return held(std::max(cur, p_.soft_fwd), error_id::kSoftLimitFwd, Interlock::SoftFwd);
+    } else if (x < cur) {
+        if (st_.limit_bwd && !p_.virtual_axis) return held(cur, error_id::kHardLimitBwd, Interlock::HardBwd);
+        if (p_.soft_bwd_enable && x < p_.soft_bwd) return held(std::min(cur, p_.soft_bwd), error_id::kSoftLimitBwd, Interlock::SoftBwd);
+    }
+    return x;
+}
+
+// A limit or interlock stops the motion in progress: it ends short (move_failed).
+void Axis::interlock_stop() noexcept {
+    if (seq_ == Seq::Moving || seq_ == Seq::Homing) st_.move_failed = true;
+    start_stop(decel());
+}
+
 // Latches an error (the first one stays until reset), stops with the emergency deceleration and,
 // for the drive-level interlocks, disables the drive at once.
 void Axis::fault(uint32_t id, bool disable) noexcept {
     if (st_.error_id == 0) st_.error_id = id;
+    if (seq_ != Seq::Idle) st_.move_failed = true;
     start_stop(emergency_decel());
     if (disable) {
         enable_req_ = false;
@@ -154,16 +183,28 @@ uint32_t Axis::check_target(double target) const noexcept {
     return 0;
 }
 
+uint32_t Axis::refuse(const AxisCommand& c, uint32_t id) noexcept {
+    finish(c.tag);
+    if (id && c.tag) st_.refused_tag = c.tag;
+    if (id && c.type != CommandType::None && c.type < CommandType::Halt) st_.move_failed = true;
+    if (id && error_id::is_warning(id)) st_.warning_id = id;
+    else if (id && id != st_.error_id) fault(id, false);
+    return id;
+}
+
+void Axis::abort_motion(uint32_t id, Interlock why) noexcept {
+    if (seq_ == Seq::Idle) return;
+    st_.move_failed = true;
+    st_.last_interlock = why;
+    if (id && !error_id::is_warning(id)) return fault(id, false); // latches, emergency stop
+    if (id) st_.warning_id = id;
+    start_stop(emergency_decel());
+}
+
 uint32_t Axis::command(const AxisCommand& c) noexcept {
     // A refused command finishes at once; its reason is the axis warning, or for error ids
     // (ECMC setErrorID) the latched axis error, which also stops a running move.
-    auto refuse = [&](uint32_t id) {
-        finish(c.tag);
-        if (id && c.tag) st_.refused_tag = c.tag;
-        if (id && error_id::is_warning(id)) st_.warning_id = id;
-        else if (id && id != st_.error_id) fault(id, false);
-        return id;
-    };
+    auto refuse = [&](uint32_t id) { return this->refuse(c, id); };
     switch (c.type) {
     case CommandType::None: return refuse(0);
     case CommandType::Power:
@@ -244,6 +285,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
         if (!p_.allow_source_change) {
             finish(c.tag);
             if (c.tag) st_.refused_tag = c.tag;
+            st_.move_failed = true;
             return error_id::kTrajSourceNotInternal; // returned, not latched (as ECMC)
         }
         traj_source_ = 0; // bumpless: the trajectory holds the PLC's last setpoint and velocity
@@ -253,6 +295,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     has_pending_ = false;
     st_.warning_id = 0;
     st_.last_interlock = Interlock::None;
+    st_.move_failed = false;
     if (c.type == CommandType::Home) {
         home_seq_ = c.homing_sequence < 0 || c.homing_sequence == 14 ? p_.homing_sequence : c.homing_sequence;
         if (home_seq_ == 25) home_seq_ = 15;
@@ -589,12 +632,12 @@ void Axis::monitor(double dt) noexcept {
     if (st_.limit_fwd && v > 0) {
         st_.warning_id = error_id::kHardLimitFwd;
         if (st_.last_interlock == Interlock::None) st_.last_interlock = Interlock::HardFwd;
-        if (!homing) start_stop(decel());
+        if (!homing) interlock_stop();
     }
     if (st_.limit_bwd && v < 0) {
         st_.warning_id = error_id::kHardLimitBwd;
         if (st_.last_interlock == Interlock::None) st_.last_interlock = Interlock::HardBwd;
-        if (!homing) start_stop(decel());
+        if (!homing) interlock_stop();
     }
     // Soft limits (not while homing): the setpoint beyond an enabled limit stops that direction.
     bool soft_fwd = p_.soft_fwd_enable && !homing && st_.set_pos > p_.soft_fwd;
@@ -602,20 +645,20 @@ void Axis::monitor(double dt) noexcept {
     if (soft_fwd && v > 0) {
         st_.warning_id = error_id::kSoftLimitFwd;
         st_.last_interlock = Interlock::SoftFwd;
-        start_stop(decel());
+        interlock_stop();
     }
     if (soft_bwd && v < 0) {
         st_.warning_id = error_id::kSoftLimitBwd;
         st_.last_interlock = Interlock::SoftBwd;
-        start_stop(decel());
+        interlock_stop();
     }
     if (plc_ilock_fwd_ && v > 0) { // PLC interlocks (mon.ilock*) stop that direction
         st_.last_interlock = Interlock::PlcFwd;
-        start_stop(decel());
+        interlock_stop();
     }
     if (plc_ilock_bwd_ && v < 0) {
         st_.last_interlock = Interlock::PlcBwd;
-        start_stop(decel());
+        interlock_stop();
     }
     st_.soft_limit_fwd = p_.soft_fwd_enable && st_.set_pos >= p_.soft_fwd;
     st_.soft_limit_bwd = p_.soft_bwd_enable && st_.set_pos <= p_.soft_bwd;
@@ -684,6 +727,10 @@ void Axis::run(double dt) noexcept {
             }
         }
     }
+    // The actual position is valid once the bus has been OK for a cycle (a PLC-fed one a cycle
+    // later: the PLC writes extactpos after the axes, in the first cycle with the bus OK).
+    ok_cycles_ = bus_ok ? std::min(ok_cycles_ + 1, 2) : 0;
+    if (!st_.position_valid) st_.position_valid = ok_cycles_ >= (enc_source_ == 1 ? 2 : 1);
     bool enabled = p_.virtual_axis ? enable_req_ : drive_.enabled();
     bool drive_enable = enable_req_;
     if (io_.brake.bound() && !p_.virtual_axis) {
@@ -761,12 +808,19 @@ void Axis::run(double dt) noexcept {
         finish(tag_);
     }
     if (!enabled && seq_ != Seq::Idle) { // a disabled axis does not move: the command ends
+        if (seq_ != Seq::Stopping) st_.move_failed = true;
         seq_ = Seq::Idle;
         finish(tag_);
     }
+    st_.following = traj_source_ == 1;
+    st_.ext_moving = st_.ext_limited = false;
     if (traj_source_ == 1 && enabled) { // the PLC gives the setpoint (ax<n>.traj.extsetpos)
-        double x = vars_.traj.extsetpos;
+        double x = p_.virtual_axis ? vars_.traj.extsetpos : hold_at_limits(vars_.traj.extsetpos);
         double v = std::isfinite(last_ext_set_) && dt > 0 ? (x - last_ext_set_) / dt : 0;
+        // moving while the setpoint changed within the last kExtSettleCycles cycles
+        bool changed = std::isfinite(last_ext_set_) && std::fabs(x - last_ext_set_) > 1e-12 * std::max(1.0, std::fabs(x));
+        ext_still_cycles_ = changed ? 0 : std::min(ext_still_cycles_ + 1, kExtSettleCycles);
+        st_.ext_moving = ext_still_cycles_ < kExtSettleCycles;
         last_ext_set_ = x;
         if (seq_ != Seq::Idle) { // an own command ends when the source is external
             seq_ = Seq::Idle;

@@ -176,6 +176,15 @@ struct AxisStatus {
     CommandType command = CommandType::None;
     uint64_t done_tag = 0;  // tag of the last command that finished (or was refused)
     uint64_t refused_tag = 0; // tag of the last command refused
+    // The last motion command was refused or ended short (a limit, an interlock, a fault, a stop
+    // of its kinematics group): a move that did not get where it was sent never reads as success.
+    // Cleared when the next motion command is accepted.
+    bool move_failed = false;
+    bool following = false;      // the setpoint comes from the PLC (traj.source 1)
+    bool ext_moving = false;     // ... and moved this cycle: something else moves the axis
+    bool ext_limited = false;    // the PLC's setpoint was held at a limit this cycle
+    bool position_valid = false; // act_pos has been read from a working bus (and, for a PLC-fed
+                                 // actual position, after the PLC's first scan)
     uint64_t cycle = 0;
     // ECMC `Stat` bits: 0 enable, 1 enabled, 2 execute, 3 busy, 4 attarget, 5 moving, 6 limit fwd
     // OK (1 = not on the switch), 7 limit bwd OK, 8 home switch, 9 homed, 14/15 soft limit fwd/bwd
@@ -197,6 +206,12 @@ public:
     // virtual axis that follows its physical axes is commanded); otherwise it is refused with
     // kTrajSourceNotInternal.
     [[nodiscard]] uint32_t command(const AxisCommand& c) noexcept;
+    // RT: refuses `c` with `id` without running it (a check above the axis, e.g. its kinematics
+    // group, said no): it finishes at once, the warning or error is raised and move_failed set.
+    uint32_t refuse(const AxisCommand& c, uint32_t id) noexcept;
+    // RT: ends the running motion short with the emergency deceleration and the warning `id`
+    // (move_failed), e.g. when a real axis of its kinematics group reached a limit.
+    void abort_motion(uint32_t id, Interlock why) noexcept;
 
     const AxisStatus& status() const noexcept { return st_; }
     // ECMC's ax<n>.* variables: PLC code reads and writes them between the axis's cycles.
@@ -215,6 +230,8 @@ private:
     void fault(uint32_t id, bool disable) noexcept;
     void finish(uint64_t tag) noexcept;
     void start_stop(double decel) noexcept;
+    void interlock_stop() noexcept;
+    double hold_at_limits(double x) noexcept;
     uint32_t check_target(double target) const noexcept;
     double decel() const noexcept;
     double emergency_decel() const noexcept;
@@ -230,6 +247,8 @@ private:
     AxisVariables vars_, seen_; // seen_: the values as the axis last published or took them
     int traj_source_ = 0, enc_source_ = 0;
     double last_ext_set_ = NAN, last_ext_act_ = NAN;
+    static constexpr int kExtSettleCycles = 20; // a PLC setpoint unchanged this long: at rest
+    int ext_still_cycles_ = kExtSettleCycles;
     bool plc_ilock_fwd_ = false, plc_ilock_bwd_ = false; // motion blocked by PLC interlocks
 
     Seq seq_ = Seq::Idle;
@@ -240,6 +259,7 @@ private:
     double move_time_ = 0;     // duration of the current/last busy period [s]
     double stall_wait_ = -1;   // after a move: time left to reach the target [s] (< 0: not armed)
     bool bus_was_ok_ = true;
+    int ok_cycles_ = 0; // cycles in a row with the bus OK (position_valid after 2)
     // A motion command that arrived while the drive was being enabled runs once it is (ECMC's
     // auto-enable path: the axis reports busy meanwhile).
     int brake_cycles_ = 0, close_ahead_left_ = 0;

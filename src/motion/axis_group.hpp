@@ -6,6 +6,7 @@
 #include "core/spsc_queue.hpp"
 #include "core/triple_buffer.hpp"
 #include "motion/axis.hpp"
+#include "motion/kinematics.hpp"
 #include "rt/engine.hpp"
 
 #include <atomic>
@@ -37,6 +38,9 @@ public:
     struct Result {
         uint64_t tag = 0;
         uint32_t code = 0;
+        std::size_t axis = 0;       // group index of the commanded axis
+        int kinematics = -1;        // index of the kinematics group that refused or stopped it
+        KinematicsVerdict verdict;  // its reason (real axis, position, limit)
     };
     const std::vector<AxisStatus>& snapshot() noexcept;
     bool pop_result(Result& r) noexcept { return results_.pop(r); }
@@ -44,6 +48,11 @@ public:
 
     // Before the cycle starts: who runs before each axis (nullptr: nobody).
     void set_hook(AxisHook* hook) noexcept { hook_ = hook; }
+    // Before the cycle starts: a kinematics group over axes of this group (checked on every
+    // command to its virtual axes, supervised every cycle). Returns its index.
+    std::size_t add_kinematics(std::unique_ptr<Kinematics> k);
+    std::size_t kinematics_count() const noexcept { return kinematics_.size(); }
+    const Kinematics& kinematics(std::size_t i) const noexcept { return *kinematics_[i]; }
 
     std::size_t size() const noexcept { return axes_.size(); }
     Axis& axis(std::size_t i) noexcept { return *axes_[i]; } // RT side (tests in virtual time)
@@ -59,6 +68,8 @@ private:
     TripleBuffer<std::vector<AxisStatus>> statuses_;
     std::atomic<uint64_t> dropped_{0};
     AxisHook* hook_ = nullptr;
+    std::vector<std::unique_ptr<Kinematics>> kinematics_;
+    std::vector<int> kinematics_of_; // per axis: the kinematics group it is a virtual axis of, or -1
 };
 
 } // namespace beamctl::motion

@@ -348,6 +348,8 @@ public:
         driver_ = std::move(d);
         if (!initialised_) return;
         resync();
+        valid_seen_ = st_.valid;
+        failed_ = false;
         publish();
         if (dmov) async_done();
     }
@@ -394,6 +396,11 @@ private:
     bool jog_fwd_ = true, home_fwd_ = true;
     bool pending_target_ = false; // a target written while homing or moving externally
     bool ls_hit_ = false;         // the last motion ended on the switch in its direction
+    bool failed_ = false;         // the motion of the last drive-field write was refused or ended
+                                  // short: its put-callback completes with a failure
+    bool valid_seen_ = true;      // the driver's readback has been valid (VAL synced to it)
+    bool lvio_refused_ = false;   // the last drive-field write was refused for a soft limit
+                                  // (SOFT/MINOR alarm until the next write that moves)
 
     std::size_t first_ = 0; // index of the first motor field (after dbCommon)
     const FieldDesc* fd_dmov_ = nullptr;
@@ -641,6 +648,7 @@ void MotorRecordImpl::init() {
         (rstm == kRstmConditional && (near_zero || use_rel)))
         driver_->set_position(dval);
     resync();
+    valid_seen_ = s.valid;
     initialised_ = true;
     scan = 9;  // ".1 second": Database::scan_periodic processes (= polls) this record
     publish(); // alarms to NO_ALARM; nobody subscribes yet
@@ -739,6 +747,8 @@ void MotorRecordImpl::track(double now) {
 
 void MotorRecordImpl::on_stopped(double now) {
     ls_hit_ = (rhls && cdir) || (rlls && !cdir);
+    if (st_.failed || ((phase_ == Phase::Moving || phase_ == Phase::Backlash) && (ls_hit_ || st_.problem))) failed_ = true;
+    if (st_.failed && st_.limit_violation) lvio = 1; // the controller refused it for a soft limit
     switch (phase_) {
     case Phase::Moving:
     case Phase::Backlash:
@@ -873,7 +883,9 @@ void MotorRecordImpl::start_move(bool retry) {
         lv = p > dhlm || p < dllm;
     }
     lvio = lv;
+    lvio_refused_ = lv;
     if (lv) {
+        failed_ = true;
         restore_targets();
         if (!active) finish();
         return;
@@ -881,6 +893,7 @@ void MotorRecordImpl::start_move(bool retry) {
     // Hard limits: no move further into an active switch.
     bool up = nint((dval - drbv) / mres) >= 0; // raw direction
     if ((up && rhls) || (!up && rlls)) {
+        failed_ = true;
         if (active) {
             restore_targets();
         } else {
@@ -912,6 +925,7 @@ void MotorRecordImpl::start_home(bool forward) {
     double v = hvel > 0 ? hvel : velo;
     driver_->home(forward, v, accel_for(v, accl, vbas));
     home_fwd_ = forward;
+    lvio_refused_ = false;
     phase_ = Phase::Homing;
     dmov = 0;
     rcnt = 0;
@@ -921,6 +935,7 @@ void MotorRecordImpl::start_home(bool forward) {
 
 void MotorRecordImpl::start_jog(bool forward) {
     jog_fwd_ = forward;
+    lvio_refused_ = false;
     double v = jog_velocity();
     driver_->move_velocity(v, jar);
     phase_ = Phase::Jogging;
@@ -1133,6 +1148,7 @@ void MotorRecordImpl::publish() {
     } else {
         if (st_.comm_error) set_sevr(kStatComm, kInvalid);
         if (st_.slip_stall || st_.problem) set_sevr(kStatState, kMajor);
+        if (lvio_refused_) set_sevr(kStatSoft, kMinor); // a move refused for a soft limit
     }
     stamp_time();
     unsigned alarm = reset_alarms();
@@ -1157,11 +1173,20 @@ void MotorRecordImpl::publish() {
 void MotorRecordImpl::run(bool work) {
     pact = 1;
     refresh();
+    if (st_.valid && !valid_seen_) { // the first real readback: the targets start there
+        valid_seen_ = true;
+        if (phase_ == Phase::Idle && dmov) resync();
+    }
     track(clock_());
     if (work) do_work();
     publish();
     pact = 0;
-    if (dmov) async_done(); // completes a put-callback waiting for the end of the motion
+    // completes a put-callback waiting for the end of the motion, failed if the motion was
+    // refused or ended short
+    if (dmov) {
+        async_done(failed_ ? PutStatus::Failed : PutStatus::Ok);
+        failed_ = false; // reported; later put-callbacks (VELO, ...) are not about that motion
+    }
 }
 
 PutStatus MotorRecordImpl::special(const FieldDesc& f) {
@@ -1177,6 +1202,7 @@ PutStatus MotorRecordImpl::special(const FieldDesc& f) {
     if (n == "JOGR" && jogr && (phase_ != Phase::Idle || jogf || lls)) return PutStatus::Failed;
 
     if (n == "VAL" || n == "DVAL" || n == "RVAL" || n == "RLV" || n == "TWF" || n == "TWR") {
+        failed_ = false;
         if (dmov) { // the 1->0 edge, posted before anything moves
             dmov = 0;
             post_now(fd_dmov_);

@@ -40,6 +40,14 @@ public:
         bool high_limit = false, low_limit = false; // switches at the dial + / dial - end
         bool home_switch = false, homed = false;
         bool problem = false, comm_error = false, enabled = true, slip_stall = false;
+        // The readback is known. A driver that has not read its controller yet says false; when
+        // it becomes true while the record is idle, VAL/DVAL/RVAL take the readback.
+        bool valid = true;
+        // The last command was refused or its motion ended short of the target (a limit, an
+        // interlock, a fault): the record ends that motion in alarm and fails its put-callback.
+        bool failed = false;
+        bool limit_violation = false; // ... for a soft limit (its own or, for a virtual axis, a
+                                      // real axis's): the record sets LVIO
     };
     virtual Status status() = 0; // latest, cheap; called when the record polls
 };

@@ -330,6 +330,27 @@ class IocFactory:
                 release_port(srv.port)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def ca_repeater():
+    """A CA repeater (`beamctl ca-repeater`) on this session's REPEATER_PORT, so that libca (here
+    and in client subprocesses) finds one and starts none: a caRepeater that libca starts itself
+    (through the /usr/local/bin/caRepeater link build.sh installs) would outlive the session."""
+    require_binary()
+    proc = subprocess.Popen([str(BEAMCTL), "ca-repeater", "--port", str(REPEATER_PORT)],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
+    line = proc.stdout.readline().decode()
+    assert line.startswith("ready:"), f"beamctl ca-repeater on port {REPEATER_PORT}: {line!r}"
+    try:
+        yield proc
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(10)
+
+
 @pytest.fixture
 def prefix():
     return new_prefix()

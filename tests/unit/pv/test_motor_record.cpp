@@ -331,9 +331,13 @@ TEST_F(MotorTest, SoftLimitViolationRefusesAndPulsesDmov) {
     arrive(2);
     Watch& dmov = watch("m.DMOV");
     bool completed = false;
-    ASSERT_EQ(put("m", 20, [&](PutStatus s) { completed = s == PutStatus::Ok; }), PutStatus::Ok);
+    PutStatus how = PutStatus::Ok;
+    ASSERT_EQ(put("m", 20, [&](PutStatus s) { completed = true, how = s; }), PutStatus::Ok);
     EXPECT_TRUE(completed); // nothing to wait for
+    EXPECT_EQ(how, PutStatus::Failed); // a refused move is not a success
     EXPECT_EQ(getd("m.LVIO"), 1);
+    EXPECT_EQ(getd("m.SEVR"), 1); // SOFT/MINOR until the next move
+    EXPECT_EQ(gets("m.STAT"), "SOFT");
     EXPECT_DOUBLE_EQ(getd("m.VAL"), 2.0); // target reverts
     EXPECT_DOUBLE_EQ(getd("m.DVAL"), 2.0);
     EXPECT_EQ(getd("m.RVAL"), 2000);
@@ -341,7 +345,73 @@ TEST_F(MotorTest, SoftLimitViolationRefusesAndPulsesDmov) {
     EXPECT_EQ(dmov.values, (std::vector<double>{0, 1}));
     ASSERT_EQ(put("m", -3), PutStatus::Ok); // a valid move clears LVIO
     EXPECT_EQ(getd("m.LVIO"), 0);
+    EXPECT_EQ(getd("m.SEVR"), 0);
     EXPECT_EQ(drv->count("move"), 2);
+}
+
+// The driver refuses a move, or its motion ends short (a limit, an interlock, a fault): the
+// put-callback fails, MSTA has PROBLEM, the record alarms (RBV included: ophyd checks it), DMOV is
+// 1 and the targets are back at the readback. A later put-callback on another field succeeds.
+TEST_F(MotorTest, AMoveTheControllerRefusesOrEndsShortFailsItsPutCallbackAndAlarms) {
+    load(kBasic);
+    bool completed = false;
+    PutStatus how = PutStatus::Ok;
+    ASSERT_EQ(put("m", 5, [&](PutStatus s) { completed = true, how = s; }), PutStatus::Ok);
+    EXPECT_FALSE(completed);
+    drv->st.position = 1.25; // ended short
+    drv->st.done = true;
+    drv->st.moving = false;
+    drv->st.failed = drv->st.problem = true;
+    m->poll();
+    EXPECT_TRUE(completed);
+    EXPECT_EQ(how, PutStatus::Failed);
+    EXPECT_EQ(getd("m.DMOV"), 1);
+    EXPECT_TRUE(uint32_t(getd("m.MSTA")) & (1u << 9));
+    EXPECT_EQ(getd("m.SEVR"), 2);
+    EXPECT_DOUBLE_EQ(getd("m.VAL"), 1.25); // VAL takes the readback
+    EXPECT_EQ(getd("m.LVIO"), 0);
+    bool velo_ok = false;
+    ASSERT_EQ(put("m.VELO", 1, [&](PutStatus s) { velo_ok = s == PutStatus::Ok; }), PutStatus::Ok);
+    EXPECT_TRUE(velo_ok);
+    // refused for a soft limit of the controller (a kinematics group): LVIO too
+    drv->st.failed = drv->st.problem = false;
+    completed = false;
+    ASSERT_EQ(put("m", 3, [&](PutStatus s) { completed = true, how = s; }), PutStatus::Ok);
+    drv->st.done = true;
+    drv->st.moving = false;
+    drv->st.failed = drv->st.problem = drv->st.limit_violation = true;
+    m->poll();
+    EXPECT_TRUE(completed);
+    EXPECT_EQ(how, PutStatus::Failed);
+    EXPECT_EQ(getd("m.LVIO"), 1);
+    // the next good move succeeds and clears the alarm
+    drv->st = MotorDriver::Status{};
+    drv->st.position = 1.25;
+    completed = false;
+    ASSERT_EQ(put("m", 2, [&](PutStatus s) { completed = true, how = s; }), PutStatus::Ok);
+    arrive(2);
+    EXPECT_TRUE(completed);
+    EXPECT_EQ(how, PutStatus::Ok);
+    EXPECT_EQ(getd("m.SEVR"), 0);
+}
+
+// A driver that has not read its controller yet (valid = false): when the readback becomes valid
+// with the record idle, VAL/DVAL/RVAL take it, so a tweak starts from where the axis is.
+TEST_F(MotorTest, ValStartsAtTheFirstValidReadback) {
+    drv->st.valid = false;
+    drv->st.position = 0;
+    load(kBasic);
+    EXPECT_DOUBLE_EQ(getd("m.VAL"), 0.0);
+    drv->st.valid = true;
+    drv->st.position = 1.5; // the absolute encoder's position
+    m->poll();
+    EXPECT_DOUBLE_EQ(getd("m.RBV"), 1.5);
+    EXPECT_DOUBLE_EQ(getd("m.VAL"), 1.5);
+    EXPECT_DOUBLE_EQ(getd("m.DVAL"), 1.5);
+    EXPECT_EQ(getd("m.RVAL"), 1500);
+    ASSERT_EQ(put("m.TWV", 0.5), PutStatus::Ok);
+    ASSERT_EQ(put("m.TWF", 1), PutStatus::Ok);
+    EXPECT_DOUBLE_EQ(drv->last("move").a, 2.0); // forward from 1.5
 }
 
 TEST_F(MotorTest, LimitsOffWhenBothZeroAndAlwaysViolatedWhenInverted) {
