@@ -1,8 +1,7 @@
 #include "config/ioc_config.hpp"
 
+#include "config/yaml_reader.hpp"
 #include "core/error.hpp"
-
-#include <yaml-cpp/yaml.h>
 
 #include <cerrno>
 #include <cstring>
@@ -12,299 +11,289 @@
 #include <sstream>
 
 namespace beamctl::config {
+
 namespace {
 
-struct Ctx {
-    std::string file;
-    std::string dir;
-    std::string at(const YAML::Node& n) const {
-        return SB() << file << ":" << n.Mark().line + 1 << ":" << n.Mark().column + 1;
-    }
-    std::string resolve(const std::string& p) const {
-        if (p.empty() || p[0] == '/') return p;
-        return (std::filesystem::path(dir) / p).lexically_normal().string();
-    }
-};
+// Where the IOC file's relative paths start.
+std::string resolve(const std::string& dir, const std::string& p) {
+    if (p.empty() || p[0] == '/') return p;
+    return (std::filesystem::path(dir) / p).lexically_normal().string();
+}
 
-void only_keys(const Ctx& c, const YAML::Node& map, const std::string& where,
-               std::initializer_list<const char*> keys) {
-    if (!map.IsMap()) throw Error(SB() << c.at(map) << ": " << where << " should be a mapping");
-    for (auto kv : map) {
-        std::string k = kv.first.as<std::string>();
-        bool ok = false;
-        for (const char* want : keys) ok = ok || k == want;
-        if (!ok) {
-            SB sb;
-            sb << c.at(kv.first) << ": unknown key '" << k << "' in " << where << " (expected:";
-            for (const char* want : keys) sb << " " << want;
-            throw Error(sb << ")");
+MacroMap macros_of(const YamlNode& n) {
+    MacroMap mm;
+    for (auto& [k, v] : n.string_pairs()) mm[k] = v;
+    return mm;
+}
+
+int int_of(const YamlNode& n, int def, double lo, double hi) {
+    return int(n.integer(between(lo, hi)).value_or(def));
+}
+
+void read_buses(const YamlNode& buses, const std::string& dir, IocConfig& cfg) {
+    std::set<int> ids;
+    const auto items = buses.list();
+    for (std::size_t i = 0; i < items.size(); ++i) {
+        const YamlNode& b = items[i];
+        if (!b.keys({"id", "link", "slaves"})) continue;
+        BusConfig bc;
+        bc.id = int_of(b["id"], int(i), 0, 15);
+        if (!ids.insert(bc.id).second) b.error(SB() << "bus id " << bc.id << " used twice");
+        if (YamlNode l = b["link"]; l.keys({"type", "plant", "host", "port", "iface", "busy_poll"}) && l) {
+            bc.link.type = l.required("type", " (sim, udp or raw)").one_of({"sim", "udp", "raw"}).value_or("sim");
+            if (auto p = l["plant"].string()) {
+                bc.link.plant = resolve(dir, *p);
+                bc.link.plant_where = l["plant"].where();
+            }
+            bc.link.host = l["host"].string().value_or(bc.link.host);
+            bc.link.port = uint16_t(l["port"].unsigned_integer(65535).value_or(bc.link.port));
+            bc.link.iface = l["iface"].string().value_or("");
+            bc.link.busy_poll = l["busy_poll"].boolean().value_or(false);
+            if (bc.link.type == "raw" && bc.link.iface.empty() && (!l.has("iface") || l["iface"].is_scalar()))
+                l.error("a raw link needs 'iface' (the network interface of the segment)");
         }
+        YamlNode slaves = b.required("slaves", " (a list of {position, type})");
+        std::set<int> positions;
+        for (const YamlNode& s : slaves.list()) {
+            if (!s.keys({"position", "type", "sdo"})) continue;
+            SlaveEntry se;
+            se.position = int_of(s.required("position"), -1, 0, 65534);
+            se.type = s.required("type", " (a device of the catalog, e.g. EL1008)").string().value_or("");
+            se.type_where = s["type"].where();
+            if (se.position >= 0 && !positions.insert(se.position).second)
+                s["position"].error(SB() << se.position << " is used twice");
+            for (const YamlNode& d : s["sdo"].list()) {
+                if (!d.keys({"index", "sub", "value", "size"})) continue;
+                SdoConfig sc;
+                sc.index = uint16_t(d.required("index").unsigned_integer(0xFFFF).value_or(0));
+                sc.sub = uint8_t(d["sub"].unsigned_integer(255).value_or(0));
+                if (auto size = d["size"].unsigned_integer(8)) {
+                    if (*size != 1 && *size != 2 && *size != 4 && *size != 8)
+                        d["size"].error(SB() << *size << " should be 1, 2, 4 or 8");
+                    else
+                        sc.size = uint8_t(*size);
+                }
+                sc.value = d.required("value")
+                               .unsigned_integer(sc.size == 8 ? UINT64_MAX
+                                                              : (uint64_t(1) << (8 * sc.size)) - 1)
+                               .value_or(0);
+                se.sdo.push_back(sc);
+            }
+            if (se.position >= 0) bc.slaves.push_back(se);
+        }
+        cfg.buses.push_back(bc);
     }
 }
 
-template <typename T> T get(const Ctx& c, const YAML::Node& n, const std::string& what) {
-    try {
-        return n.as<T>();
-    } catch (const YAML::Exception&) {
-        throw Error(SB() << c.at(n) << ": " << what << ": '" << (n.IsScalar() ? n.Scalar() : std::string("<not a scalar>"))
-                         << "' is not a valid " << (std::is_same_v<T, std::string> ? "string" : "number"));
-    }
-}
-
-uint64_t get_uint(const Ctx& c, const YAML::Node& n, const std::string& what, uint64_t max) {
-    std::string s = get<std::string>(c, n, what);
-    char* end = nullptr;
-    errno = 0;
-    unsigned long long v = std::strtoull(s.c_str(), &end, 0);
-    if (s.empty() || *end || errno || s[0] == '-' || v > max)
-        throw Error(SB() << c.at(n) << ": " << what << ": '" << s << "' should be an integer from 0 to " << max);
-    return v;
+// `include: [dirs]`, `libraries: [files]`: resolved paths.
+std::vector<std::string> paths_of(const YamlNode& n, const std::string& dir) {
+    std::vector<std::string> out;
+    for (const YamlNode& item : n.list())
+        if (auto s = item.string()) out.push_back(resolve(dir, *s));
+    return out;
 }
 
 } // namespace
 
-IocConfig IocConfig::load(const std::string& path) {
+std::string expand_ioc_macros(const std::string& text, const MacroMap& macros, const std::string& path) {
+    // A reference is expanded when its name (up to '=', ',' or the closing bracket) has a value
+    // or the reference has a default; nested names ($(A$(B))) are left to the files that use them.
+    auto expands = [&](std::size_t pos) {
+        std::size_t end = text.find_first_of(")}=,$\\'\"\n", pos + 2);
+        if (end == std::string::npos) return false;
+        return text[end] == '=' || macros.count(text.substr(pos + 2, end - pos - 2)) > 0;
+    };
+    std::string out;
+    out.reserve(text.size());
+    SourceLoc loc{path, 1, 1};
+    for (std::size_t pos = 0; pos < text.size();) {
+        if (is_macro_ref(text, pos) && expands(pos)) {
+            out += expand_macro_ref(text, pos, loc, macros);
+            continue;
+        }
+        advance_loc(loc, text[pos]);
+        out += text[pos++];
+    }
+    return out;
+}
+
+IocConfig IocConfig::load(const std::string& path, const MacroMap& macros) {
+    ErrorList errors;
+    IocConfig cfg = load(path, errors, macros);
+    errors.throw_if_any();
+    return cfg;
+}
+
+IocConfig IocConfig::load(const std::string& path, ErrorList& errors, const MacroMap& macros) {
     std::ifstream f(path);
-    if (!f) throw Error(SB() << path << ": cannot open: " << std::strerror(errno));
+    if (!f) {
+        errors.add(SB() << path << ": cannot open: " << std::strerror(errno));
+        IocConfig cfg;
+        cfg.path = path;
+        return cfg;
+    }
     std::stringstream ss;
     ss << f.rdbuf();
-    return parse(ss.str(), path);
+    std::string text;
+    if (!errors.capture([&] { text = expand_ioc_macros(ss.str(), macros, path); })) {
+        IocConfig cfg;
+        cfg.path = path;
+        return cfg;
+    }
+    return parse(text, path, errors);
 }
 
 IocConfig IocConfig::parse(const std::string& text, const std::string& path) {
-    Ctx c{path, std::filesystem::path(path).parent_path().string()};
-    if (c.dir.empty()) c.dir = ".";
-    YAML::Node root;
-    try {
-        root = YAML::Load(text);
-    } catch (const YAML::ParserException& e) {
-        throw Error(SB() << path << ":" << e.mark.line + 1 << ":" << e.mark.column + 1 << ": " << e.msg);
-    }
+    ErrorList errors;
+    IocConfig cfg = parse(text, path, errors);
+    errors.throw_if_any();
+    return cfg;
+}
+
+IocConfig IocConfig::parse(const std::string& text, const std::string& path, ErrorList& errors) {
+    std::string dir = std::filesystem::path(path).parent_path().string();
+    if (dir.empty()) dir = ".";
+    YamlReader rd(path, text, "the IOC file");
     IocConfig cfg;
     cfg.path = path;
-    if (!root || root.IsNull()) throw Error(SB() << path << ":1:1: empty configuration (needs at least ioc:)");
-    for (auto kv : root) {
-        std::string k = kv.first.as<std::string>();
-        if (k == "web")
-            throw Error(SB() << c.at(kv.first) << ": '" << k
-                             << "' is not supported by this version of beamctl yet");
+    YamlNode root = rd.root();
+    if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "db", "bridges", "ca"},
+                   {{"web", "it is not supported by this version of beamctl yet", true}}) ||
+        root.is_null()) {
+        rd.take_errors(errors);
+        return cfg;
     }
-    only_keys(c, root, "the IOC file", {"ioc", "engine", "buses", "axes", "plugins", "plcs", "db", "bridges", "ca"});
-    if (!root["ioc"]) throw Error(SB() << path << ":1:1: missing required key 'ioc' ({name: ..., prefix: ...})");
+    if (YamlNode n = root.required("ioc", " ({name: ..., prefix: ...})"); n.keys({"name", "prefix"}) && n) {
+        if (auto name = n.required("name").string()) {
+            if (name->empty() || name->find_first_of(" .$\"'") != std::string::npos)
+                n["name"].error(SB() << "'" << *name << "' should be a plain PV name part");
+            else
+                cfg.name = *name;
+        }
+        cfg.prefix = n["prefix"].string().value_or(cfg.name + ":");
+    } else {
+        cfg.prefix = cfg.name + ":";
+    }
+    if (YamlNode n = root["engine"]; n.keys({"rate_hz", "cpu", "priority"})) {
+        cfg.rate_hz = n["rate_hz"].number(between(1, 20000)).value_or(cfg.rate_hz);
+        cfg.cpu = int_of(n["cpu"], cfg.cpu, 0, 1023);
+        cfg.priority = int_of(n["priority"], cfg.priority, 0, 99);
+    }
+    read_buses(root["buses"], dir, cfg);
+    for (const YamlNode& a : root["axes"].list()) {
+        if (!a.keys({"file", "macros", "encoders"})) continue;
+        AxisEntry e;
+        e.where = a.where();
+        e.file = resolve(dir, a.required("file", " (an ECMC axis YAML file)").string().value_or(""));
+        e.file_where = a["file"].where();
+        e.macros = macros_of(a["macros"]);
+        for (const YamlNode& enc : a["encoders"].list()) {
+            if (!enc.keys({"file", "macros"})) continue;
+            AxisEntry::Encoder x;
+            x.file = resolve(dir, enc.required("file").string().value_or(""));
+            x.file_where = enc["file"].where();
+            x.macros = macros_of(enc["macros"]);
+            e.encoders.push_back(std::move(x));
+        }
+        cfg.axes.push_back(std::move(e));
+    }
+    for (const YamlNode& p : root["plugins"].list()) {
+        if (!p.keys({"file", "config"})) continue;
+        PluginEntry e;
+        e.file = resolve(dir, p.required("file", " (a plugin shared library)").string().value_or(""));
+        e.file_where = p["file"].where();
+        e.config = p["config"].string().value_or("");
+        e.where = p.where();
+        cfg.plugins.push_back(std::move(e));
+    }
     {
-        auto n = root["ioc"];
-        only_keys(c, n, "ioc", {"name", "prefix"});
-        if (!n["name"]) throw Error(SB() << c.at(n) << ": ioc: missing required key 'name'");
-        cfg.name = get<std::string>(c, n["name"], "ioc.name");
-        if (cfg.name.empty() || cfg.name.find_first_of(" .$\"'") != std::string::npos)
-            throw Error(SB() << c.at(n["name"]) << ": ioc.name '" << cfg.name << "' should be a plain PV name part");
-        cfg.prefix = n["prefix"] ? get<std::string>(c, n["prefix"], "ioc.prefix") : cfg.name + ":";
-    }
-    if (auto n = root["engine"]) {
-        only_keys(c, n, "engine", {"rate_hz", "cpu", "priority"});
-        if (n["rate_hz"]) {
-            cfg.rate_hz = get<double>(c, n["rate_hz"], "engine.rate_hz");
-            if (!(cfg.rate_hz >= 1 && cfg.rate_hz <= 20000))
-                throw Error(SB() << c.at(n["rate_hz"]) << ": engine.rate_hz: " << cfg.rate_hz
-                                 << " should be between 1 and 20000");
-        }
-        if (n["cpu"]) cfg.cpu = int(get_uint(c, n["cpu"], "engine.cpu", 1023));
-        if (n["priority"]) cfg.priority = int(get_uint(c, n["priority"], "engine.priority", 99));
-    }
-    if (auto buses = root["buses"]) {
-        if (!buses.IsSequence()) throw Error(SB() << c.at(buses) << ": buses should be a list");
         std::set<int> ids;
-        for (std::size_t i = 0; i < buses.size(); ++i) {
-            auto b = buses[i];
-            std::string where = SB() << "buses[" << i << "]";
-            only_keys(c, b, where, {"id", "link", "slaves"});
-            BusConfig bc;
-            bc.id = b["id"] ? int(get_uint(c, b["id"], where + ".id", 15)) : int(i);
-            if (!ids.insert(bc.id).second) throw Error(SB() << c.at(b) << ": " << where << ": bus id " << bc.id << " used twice");
-            if (auto l = b["link"]) {
-                only_keys(c, l, where + ".link", {"type", "plant", "host", "port", "iface", "busy_poll"});
-                if (!l["type"]) throw Error(SB() << c.at(l) << ": " << where << ".link: missing 'type' (sim, udp or raw)");
-                bc.link.type = get<std::string>(c, l["type"], where + ".link.type");
-                if (bc.link.type != "sim" && bc.link.type != "udp" && bc.link.type != "raw")
-                    throw Error(SB() << c.at(l["type"]) << ": " << where << ".link.type: '" << bc.link.type
-                                     << "' should be sim, udp or raw");
-                if (l["plant"]) bc.link.plant = c.resolve(get<std::string>(c, l["plant"], where + ".link.plant"));
-                if (l["host"]) bc.link.host = get<std::string>(c, l["host"], where + ".link.host");
-                if (l["port"]) bc.link.port = uint16_t(get_uint(c, l["port"], where + ".link.port", 65535));
-                if (l["iface"]) bc.link.iface = get<std::string>(c, l["iface"], where + ".link.iface");
-                if (auto bp = l["busy_poll"]) {
-                    bool v = false;
-                    if (!bp.IsScalar() || !YAML::convert<bool>::decode(bp, v))
-                        throw Error(SB() << c.at(bp) << ": " << where << ".link.busy_poll: should be true or false");
-                    bc.link.busy_poll = v;
-                }
-                if (bc.link.type == "raw" && bc.link.iface.empty())
-                    throw Error(SB() << c.at(l) << ": " << where
-                                     << ".link: a raw link needs 'iface' (the network interface of the segment)");
-            }
-            auto slaves = b["slaves"];
-            if (!slaves || !slaves.IsSequence())
-                throw Error(SB() << c.at(b) << ": " << where << ": 'slaves' should be a list of {position, type}");
-            std::set<int> positions;
-            for (std::size_t k = 0; k < slaves.size(); ++k) {
-                auto s = slaves[k];
-                std::string sw = SB() << where << ".slaves[" << k << "]";
-                only_keys(c, s, sw, {"position", "type", "sdo"});
-                if (!s["position"] || !s["type"])
-                    throw Error(SB() << c.at(s) << ": " << sw << ": needs position and type");
-                SlaveEntry se;
-                se.position = int(get_uint(c, s["position"], sw + ".position", 65534));
-                se.type = get<std::string>(c, s["type"], sw + ".type");
-                if (!positions.insert(se.position).second)
-                    throw Error(SB() << c.at(s["position"]) << ": " << sw << ": position " << se.position << " used twice");
-                if (auto sdos = s["sdo"]) {
-                    if (!sdos.IsSequence()) throw Error(SB() << c.at(sdos) << ": " << sw << ".sdo should be a list");
-                    for (std::size_t q = 0; q < sdos.size(); ++q) {
-                        auto d = sdos[q];
-                        std::string dw = SB() << sw << ".sdo[" << q << "]";
-                        only_keys(c, d, dw, {"index", "sub", "value", "size"});
-                        if (!d["index"] || !d["value"]) throw Error(SB() << c.at(d) << ": " << dw << ": needs index and value");
-                        SdoConfig sc;
-                        sc.index = uint16_t(get_uint(c, d["index"], dw + ".index", 0xFFFF));
-                        sc.sub = d["sub"] ? uint8_t(get_uint(c, d["sub"], dw + ".sub", 255)) : 0;
-                        sc.size = d["size"] ? uint8_t(get_uint(c, d["size"], dw + ".size", 8)) : 4;
-                        if (sc.size != 1 && sc.size != 2 && sc.size != 4 && sc.size != 8)
-                            throw Error(SB() << c.at(d["size"]) << ": " << dw << ".size: " << int(sc.size) << " should be 1, 2, 4 or 8");
-                        sc.value = get_uint(c, d["value"], dw + ".value",
-                                            sc.size == 8 ? UINT64_MAX : (uint64_t(1) << (8 * sc.size)) - 1);
-                        se.sdo.push_back(sc);
-                    }
-                }
-                bc.slaves.push_back(se);
-            }
-            cfg.buses.push_back(bc);
-        }
-    }
-    auto macros = [&](const YAML::Node& m, const std::string& where) {
-        MacroMap mm;
-        if (!m) return mm;
-        if (!m.IsMap()) throw Error(SB() << c.at(m) << ": " << where << ".macros should be a mapping");
-        for (auto kv : m) mm[kv.first.as<std::string>()] = get<std::string>(c, kv.second, where + ".macros");
-        return mm;
-    };
-    if (auto axes = root["axes"]) {
-        if (!axes.IsSequence()) throw Error(SB() << c.at(axes) << ": axes should be a list of {file, macros}");
-        for (std::size_t i = 0; i < axes.size(); ++i) {
-            auto a = axes[i];
-            std::string where = SB() << "axes[" << i << "]";
-            only_keys(c, a, where, {"file", "macros", "encoders"});
-            if (!a["file"]) throw Error(SB() << c.at(a) << ": " << where << ": missing 'file' (an ECMC axis YAML file)");
-            AxisEntry e;
-            e.file = c.resolve(get<std::string>(c, a["file"], where + ".file"));
-            e.macros = macros(a["macros"], where);
-            e.where = c.at(a);
-            if (auto encs = a["encoders"]) {
-                if (!encs.IsSequence()) throw Error(SB() << c.at(encs) << ": " << where << ".encoders should be a list of {file, macros}");
-                for (std::size_t k = 0; k < encs.size(); ++k) {
-                    std::string ew = SB() << where << ".encoders[" << k << "]";
-                    only_keys(c, encs[k], ew, {"file", "macros"});
-                    if (!encs[k]["file"]) throw Error(SB() << c.at(encs[k]) << ": " << ew << ": missing 'file'");
-                    e.encoders.push_back({c.resolve(get<std::string>(c, encs[k]["file"], ew + ".file")), macros(encs[k]["macros"], ew)});
-                }
-            }
-            cfg.axes.push_back(std::move(e));
-        }
-    }
-    if (auto plugins = root["plugins"]) {
-        if (!plugins.IsSequence()) throw Error(SB() << c.at(plugins) << ": plugins should be a list of {file, config}");
-        for (std::size_t i = 0; i < plugins.size(); ++i) {
-            auto p = plugins[i];
-            std::string where = SB() << "plugins[" << i << "]";
-            only_keys(c, p, where, {"file", "config"});
-            if (!p["file"]) throw Error(SB() << c.at(p) << ": " << where << ": missing 'file' (a plugin shared library)");
-            PluginEntry e;
-            e.file = c.resolve(get<std::string>(c, p["file"], where + ".file"));
-            if (p["config"]) e.config = get<std::string>(c, p["config"], where + ".config");
-            e.where = c.at(p);
-            cfg.plugins.push_back(std::move(e));
-        }
-    }
-    if (auto plcs = root["plcs"]) {
-        if (!plcs.IsSequence()) throw Error(SB() << c.at(plcs) << ": plcs should be a list of {id, file, rate_ms, macros}");
-        std::set<int> ids;
+        const auto plcs = root["plcs"].list();
         for (std::size_t i = 0; i < plcs.size(); ++i) {
-            auto p = plcs[i];
-            std::string where = SB() << "plcs[" << i << "]";
-            only_keys(c, p, where, {"id", "file", "rate_ms", "enable", "macros", "include", "libraries"});
-            if (!p["file"]) throw Error(SB() << c.at(p) << ": " << where << ": missing 'file' (a PLC file in ECMC's language)");
+            const YamlNode& p = plcs[i];
+            if (!p.keys({"id", "file", "rate_ms", "enable", "macros", "include", "libraries"})) continue;
             PlcEntry e;
-            e.id = p["id"] ? int(get_uint(c, p["id"], where + ".id", 99)) : int(i);
-            if (!ids.insert(e.id).second) throw Error(SB() << c.at(p) << ": " << where << ": PLC id " << e.id << " used twice");
-            e.file = c.resolve(get<std::string>(c, p["file"], where + ".file"));
-            if (auto r = p["rate_ms"]) {
-                e.rate_ms = get<double>(c, r, where + ".rate_ms");
-                if (!(e.rate_ms > 0 || e.rate_ms == -1))
-                    throw Error(SB() << c.at(r) << ": " << where << ".rate_ms: " << e.rate_ms << " should be > 0, or -1 (every cycle)");
+            e.id = int_of(p["id"], int(i), 0, 99);
+            if (!ids.insert(e.id).second) p.error(SB() << "PLC id " << e.id << " used twice");
+            e.file = resolve(dir, p.required("file", " (a PLC file in ECMC's language)").string().value_or(""));
+            e.file_where = p["file"].where();
+            if (auto r = p["rate_ms"].number()) {
+                if (*r > 0 || *r == -1)
+                    e.rate_ms = *r;
+                else
+                    p["rate_ms"].error(SB() << *r << " should be > 0, or -1 (every cycle)");
             }
-            if (auto en = p["enable"]) {
-                bool v = true;
-                if (!en.IsScalar() || !YAML::convert<bool>::decode(en, v))
-                    throw Error(SB() << c.at(en) << ": " << where << ".enable: should be true or false");
-                e.enable = v;
-            }
-            e.macros = macros(p["macros"], where);
-            auto list = [&](const char* key, std::vector<std::string>& out) {
-                auto l = p[key];
-                if (!l) return;
-                if (!l.IsSequence()) throw Error(SB() << c.at(l) << ": " << where << "." << key << " should be a list");
-                for (std::size_t k = 0; k < l.size(); ++k) out.push_back(c.resolve(get<std::string>(c, l[k], where + "." + key)));
-            };
-            list("include", e.include);
-            list("libraries", e.libraries);
-            e.where = c.at(p);
+            e.enable = p["enable"].boolean().value_or(true);
+            e.macros = macros_of(p["macros"]);
+            e.include = paths_of(p["include"], dir);
+            e.libraries = paths_of(p["libraries"], dir);
+            e.where = p.where();
             cfg.plcs.push_back(std::move(e));
         }
     }
-    if (auto dbs = root["db"]) {
-        if (!dbs.IsSequence()) throw Error(SB() << c.at(dbs) << ": db should be a list of {file, macros}");
-        for (std::size_t i = 0; i < dbs.size(); ++i) {
-            auto d = dbs[i];
-            std::string where = SB() << "db[" << i << "]";
-            only_keys(c, d, where, {"file", "macros"});
-            if (!d["file"]) throw Error(SB() << c.at(d) << ": " << where << ": missing 'file'");
-            DbConfig dc;
-            dc.file = c.resolve(get<std::string>(c, d["file"], where + ".file"));
-            if (auto m = d["macros"]) {
-                if (!m.IsMap()) throw Error(SB() << c.at(m) << ": " << where << ".macros should be a mapping");
-                for (auto kv : m) dc.macros[kv.first.as<std::string>()] = get<std::string>(c, kv.second, where + ".macros");
+    {
+        const auto kins = root["kinematics"].list();
+        for (std::size_t i = 0; i < kins.size(); ++i) {
+            const YamlNode& k = kins[i];
+            if (!k.keys({"name", "virtual", "real", "inverse", "file", "macros", "include"})) continue;
+            KinematicsEntry e;
+            e.where = k.where();
+            e.name = k["name"].string().value_or(k.path());
+            auto ids = [&](const char* key, std::vector<int>& out) {
+                YamlNode l = k.required(key, " (a list of axis ids)");
+                if (l && (!l.is_list() || l.yaml().size() == 0)) {
+                    l.error("should be a list of axis ids");
+                    return;
+                }
+                for (const YamlNode& id : l.list())
+                    if (auto v = id.unsigned_integer(999)) out.push_back(int(*v));
+            };
+            ids("virtual", e.virt);
+            ids("real", e.real);
+            if (k.has("inverse") == k.has("file"))
+                k.error("give the inverse transform as 'inverse' (PLC code) or 'file', one of them");
+            e.code = k["inverse"].string().value_or("");
+            if (auto f = k["file"].string()) {
+                e.file = resolve(dir, *f);
+                e.file_where = k["file"].where();
             }
-            cfg.db.push_back(dc);
+            e.macros = macros_of(k["macros"]);
+            e.include = paths_of(k["include"], dir);
+            cfg.kinematics.push_back(std::move(e));
         }
     }
-    if (auto bridges = root["bridges"]) {
-        only_keys(c, bridges, "bridges", {"rcp"});
-        if (auto r = bridges["rcp"]) {
-            only_keys(c, r, "bridges.rcp", {"listen", "port", "prefix", "timeout_s", "db_out", "pv_pattern", "motor_fields"});
+    for (const YamlNode& d : root["db"].list()) {
+        if (!d.keys({"file", "macros"})) continue;
+        DbConfig dc;
+        dc.file = resolve(dir, d.required("file", " (an EPICS .db file)").string().value_or(""));
+        dc.file_where = d["file"].where();
+        dc.macros = macros_of(d["macros"]);
+        cfg.db.push_back(dc);
+    }
+    if (YamlNode bridges = root["bridges"]; bridges.keys({"rcp"})) {
+        if (YamlNode r = bridges["rcp"];
+            r.keys({"listen", "port", "prefix", "timeout_s", "db_out", "pv_pattern", "motor_fields"}) && r) {
             RcpBridgeEntry e;
-            e.prefix = cfg.prefix + "RCP:";
-            if (r["listen"]) e.listen = get<std::string>(c, r["listen"], "bridges.rcp.listen");
-            if (r["port"]) e.port = uint16_t(get_uint(c, r["port"], "bridges.rcp.port", 65535));
-            if (r["prefix"]) e.prefix = get<std::string>(c, r["prefix"], "bridges.rcp.prefix");
-            if (auto t = r["timeout_s"]) {
-                e.timeout_s = get<double>(c, t, "bridges.rcp.timeout_s");
-                if (!(e.timeout_s > 0 && e.timeout_s <= 3600))
-                    throw Error(SB() << c.at(t) << ": bridges.rcp.timeout_s: " << e.timeout_s << " should be > 0 and <= 3600");
-            }
-            if (r["db_out"]) e.db_out = c.resolve(get<std::string>(c, r["db_out"], "bridges.rcp.db_out"));
-            if (r["pv_pattern"]) e.pv_pattern = get<std::string>(c, r["pv_pattern"], "bridges.rcp.pv_pattern");
-            if (auto m = r["motor_fields"]) {
-                if (!m.IsMap()) throw Error(SB() << c.at(m) << ": bridges.rcp.motor_fields should be a mapping of motor record fields, e.g. {DHLM: 45, DLLM: -45}");
-                for (auto kv : m) e.motor_fields.emplace_back(kv.first.as<std::string>(), get<std::string>(c, kv.second, "bridges.rcp.motor_fields"));
-            }
-            e.where = c.at(r);
+            e.prefix = r["prefix"].string().value_or(cfg.prefix + "RCP:");
+            e.listen = r["listen"].string().value_or(e.listen);
+            e.port = uint16_t(r["port"].unsigned_integer(65535).value_or(e.port));
+            e.timeout_s = r["timeout_s"].number(Range{0, 3600, true}).value_or(e.timeout_s);
+            if (auto o = r["db_out"].string()) e.db_out = resolve(dir, *o);
+            e.pv_pattern = r["pv_pattern"].string().value_or("");
+            e.motor_fields = r["motor_fields"].string_pairs();
+            e.where = r.where();
             cfg.rcp = e;
         }
     }
-    if (auto ca = root["ca"]) {
-        only_keys(c, ca, "ca", {"port", "acf"});
-        if (ca["port"]) cfg.ca_port = uint16_t(get_uint(c, ca["port"], "ca.port", 65535));
-        if (ca["acf"]) cfg.acf = c.resolve(get<std::string>(c, ca["acf"], "ca.acf"));
+    if (YamlNode ca = root["ca"]; ca.keys({"port", "acf"})) {
+        if (auto p = ca["port"].unsigned_integer(65535)) cfg.ca_port = uint16_t(*p);
+        if (auto a = ca["acf"].string()) {
+            cfg.acf = resolve(dir, *a);
+            cfg.acf_where = ca["acf"].where();
+        }
     }
+    rd.take_errors(errors);
     return cfg;
 }
 

@@ -1,8 +1,10 @@
-// The IOC configuration file (`beamctl run ioc.yaml`, ARCHITECTURE.md §4) as typed structs.
-// Every error names file:line:col and the key; unknown keys are errors; files it references
-// are resolved relative to it.
+// The IOC configuration file (`beamctl run ioc.yaml`, ARCHITECTURE.md §4) as typed structs, read
+// with config::YamlReader: every error of the file at once, each with file:line:col and the key;
+// unknown keys are errors (with a close-match hint); files it references are resolved relative
+// to it, and their place in the IOC file is kept (`*_where`) for errors about them.
 #pragma once
 
+#include "core/error_list.hpp"
 #include "core/macros.hpp"
 
 #include <cstdint>
@@ -23,6 +25,7 @@ struct SlaveEntry {
     int position = 0;
     std::string type;
     std::vector<SdoConfig> sdo;
+    std::string type_where; // file:line:col of the type in the IOC file
 };
 
 struct LinkConfig {
@@ -32,6 +35,7 @@ struct LinkConfig {
     uint16_t port = 0x88A4;   // udp
     std::string iface;        // raw: network interface of the segment
     bool busy_poll = false;   // raw: spin in receive instead of sleeping (no wake-up latency)
+    std::string plant_where;  // file:line:col of `plant` in the IOC file
 };
 
 struct BusConfig {
@@ -43,6 +47,7 @@ struct BusConfig {
 struct DbConfig {
     std::string file; // resolved path
     MacroMap macros;
+    std::string file_where; // file:line:col of the file name in the IOC file
 };
 
 // An ECMC axis file with its macros (ecmccfg loadYamlAxis.cmd), and extra encoder files
@@ -53,9 +58,11 @@ struct AxisEntry {
     struct Encoder {
         std::string file;
         MacroMap macros;
+        std::string file_where;
     };
     std::vector<Encoder> encoders;
-    std::string where; // file:line:col of the entry in the IOC file
+    std::string where;      // file:line:col of the entry in the IOC file
+    std::string file_where; // file:line:col of the file name in the IOC file
 };
 
 // A PLC file (ecmccfg loadPLCFile.cmd): `plcs: [{id, file, rate_ms, enable, macros, include,
@@ -69,6 +76,22 @@ struct PlcEntry {
     std::vector<std::string> include;   // resolved directories searched by `include`
     std::vector<std::string> libraries; // resolved files of `function` definitions
     std::string where;       // file:line:col of the entry
+    std::string file_where;  // file:line:col of the file name
+};
+
+// A kinematics group (docs/motion.md, motion/kinematics.hpp): virtual axes whose moves drive real
+// axes; its inverse transform, in the PLC language, is what the engine checks virtual moves with.
+// `kinematics: [{name, virtual: [ids], real: [ids], inverse: CODE | file: F, macros, include}]`.
+// In the code, `ax<n>` is the position of axis n: read it for a virtual axis, assign it for a real.
+struct KinematicsEntry {
+    std::string name;
+    std::vector<int> virt, real;        // axis ids
+    std::string code;                   // inline inverse, or
+    std::string file;                   // resolved path of a file with it
+    MacroMap macros;
+    std::vector<std::string> include;   // resolved directories searched by `include`
+    std::string where;                  // file:line:col of the entry
+    std::string file_where;             // file:line:col of `file`, if given
 };
 
 // A plugin (include/beamctl/plugin.h): `plugins: [{file, config}]`.
@@ -76,6 +99,7 @@ struct PluginEntry {
     std::string file; // resolved path
     std::string config;
     std::string where;
+    std::string file_where;
 };
 
 // The UDP bridge to rapid-control-prototyping machines (`bridges: rcp:`; docs/rcp.md).
@@ -103,13 +127,29 @@ struct IocConfig {
     std::vector<AxisEntry> axes;
     std::vector<PluginEntry> plugins;
     std::vector<PlcEntry> plcs;
+    std::vector<KinematicsEntry> kinematics;
     std::vector<DbConfig> db;
     std::optional<RcpBridgeEntry> rcp;
     std::optional<uint16_t> ca_port; // default: EPICS_CAS_SERVER_PORT / 5064
     std::string acf;                 // resolved path
+    std::string acf_where;           // file:line:col of `acf`
 
-    static IocConfig load(const std::string& path);
+    // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
+    // (`beamctl run -m`).
+    // Throws one MultiError with every error of the file (its first line: the first error).
+    static IocConfig load(const std::string& path, const MacroMap& macros = {});
     static IocConfig parse(const std::string& text, const std::string& path);
+    // The same, recording every error in `errors` and returning what could be read (defaults
+    // where values were bad), for `beamctl check`.
+    static IocConfig load(const std::string& path, ErrorList& errors, const MacroMap& macros = {});
+    static IocConfig parse(const std::string& text, const std::string& path, ErrorList& errors);
 };
+
+// The IOC file's text with its macro references expanded, as `beamctl run -m NAME=VALUE` asks:
+// $(NAME) and ${NAME} take the value given in `macros`, $(NAME=default) that value or else the
+// default (core/macros.hpp syntax). A reference to a name with neither is left as it is, for the
+// file or code it is handed to (axis, PLC and kinematics macros). Values are inserted as text
+// before the YAML is read. Errors (an unterminated reference, a recursive value) name path:line:col.
+std::string expand_ioc_macros(const std::string& text, const MacroMap& macros, const std::string& path);
 
 } // namespace beamctl::config

@@ -102,7 +102,7 @@ TEST(RawLink, IocConfigTakesARawLinkWithItsInterface) {
         config::IocConfig::parse(bus("{type: raw, iface: eth1, busy_poll: sometimes}"), "ioc.yaml");
         FAIL();
     } catch (const Error& e) {
-        EXPECT_NE(std::string(e.what()).find("busy_poll: should be true or false"),
+        EXPECT_NE(std::string(e.what()).find("busy_poll should be true or false"),
                   std::string::npos)
             << e.what();
     }

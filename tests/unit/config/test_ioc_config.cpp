@@ -1,0 +1,189 @@
+// The IOC file through the one reader: every section read with its defaults, the places of the
+// files it names, and a file with many errors reporting each with file:line:col in one pass.
+#include "config/ioc_config.hpp"
+
+#include "core/error_list.hpp"
+
+#include <gtest/gtest.h>
+
+using namespace beamctl;
+using namespace beamctl::config;
+
+namespace {
+
+std::string joined(const std::vector<std::string>& v) {
+    std::string s;
+    for (const auto& x : v) s += x + "\n";
+    return s;
+}
+
+std::vector<std::string> errors_of(const std::string& text) {
+    ErrorList e;
+    IocConfig::parse(text, "/cfg/ioc.yaml", e);
+    return e.messages();
+}
+
+} // namespace
+
+TEST(IocConfig, ReadsEverySectionWithPlacesOfTheFilesItNames) {
+    const char* text = R"(ioc: {name: DEMO}
+engine: {rate_hz: 2000, cpu: 1, priority: 70}
+buses:
+  - id: 0
+    link: {type: sim, plant: plant.yaml}
+    slaves:
+      - {position: 0, type: EK1100}
+      - {position: 2, type: EL7041, sdo: [{index: 0x8010, sub: 1, value: 1000, size: 2}]}
+axes:
+  - {file: axes/x.yaml, macros: {AX_ID: 1, DRV_SLAVE: 2}, encoders: [{file: enc.yaml}]}
+plcs:
+  - {file: main.plc, rate_ms: 10, enable: false, include: [lib], macros: {A: 1}}
+kinematics:
+  - {name: slit, virtual: [11, 12], real: [1, 2], inverse: "ax1 := ax11;"}
+  - {virtual: [13], real: [3], file: /abs/k.plc_inc}
+db:
+  - {file: extra.db, macros: {P: "X:"}}
+bridges:
+  rcp: {port: 18066, timeout_s: 2, motor_fields: {DHLM: 45}}
+ca: {port: 5070, acf: access.acf}
+)";
+    IocConfig c = IocConfig::parse(text, "/cfg/ioc.yaml");
+    EXPECT_EQ(c.name, "DEMO");
+    EXPECT_EQ(c.prefix, "DEMO:");
+    EXPECT_EQ(c.rate_hz, 2000);
+    EXPECT_EQ(c.cpu, 1);
+    EXPECT_EQ(c.priority, 70);
+    ASSERT_EQ(c.buses.size(), 1u);
+    EXPECT_EQ(c.buses[0].link.plant, "/cfg/plant.yaml");
+    EXPECT_EQ(c.buses[0].link.plant_where, "/cfg/ioc.yaml:5:30");
+    ASSERT_EQ(c.buses[0].slaves.size(), 2u);
+    EXPECT_EQ(c.buses[0].slaves[1].type, "EL7041");
+    EXPECT_EQ(c.buses[0].slaves[1].type_where, "/cfg/ioc.yaml:8:29");
+    ASSERT_EQ(c.buses[0].slaves[1].sdo.size(), 1u);
+    EXPECT_EQ(c.buses[0].slaves[1].sdo[0].index, 0x8010);
+    EXPECT_EQ(c.buses[0].slaves[1].sdo[0].size, 2);
+    EXPECT_EQ(c.buses[0].slaves[1].sdo[0].value, 1000u);
+    ASSERT_EQ(c.axes.size(), 1u);
+    EXPECT_EQ(c.axes[0].file, "/cfg/axes/x.yaml");
+    EXPECT_EQ(c.axes[0].file_where, "/cfg/ioc.yaml:10:12");
+    EXPECT_EQ(c.axes[0].where, "/cfg/ioc.yaml:10:5");
+    EXPECT_EQ(c.axes[0].macros.at("DRV_SLAVE"), "2");
+    ASSERT_EQ(c.axes[0].encoders.size(), 1u);
+    EXPECT_EQ(c.axes[0].encoders[0].file, "/cfg/enc.yaml");
+    ASSERT_EQ(c.plcs.size(), 1u);
+    EXPECT_EQ(c.plcs[0].id, 0);
+    EXPECT_EQ(c.plcs[0].rate_ms, 10);
+    EXPECT_FALSE(c.plcs[0].enable);
+    EXPECT_EQ(c.plcs[0].include, std::vector<std::string>{"/cfg/lib"});
+    ASSERT_EQ(c.kinematics.size(), 2u);
+    EXPECT_EQ(c.kinematics[0].name, "slit");
+    EXPECT_EQ(c.kinematics[0].virt, (std::vector<int>{11, 12}));
+    EXPECT_EQ(c.kinematics[0].code, "ax1 := ax11;");
+    EXPECT_EQ(c.kinematics[1].name, "kinematics[1]");
+    EXPECT_EQ(c.kinematics[1].file, "/abs/k.plc_inc");
+    ASSERT_EQ(c.db.size(), 1u);
+    EXPECT_EQ(c.db[0].macros.at("P"), "X:");
+    ASSERT_TRUE(c.rcp);
+    EXPECT_EQ(c.rcp->prefix, "DEMO:RCP:");
+    EXPECT_EQ(c.rcp->port, 18066);
+    EXPECT_EQ(c.rcp->timeout_s, 2);
+    EXPECT_EQ(c.rcp->motor_fields.size(), 1u);
+    EXPECT_EQ(c.ca_port, 5070);
+    EXPECT_EQ(c.acf, "/cfg/access.acf");
+}
+
+TEST(IocConfig, DefaultsForAMinimalFile) {
+    IocConfig c = IocConfig::parse("ioc: {name: T, prefix: \"P:\"}\n", "ioc.yaml");
+    EXPECT_EQ(c.prefix, "P:");
+    EXPECT_EQ(c.rate_hz, 1000);
+    EXPECT_EQ(c.cpu, -1);
+    EXPECT_EQ(c.priority, 80);
+    EXPECT_TRUE(c.buses.empty());
+    EXPECT_FALSE(c.rcp);
+    EXPECT_FALSE(c.ca_port);
+}
+
+TEST(IocConfig, EveryErrorOfTheFileInOnePass) {
+    const char* text = "ioc: {name: \"A B\"}\n"                                      // 1
+                       "engine: {rate_hz: 0, cpus: 1}\n"                             // 2
+                       "buses:\n"                                                    // 3
+                       "  - id: 0\n"                                                 // 4
+                       "    link: {type: simm}\n"                                    // 5
+                       "    slaves:\n"                                               // 6
+                       "      - {position: 1, type: EL1008}\n"                       // 7
+                       "      - {position: 1, type: EL2008}\n"                       // 8
+                       "      - {position: 2, type: EL7041, sdo: [{index: 0x8010, value: 70000, size: 2}]}\n" // 9
+                       "axes:\n"                                                     // 10
+                       "  - {macros: {A: 1}}\n"                                      // 11
+                       "plcs:\n"                                                     // 12
+                       "  - {file: a.plc, rate_ms: 0}\n"                             // 13
+                       "  - {id: 0, file: b.plc}\n"                                  // 14
+                       "kinematics:\n"                                               // 15
+                       "  - {virtual: [], real: [1], inverse: x, file: y}\n"         // 16
+                       "web: {port: 8080}\n";                                        // 17
+    const auto e = errors_of(text);
+    const std::vector<std::string> want = {
+        "/cfg/ioc.yaml:1:14: ioc.name: 'A B' should be a plain PV name part",
+        "/cfg/ioc.yaml:2:19: engine.rate_hz should be from 1 to 20000, got 0",
+        "/cfg/ioc.yaml:2:22: unknown key 'cpus' in engine (did you mean 'cpu'?)",
+        "/cfg/ioc.yaml:5:18: buses[0].link.type should be sim, udp or raw, got 'simm' (did you "
+        "mean 'sim'?)",
+        "/cfg/ioc.yaml:8:20: buses[0].slaves[1].position: 1 is used twice",
+        "/cfg/ioc.yaml:9:66: buses[0].slaves[2].sdo[0].value should be from 0 to 65535, got 70000",
+        "/cfg/ioc.yaml:11:5: axes[0]: missing required key 'file' (an ECMC axis YAML file)",
+        "/cfg/ioc.yaml:13:28: plcs[0].rate_ms: 0 should be > 0, or -1 (every cycle)",
+        "/cfg/ioc.yaml:14:5: plcs[1]: PLC id 0 used twice",
+        "/cfg/ioc.yaml:16:5: kinematics[0]: give the inverse transform as 'inverse' (PLC code) or "
+        "'file', one of them",
+        "/cfg/ioc.yaml:16:15: kinematics[0].virtual: should be a list of axis ids",
+        "/cfg/ioc.yaml:17:1: unknown key 'web' in the IOC file: it is not supported by this "
+        "version of beamctl yet",
+    };
+    EXPECT_EQ(e, want) << joined(e);
+    try {
+        IocConfig::parse(text, "/cfg/ioc.yaml");
+        FAIL() << "no error";
+    } catch (const MultiError& m) {
+        EXPECT_EQ(m.errors(), want);
+    }
+}
+
+TEST(IocConfig, StructuralErrors) {
+    EXPECT_EQ(errors_of(""), std::vector<std::string>{"/cfg/ioc.yaml:1:1: empty configuration "
+                                                      "(needs at least ioc:)"});
+    EXPECT_EQ(errors_of("- a\n"), std::vector<std::string>{"/cfg/ioc.yaml:1:1: the IOC file should "
+                                                           "be a mapping (key: value lines), got a "
+                                                           "list"});
+    EXPECT_EQ(errors_of("engine: {}\n"),
+              std::vector<std::string>{"/cfg/ioc.yaml:1:1: the IOC file: missing required key "
+                                       "'ioc' ({name: ..., prefix: ...})"});
+    auto e = errors_of("ioc: {name: T}\nbuses: [{id: 0, link: {type: raw}}]\n");
+    EXPECT_EQ(e, (std::vector<std::string>{
+                     "/cfg/ioc.yaml:2:9: buses[0]: missing required key 'slaves' (a list of "
+                     "{position, type})",
+                     "/cfg/ioc.yaml:2:23: buses[0].link: a raw link needs 'iface' (the network "
+                     "interface of the segment)"}))
+        << joined(e);
+    e = errors_of("ioc: {name: T}\nbuses: [{slaves: [{position: 0}]}]\nca: {port: 70000}\n");
+    EXPECT_EQ(e, (std::vector<std::string>{
+                     "/cfg/ioc.yaml:2:19: buses[0].slaves[0]: missing required key 'type' (a "
+                     "device of the catalog, e.g. EL1008)",
+                     "/cfg/ioc.yaml:3:12: ca.port should be from 0 to 65535, got 70000"}))
+        << joined(e);
+    e = errors_of("ioc: {name: T}\nbridges: {rcp: {timeout_s: 0}}\n");
+    EXPECT_EQ(e, (std::vector<std::string>{
+                     "/cfg/ioc.yaml:2:28: bridges.rcp.timeout_s should be > 0 and <= 3600, got 0"}))
+        << joined(e);
+    e = errors_of("ioc: {name: T}\nioc: {name: U}\n");
+    EXPECT_EQ(e, (std::vector<std::string>{
+                     "/cfg/ioc.yaml:2:1: duplicate key 'ioc' in the IOC file (also at line 1)"}))
+        << joined(e);
+}
+
+TEST(IocConfig, AMissingFileAndMacroErrorsAreErrorsToo) {
+    ErrorList e;
+    IocConfig::load("/nonexistent/ioc.yaml", e);
+    EXPECT_EQ(e.messages(), std::vector<std::string>{"/nonexistent/ioc.yaml: cannot open: No such "
+                                                     "file or directory"});
+    EXPECT_THROW(IocConfig::load("/nonexistent/ioc.yaml"), Error);
+}
