@@ -1,14 +1,14 @@
 #include "bridge/rcp/model.hpp"
 
+#include "config/yaml_reader.hpp"
 #include "core/error.hpp"
-
-#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <numbers>
 #include <sstream>
@@ -16,88 +16,12 @@
 namespace beamctl::bridge::rcp {
 namespace {
 
-// ---------------------------------------------------------------- YAML with file:line:col
-struct Yaml {
-    const std::string& file;
-
-    std::string where(const YAML::Node& n) const {
-        return SB() << file << ":" << n.Mark().line + 1 << ":" << n.Mark().column + 1;
-    }
-    [[noreturn]] void fail(const YAML::Node& n, const std::string& msg) const {
-        throw Error(SB() << where(n) << ": " << msg);
-    }
-    void keys(const YAML::Node& n, std::initializer_list<const char*> allowed,
-              const char* what) const {
-        if (!n.IsMap()) fail(n, SB() << what << " should be a mapping");
-        for (auto kv : n) {
-            std::string k = kv.first.as<std::string>();
-            if (std::none_of(allowed.begin(), allowed.end(),
-                             [&](const char* a) { return k == a; })) {
-                std::string list;
-                for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
-                fail(kv.first, SB() << "unknown key '" << k << "' in " << what << " (expected "
-                                    << list << ")");
-            }
-        }
-    }
-    std::string str(const YAML::Node& n, const char* key) const {
-        if (!n.IsScalar()) fail(n, SB() << key << " should be a string");
-        return n.as<std::string>();
-    }
-    double num(const YAML::Node& n, const char* key) const {
-        double v;
-        try {
-            v = n.as<double>();
-        } catch (const YAML::Exception&) {
-            fail(n, SB() << key << " should be a number");
-        }
-        if (!std::isfinite(v)) fail(n, SB() << key << " should be a finite number");
-        return v;
-    }
-    double num(const YAML::Node& parent, const char* key, double def) const {
-        YAML::Node n = parent[key];
-        return n ? num(n, key) : def;
-    }
-    double positive(const YAML::Node& parent, const char* key, double def) const {
-        double v = num(parent, key, def);
-        if (!(v > 0)) fail(parent[key], SB() << key << " should be > 0 (got " << v << ")");
-        return v;
-    }
-    int64_t integer(const YAML::Node& n, const char* key, int64_t lo, int64_t hi) const {
-        int64_t v;
-        try {
-            v = n.as<int64_t>();
-        } catch (const YAML::Exception&) {
-            fail(n, SB() << key << " should be an integer");
-        }
-        if (v < lo || v > hi)
-            fail(n, SB() << key << " should be in " << lo << ".." << hi << " (got " << v << ")");
-        return v;
-    }
-    bool flag(const YAML::Node& parent, const char* key, bool def) const {
-        YAML::Node n = parent[key];
-        if (!n) return def;
-        try {
-            return n.as<bool>();
-        } catch (const YAML::Exception&) {
-            fail(n, SB() << key << " should be true or false");
-        }
-    }
-    uint32_t ip(const YAML::Node& n, const char* key) const {
-        std::string s = str(n, key);
-        uint32_t v;
-        if (!parse_ipv4(s, v))
-            fail(n, SB() << key << " '" << s << "' should be an IPv4 address such as 127.0.0.1");
-        return v;
-    }
-    // [lo, hi] with lo < hi
-    std::pair<double, double> range(const YAML::Node& n, const char* key) const {
-        if (!n.IsSequence() || n.size() != 2) fail(n, SB() << key << " should be [low, high]");
-        double lo = num(n[0], key), hi = num(n[1], key);
-        if (!(lo < hi)) fail(n, SB() << key << ": low " << lo << " should be below high " << hi);
-        return {lo, hi};
-    }
-};
+using config::above;
+using config::at_least;
+using config::between;
+using config::Range;
+using config::YamlNode;
+using config::YamlReader;
 
 DataType default_data_type(ObjectType t) {
     switch (t) {
@@ -159,187 +83,272 @@ double representable(DataType t, double v) {
     return std::clamp(std::round(v), lo, hi);
 }
 
-ObjectSpec parse_object(const Yaml& y, const YAML::Node& n) {
-    y.keys(n,
-           {"id", "name", "type", "data_type", "count", "signal", "plant", "within", "counter",
-            "setpoint", "motor"},
-           "an object");
+// A number of `n`'s key (finite); `def` when absent or bad.
+double num(const YamlNode& n, const char* key, double def, Range r = {}) {
+    return n[key].number(r).value_or(def);
+}
+
+uint32_t ip(const YamlNode& n, uint32_t def) {
+    auto s = n.string();
+    if (!s) return def;
+    uint32_t v;
+    if (!parse_ipv4(*s, v)) {
+        n.error(SB() << "'" << *s << "' should be an IPv4 address such as 127.0.0.1");
+        return def;
+    }
+    return v;
+}
+
+// [lo, hi] with lo < hi; nullopt if absent or bad.
+std::optional<std::pair<double, double>> range(const YamlNode& n) {
+    if (!n) return std::nullopt;
+    auto items = n.list();
+    if (!n.is_list()) return std::nullopt;
+    if (items.size() != 2) {
+        n.error("should be [low, high]");
+        return std::nullopt;
+    }
+    auto lo = items[0].number(), hi = items[1].number();
+    if (!lo || !hi) return std::nullopt;
+    if (!(*lo < *hi)) {
+        n.error(SB() << "low " << *lo << " should be below high " << *hi);
+        return std::nullopt;
+    }
+    return std::pair(*lo, *hi);
+}
+
+ObjectSpec parse_object(const YamlNode& n) {
     ObjectSpec o;
-    o.where = y.where(n);
-    if (!n["id"]) y.fail(n, "an object needs id: (1..255)");
-    if (!n["name"]) y.fail(n, "an object needs name:");
-    if (!n["type"]) y.fail(n, "an object needs type: (AI AO BI BO LI LO MOTOR)");
-    o.id = uint8_t(y.integer(n["id"], "id", 1, 255));
-    o.name = y.str(n["name"], "name");
-    if (!valid_name(o.name))
-        y.fail(n["name"],
-               SB() << "name '" << o.name << "' should be 1..39 characters of [A-Za-z0-9_:.-]");
-    std::string type = y.str(n["type"], "type");
-    if (!parse_object_type(type, o.type))
-        y.fail(n["type"],
-               SB() << "unknown type '" << type << "' (expected AI AO BI BO LI LO MOTOR)");
+    o.where = n.where();
+    if (!n.keys({"id", "name", "type", "data_type", "count", "signal", "plant", "within", "counter",
+                 "setpoint", "motor"}))
+        return o;
+    o.id = uint8_t(n.required("id", " (1..255)").integer(between(1, 255)).value_or(0));
+    if (auto name = n.required("name").string()) {
+        if (valid_name(*name))
+            o.name = *name;
+        else
+            n["name"].error(SB() << "'" << *name
+                                 << "' should be 1..39 characters of [A-Za-z0-9_:.-]");
+    }
+    bool type_ok = false;
+    if (auto type = n.required("type", " (AI AO BI BO LI LO MOTOR)").string()) {
+        type_ok = parse_object_type(*type, o.type);
+        if (!type_ok)
+            n["type"].error(SB() << "unknown type '" << *type
+                                 << "' (expected AI AO BI BO LI LO MOTOR)");
+    }
     o.data_type = default_data_type(o.type);
-    if (auto d = n["data_type"]) {
-        std::string s = y.str(d, "data_type");
-        if (!parse_data_type(s, o.data_type))
-            y.fail(
-                d,
-                SB() << "unknown data_type '" << s
+    if (auto s = n["data_type"].string()) {
+        if (!parse_data_type(*s, o.data_type))
+            n["data_type"].error(
+                SB() << "unknown data_type '" << *s
                      << "' (expected bool int8 uint8 int16 uint16 int32 uint32 float32 float64)");
-        if (o.type == ObjectType::Motor && o.data_type != DataType::Float64)
-            y.fail(d, "a MOTOR object is float64");
+        else if (o.type == ObjectType::Motor && o.data_type != DataType::Float64)
+            n["data_type"].error("a MOTOR object is float64");
     }
     if (o.type == ObjectType::Motor) o.count = kMotorValueCount;
-    if (auto c = n["count"]) {
-        if (o.type == ObjectType::Motor)
-            y.fail(c, "a MOTOR object has no count: (always 5 values)");
-        o.count = uint16_t(y.integer(c, "count", 1, int64_t(kMaxValues)));
-        if (kDataHeaderSize + entry_wire_size(o.data_type, o.count) + 1 > kPacketSize)
-            y.fail(c, SB() << "count " << o.count << " of " << to_string(o.data_type)
-                           << " does not fit one data packet (at most "
-                           << (kPacketSize - kDataHeaderSize - kEntryHeaderSize - 1) /
-                                  data_type_size(o.data_type)
-                           << ")");
+    if (YamlNode c = n["count"]) {
+        if (o.type == ObjectType::Motor) {
+            c.error("a MOTOR object has no count: (always 5 values)");
+        } else if (auto v = c.integer(between(1, double(kMaxValues)))) {
+            o.count = uint16_t(*v);
+            if (kDataHeaderSize + entry_wire_size(o.data_type, o.count) + 1 > kPacketSize) {
+                c.error(SB() << o.count << " of " << to_string(o.data_type)
+                             << " does not fit one data packet (at most "
+                             << (kPacketSize - kDataHeaderSize - kEntryHeaderSize - 1) /
+                                    data_type_size(o.data_type)
+                             << ")");
+                o.count = 1;
+            }
+        }
     }
     const char* kinds[] = {"signal", "plant", "within", "counter", "setpoint", "motor"};
     const char* kind = nullptr;
     for (const char* k : kinds)
-        if (n[k]) {
+        if (n.has(k)) {
             if (kind)
-                y.fail(n[k], SB() << "an object has one behaviour, not both " << kind << ": and "
-                                  << k << ":");
-            kind = k;
-        }
-    auto allowed = [&](std::initializer_list<ObjectType> types) {
-        if (std::find(types.begin(), types.end(), o.type) == types.end())
-            y.fail(n[kind], SB() << kind << ": is not for a " << to_string(o.type) << " object");
-    };
-    if (!kind) {
-        if (is_output(o.type))
-            kind = "setpoint";
-        else if (o.type == ObjectType::Motor)
-            kind = "motor";
-        else
-            y.fail(n, SB() << "a " << to_string(o.type)
-                           << " object needs a behaviour (signal:, plant:, within: or counter:)");
-    }
-    YAML::Node b = n[kind];
-    std::string k = kind;
-    if (k == "signal") {
-        allowed({ObjectType::AI, ObjectType::BI, ObjectType::LI});
-        y.keys(b, {"shape", "amplitude", "frequency_hz", "offset", "phase"}, "signal");
-        SignalSpec s;
-        if (auto sh = b["shape"]) {
-            std::string v = y.str(sh, "shape");
-            if (v == "sine")
-                s.shape = SignalSpec::Shape::Sine;
-            else if (v == "square")
-                s.shape = SignalSpec::Shape::Square;
-            else if (v == "ramp")
-                s.shape = SignalSpec::Shape::Ramp;
-            else if (v == "constant")
-                s.shape = SignalSpec::Shape::Constant;
+                n[k].error(SB() << "an object has one behaviour, not both " << kind << ": and "
+                                << k << ":");
             else
-                y.fail(sh, SB() << "unknown shape '" << v
-                                << "' (expected sine, square, ramp, constant)");
+                kind = k;
         }
-        s.amplitude = y.num(b, "amplitude", 1);
-        s.frequency_hz = y.num(b, "frequency_hz", 1);
-        if (s.frequency_hz < 0) y.fail(b["frequency_hz"], "frequency_hz should be >= 0");
-        s.offset = y.num(b, "offset", 0);
-        s.phase = y.num(b, "phase", 0);
+    if (!type_ok && n.has("type")) return o; // the behaviour cannot be checked against it
+    if (kind) {
+        const std::string_view k = kind;
+        std::vector<ObjectType> types; // the object types the behaviour is for
+        if (k == "signal") types = {ObjectType::AI, ObjectType::BI, ObjectType::LI};
+        if (k == "plant") types = {ObjectType::AI};
+        if (k == "within") types = {ObjectType::BI};
+        if (k == "counter") types = {ObjectType::LI};
+        if (k == "setpoint") types = {ObjectType::AO, ObjectType::BO, ObjectType::LO};
+        if (k == "motor") types = {ObjectType::Motor};
+        if (std::find(types.begin(), types.end(), o.type) == types.end()) {
+            n[kind].error(SB() << "is not for a " << to_string(o.type) << " object");
+            return o;
+        }
+    } else if (is_output(o.type)) {
+        kind = "setpoint";
+    } else if (o.type == ObjectType::Motor) {
+        kind = "motor";
+    } else {
+        n.error(SB() << "a " << to_string(o.type)
+                     << " object needs a behaviour (signal:, plant:, within: or counter:)");
+        return o;
+    }
+    const YamlNode b = n[kind];
+    const std::string k = kind;
+    if (k == "signal") {
+        b.keys({"shape", "amplitude", "frequency_hz", "offset", "phase"});
+        SignalSpec s;
+        if (auto sh = b["shape"].one_of({"sine", "square", "ramp", "constant"})) {
+            if (*sh == "sine") s.shape = SignalSpec::Shape::Sine;
+            if (*sh == "square") s.shape = SignalSpec::Shape::Square;
+            if (*sh == "ramp") s.shape = SignalSpec::Shape::Ramp;
+            if (*sh == "constant") s.shape = SignalSpec::Shape::Constant;
+        }
+        s.amplitude = num(b, "amplitude", 1);
+        s.frequency_hz = num(b, "frequency_hz", 1, at_least(0));
+        s.offset = num(b, "offset", 0);
+        s.phase = num(b, "phase", 0);
         o.behaviour = s;
     } else if (k == "plant") {
-        allowed({ObjectType::AI});
-        y.keys(b, {"input", "time_constant_s", "gain", "initial", "enable"}, "plant");
+        b.keys({"input", "time_constant_s", "gain", "initial", "enable"});
         PlantSpec p;
-        if (!b["input"]) y.fail(b, "plant: needs input: (the name of an AO object)");
-        p.input = y.str(b["input"], "input");
-        if (b["enable"]) p.enable = y.str(b["enable"], "enable");
-        p.time_constant_s = y.positive(b, "time_constant_s", 1);
-        p.gain = y.num(b, "gain", 1);
-        p.initial = y.num(b, "initial", 0);
+        p.input = b.required("input", " (the name of an AO object)").string().value_or("");
+        p.enable = b["enable"].string().value_or("");
+        p.time_constant_s = num(b, "time_constant_s", 1, above(0));
+        p.gain = num(b, "gain", 1);
+        p.initial = num(b, "initial", 0);
         o.behaviour = p;
     } else if (k == "within") {
-        allowed({ObjectType::BI});
-        y.keys(b, {"value", "target", "tolerance"}, "within");
+        b.keys({"value", "target", "tolerance"});
         WithinSpec w;
-        if (!b["value"] || !b["target"])
-            y.fail(b, "within: needs value: and target: (object names)");
-        w.value = y.str(b["value"], "value");
-        w.target = y.str(b["target"], "target");
-        w.tolerance = y.num(b, "tolerance", 0);
-        if (w.tolerance < 0) y.fail(b["tolerance"], "tolerance should be >= 0");
+        w.value = b.required("value", " (an object name)").string().value_or("");
+        w.target = b.required("target", " (an object name)").string().value_or("");
+        w.tolerance = num(b, "tolerance", 0, at_least(0));
         o.behaviour = w;
     } else if (k == "counter") {
-        allowed({ObjectType::LI});
-        y.keys(b, {"step", "enable"}, "counter");
+        b.keys({"step", "enable"});
         CounterSpec c;
-        if (auto s = b["step"])
-            c.step = y.integer(s, "step", -(int64_t(1) << 32), int64_t(1) << 32);
-        if (b["enable"]) c.enable = y.str(b["enable"], "enable");
+        c.step = b["step"]
+                     .integer(between(-double(int64_t(1) << 32), double(int64_t(1) << 32)))
+                     .value_or(1);
+        c.enable = b["enable"].string().value_or("");
         if (!is_integer(o.data_type) || o.data_type == DataType::Bool)
-            y.fail(n, SB() << "counter: needs an integer data_type (got " << to_string(o.data_type)
-                           << ")");
+            n.error(SB() << "counter: needs an integer data_type (got " << to_string(o.data_type)
+                         << ")");
         o.behaviour = c;
     } else if (k == "setpoint") {
-        allowed({ObjectType::AO, ObjectType::BO, ObjectType::LO});
         SetpointSpec s;
-        if (b) {
-            y.keys(b, {"initial", "min", "max"}, "setpoint");
-            s.initial = y.num(b, "initial", 0);
-            s.min = y.num(b, "min", s.min);
-            s.max = y.num(b, "max", s.max);
-            if (!(s.min <= s.max))
-                y.fail(b, SB() << "setpoint: min " << s.min << " should be <= max " << s.max);
+        if (b.keys({"initial", "min", "max"}) && b) {
+            s.initial = num(b, "initial", 0);
+            s.min = num(b, "min", s.min);
+            s.max = num(b, "max", s.max);
+            if (!(s.min <= s.max)) {
+                b.error(SB() << "min " << s.min << " should be <= max " << s.max);
+                s.min = -1e300, s.max = 1e300;
+            }
         }
         if (representable(o.data_type, s.initial) != s.initial)
-            y.fail(b ? b["initial"] : n, SB() << "initial " << s.initial << " is not a "
-                                              << to_string(o.data_type) << " value");
+            b["initial"].error(SB() << s.initial << " is not a " << to_string(o.data_type)
+                                    << " value");
         o.behaviour = s;
     } else {
-        allowed({ObjectType::Motor});
         MotorSpec m;
-        if (b) {
-            y.keys(b,
-                   {"position", "velocity", "max_velocity", "acceleration", "max_acceleration",
-                    "soft_limits", "hard_limits", "home_position", "home_velocity", "enabled"},
-                   "motor");
-            m.position = y.num(b, "position", m.position);
-            m.velocity = y.positive(b, "velocity", m.velocity);
-            m.max_velocity = y.positive(b, "max_velocity", std::max(m.max_velocity, m.velocity));
-            m.acceleration = y.positive(b, "acceleration", m.acceleration);
-            m.max_acceleration =
-                y.positive(b, "max_acceleration", std::max(m.max_acceleration, m.acceleration));
+        if (b.keys({"position", "velocity", "max_velocity", "acceleration", "max_acceleration",
+                    "soft_limits", "hard_limits", "home_position", "home_velocity", "enabled"}) &&
+            b) {
+            m.position = num(b, "position", m.position);
+            m.velocity = num(b, "velocity", m.velocity, above(0));
+            m.max_velocity = num(b, "max_velocity", std::max(m.max_velocity, m.velocity), above(0));
+            m.acceleration = num(b, "acceleration", m.acceleration, above(0));
+            m.max_acceleration = num(b, "max_acceleration",
+                                     std::max(m.max_acceleration, m.acceleration), above(0));
             if (m.velocity > m.max_velocity)
-                y.fail(b["velocity"], SB() << "velocity " << m.velocity << " exceeds max_velocity "
-                                           << m.max_velocity);
+                b["velocity"].error(SB() << m.velocity << " exceeds max_velocity "
+                                         << m.max_velocity);
             if (m.acceleration > m.max_acceleration)
-                y.fail(b["acceleration"], SB() << "acceleration " << m.acceleration
-                                               << " exceeds max_acceleration "
-                                               << m.max_acceleration);
-            if (auto s = b["soft_limits"]) {
-                std::tie(m.soft_low, m.soft_high) = y.range(s, "soft_limits");
+                b["acceleration"].error(SB() << m.acceleration << " exceeds max_acceleration "
+                                             << m.max_acceleration);
+            if (auto s = range(b["soft_limits"])) {
+                std::tie(m.soft_low, m.soft_high) = *s;
                 m.has_soft_limits = true;
             }
-            if (auto h = b["hard_limits"]) {
-                std::tie(m.hard_low, m.hard_high) = y.range(h, "hard_limits");
+            if (auto h = range(b["hard_limits"])) {
+                std::tie(m.hard_low, m.hard_high) = *h;
                 m.has_hard_limits = true;
                 if (m.position < m.hard_low || m.position > m.hard_high)
-                    y.fail(b["position"] ? b["position"] : b,
-                           SB() << "position " << m.position << " is outside hard_limits");
+                    (b["position"] ? b["position"] : b)
+                        .error(SB() << (b["position"] ? "" : "position ") << m.position
+                                    << " is outside hard_limits");
             }
-            m.home_position = y.num(b, "home_position", m.home_position);
-            m.home_velocity = y.positive(b, "home_velocity", m.home_velocity);
+            m.home_position = num(b, "home_position", m.home_position);
+            m.home_velocity = num(b, "home_velocity", m.home_velocity, above(0));
             if (m.has_hard_limits &&
                 (m.home_position <= m.hard_low || m.home_position >= m.hard_high))
-                y.fail(b["home_position"] ? b["home_position"] : b,
-                       "home_position should be between the hard limits");
-            m.enabled = y.flag(b, "enabled", true);
+                (b["home_position"] ? b["home_position"] : b)
+                    .error(SB() << (b["home_position"] ? "" : "home_position ") << m.home_position
+                                << " should be between the hard limits");
+            m.enabled = b["enabled"].boolean().value_or(true);
         }
         o.behaviour = m;
     }
     return o;
+}
+
+// Duplicate ids and names, references between objects and one-value behaviours: every problem
+// goes to report(index of the object, what). Objects without an id (0) or a name are not compared.
+void check_objects(const std::vector<ObjectSpec>& objs,
+                   const std::function<void(std::size_t, std::string)>& report) {
+    auto find = [&](const std::string& name) -> const ObjectSpec* {
+        for (const ObjectSpec& o : objs)
+            if (o.name == name) return &o;
+        return nullptr;
+    };
+    for (std::size_t i = 0; i < objs.size(); ++i) {
+        const ObjectSpec& s = objs[i];
+        for (std::size_t j = 0; j < i; ++j)
+            if (s.id != 0 && objs[j].id == s.id) {
+                report(i, SB() << "object id " << int(s.id) << " is used twice");
+                break;
+            }
+        for (std::size_t j = 0; j < i; ++j)
+            if (!s.name.empty() && objs[j].name == s.name) {
+                report(i, SB() << "object name '" << s.name << "' is used twice");
+                break;
+            }
+    }
+    for (std::size_t i = 0; i < objs.size(); ++i) {
+        const ObjectSpec& s = objs[i];
+        auto ref = [&](const std::string& name, const char* key,
+                       std::initializer_list<ObjectType> types) {
+            const ObjectSpec* t = find(name);
+            if (!t)
+                report(i, SB() << key << ": no object named '" << name << "'");
+            else if (std::find(types.begin(), types.end(), t->type) == types.end())
+                report(i, SB() << key << ": '" << name << "' is a " << to_string(t->type)
+                               << " object");
+            else if (t->count != 1)
+                report(i, SB() << key << ": '" << name << "' has " << t->count
+                               << " values, not 1");
+        };
+        bool scalar_only = std::holds_alternative<PlantSpec>(s.behaviour) ||
+                           std::holds_alternative<WithinSpec>(s.behaviour) ||
+                           std::holds_alternative<CounterSpec>(s.behaviour);
+        if (scalar_only && s.count != 1) report(i, "this behaviour has one value (count 1)");
+        if (auto* p = std::get_if<PlantSpec>(&s.behaviour)) {
+            if (!p->input.empty()) ref(p->input, "plant input", {ObjectType::AO});
+            if (!p->enable.empty()) ref(p->enable, "plant enable", {ObjectType::BO});
+        } else if (auto* w = std::get_if<WithinSpec>(&s.behaviour)) {
+            auto any = {ObjectType::AI, ObjectType::AO, ObjectType::BI,
+                        ObjectType::BO, ObjectType::LI, ObjectType::LO};
+            if (!w->value.empty()) ref(w->value, "within value", any);
+            if (!w->target.empty()) ref(w->target, "within target", any);
+        } else if (auto* c = std::get_if<CounterSpec>(&s.behaviour)) {
+            if (!c->enable.empty()) ref(c->enable, "counter enable", {ObjectType::BO});
+        }
+    }
 }
 
 double signal_value(const SignalSpec& s, double t, double shift) {
@@ -371,46 +380,46 @@ ModelConfig ModelConfig::load(const std::string& file) {
 }
 
 ModelConfig ModelConfig::parse(std::string_view text, const std::string& file) {
-    YAML::Node root;
-    try {
-        root = YAML::Load(std::string(text));
-    } catch (const YAML::ParserException& e) {
-        throw Error(SB() << file << ":" << e.mark.line + 1 << ":" << e.mark.column + 1 << ": "
-                         << e.msg);
-    }
-    Yaml y{file};
-    if (!root || !root.IsMap())
-        throw Error(SB() << file << ":1:1: expected a mapping with application:, objects:, ...");
-    y.keys(root, {"application", "rate_hz", "beacon_period_s", "ioc", "listen", "objects"},
-           "the model");
+    YamlReader rd(file, std::string(text), "the model");
     ModelConfig c;
-    if (!root["application"]) y.fail(root, "the model needs application: (its name)");
-    c.application = y.str(root["application"], "application");
-    if (!valid_name(c.application))
-        y.fail(root["application"], SB() << "application '" << c.application
-                                         << "' should be 1..39 characters of [A-Za-z0-9_:.-]");
-    c.rate_hz = y.positive(root, "rate_hz", c.rate_hz);
-    if (c.rate_hz > 100000)
-        y.fail(root["rate_hz"], SB() << "rate_hz " << c.rate_hz << " should be <= 100000");
-    c.beacon_period_s = y.positive(root, "beacon_period_s", c.beacon_period_s);
-    if (auto n = root["ioc"]) {
-        y.keys(n, {"host", "port", "data_port"}, "ioc");
-        if (n["host"]) c.ioc_ip = y.ip(n["host"], "host");
-        if (n["port"]) c.ioc_port = uint16_t(y.integer(n["port"], "port", 1, 65535));
-        c.ioc_data_port = n["data_port"]
-                              ? uint16_t(y.integer(n["data_port"], "data_port", 1, 65535))
-                              : c.ioc_port;
+    YamlNode root = rd.root();
+    if (root.is_null() || (root && !root.is_map()))
+        rd.error(rd.top(), "expected a mapping with application:, objects:, ...");
+    else if (root.keys({"application", "rate_hz", "beacon_period_s", "ioc", "listen", "objects"})) {
+        if (auto app = root.required("application", " (its name)").string()) {
+            if (valid_name(*app))
+                c.application = *app;
+            else
+                root["application"].error(SB() << "'" << *app
+                                               << "' should be 1..39 characters of [A-Za-z0-9_:.-]");
+        }
+        c.rate_hz = root["rate_hz"].number(Range{0, 100000, true}).value_or(c.rate_hz);
+        c.beacon_period_s = root["beacon_period_s"].number(above(0)).value_or(c.beacon_period_s);
+        if (YamlNode n = root["ioc"]; n.keys({"host", "port", "data_port"}) && n) {
+            c.ioc_ip = ip(n["host"], c.ioc_ip);
+            c.ioc_port = uint16_t(n["port"].integer(between(1, 65535)).value_or(c.ioc_port));
+            c.ioc_data_port =
+                uint16_t(n["data_port"].integer(between(1, 65535)).value_or(c.ioc_port));
+        }
+        if (YamlNode n = root["listen"]; n.keys({"host", "port"}) && n) {
+            c.listen_ip = ip(n["host"], c.listen_ip);
+            c.listen_port = uint16_t(n["port"].integer(between(0, 65535)).value_or(c.listen_port));
+        }
+        YamlNode objs = root.required("objects", " (a non-empty list)");
+        std::vector<SourceLoc> places;
+        if (objs && (!objs.is_list() || objs.yaml().size() == 0))
+            objs.error("should be a non-empty list");
+        else
+            for (const YamlNode& n : objs.list()) {
+                c.objects.push_back(parse_object(n));
+                places.push_back(n.loc());
+            }
+        // the checks the Model constructor makes, with every error
+        check_objects(c.objects, [&](std::size_t i, std::string what) {
+            rd.error(places[i], SB() << "objects[" << i << "]: " << what);
+        });
     }
-    if (auto n = root["listen"]) {
-        y.keys(n, {"host", "port"}, "listen");
-        if (n["host"]) c.listen_ip = y.ip(n["host"], "host");
-        if (n["port"]) c.listen_port = uint16_t(y.integer(n["port"], "port", 0, 65535));
-    }
-    YAML::Node objs = root["objects"];
-    if (!objs || !objs.IsSequence() || objs.size() == 0)
-        y.fail(objs ? objs : root, "objects: should be a non-empty list");
-    for (auto n : objs) c.objects.push_back(parse_object(y, n));
-    Model check(c); // cross references, duplicates: the same errors the Model constructor throws
+    rd.throw_if_errors();
     return c;
 }
 
@@ -431,53 +440,28 @@ uint32_t MotorState::status_bits() const {
 Model::Model(ModelConfig cfg)
     : cfg_(std::move(cfg)) {
     if (cfg_.objects.empty()) throw Error("rcp-sim model: no objects");
+    check_objects(cfg_.objects, [&](std::size_t i, const std::string& what) {
+        throw Error(SB() << cfg_.objects[i].where << ": " << what);
+    });
     by_id_.fill(-1);
     for (const ObjectSpec& s : cfg_.objects) {
-        if (by_id_[s.id] >= 0)
-            throw Error(SB() << s.where << ": object id " << int(s.id) << " is used twice");
-        for (const Obj& o : objs_)
-            if (o.spec.name == s.name)
-                throw Error(SB() << s.where << ": object name '" << s.name << "' is used twice");
         by_id_[s.id] = int16_t(objs_.size());
         Obj o;
         o.spec = s;
         o.values.assign(s.count, 0.0);
         objs_.push_back(std::move(o));
     }
-    auto ref = [&](const ObjectSpec& s, const std::string& name, const char* key, bool want_scalar,
-                   std::initializer_list<ObjectType> types) {
-        int i = index(name);
-        if (i < 0)
-            throw Error(SB() << s.where << ": " << key << ": no object named '" << name << "'");
-        const ObjectSpec& t = objs_[std::size_t(i)].spec;
-        if (types.size() && std::find(types.begin(), types.end(), t.type) == types.end())
-            throw Error(SB() << s.where << ": " << key << ": '" << name << "' is a "
-                             << to_string(t.type) << " object");
-        if (want_scalar && t.count != 1)
-            throw Error(SB() << s.where << ": " << key << ": '" << name << "' has " << t.count
-                             << " values, not 1");
-        return i;
-    };
-    for (Obj& o : objs_) {
+    for (Obj& o : objs_) { // every reference names an object of the right kind (checked above)
         const ObjectSpec& s = o.spec;
-        bool scalar_only = std::holds_alternative<PlantSpec>(s.behaviour) ||
-                           std::holds_alternative<WithinSpec>(s.behaviour) ||
-                           std::holds_alternative<CounterSpec>(s.behaviour);
-        if (scalar_only && s.count != 1)
-            throw Error(SB() << s.where << ": this behaviour has one value (count 1)");
         if (auto* p = std::get_if<PlantSpec>(&s.behaviour)) {
-            o.input = ref(s, p->input, "plant input", true, {ObjectType::AO});
-            if (!p->enable.empty())
-                o.enable = ref(s, p->enable, "plant enable", true, {ObjectType::BO});
+            o.input = index(p->input);
+            if (!p->enable.empty()) o.enable = index(p->enable);
             o.plant_state = p->initial;
         } else if (auto* w = std::get_if<WithinSpec>(&s.behaviour)) {
-            auto any = {ObjectType::AI, ObjectType::AO, ObjectType::BI,
-                        ObjectType::BO, ObjectType::LI, ObjectType::LO};
-            o.input = ref(s, w->value, "within value", true, any);
-            o.target = ref(s, w->target, "within target", true, any);
+            o.input = index(w->value);
+            o.target = index(w->target);
         } else if (auto* c = std::get_if<CounterSpec>(&s.behaviour)) {
-            if (!c->enable.empty())
-                o.enable = ref(s, c->enable, "counter enable", true, {ObjectType::BO});
+            if (!c->enable.empty()) o.enable = index(c->enable);
         } else if (auto* sp = std::get_if<SetpointSpec>(&s.behaviour)) {
             std::fill(o.values.begin(), o.values.end(), std::clamp(sp->initial, sp->min, sp->max));
         } else if (auto* m = std::get_if<MotorSpec>(&s.behaviour)) {

@@ -103,42 +103,46 @@ TEST(RcpModel, ConfigurationErrorsSayWhereAndWhat) {
     EXPECT_EQ(
         error_of(
             "application: a\nobjects:\n  - {id: 1, name: X, type: AI, signal: {shap: sine}}\n"),
-        "m.yaml:3:41: unknown key 'shap' in signal (expected shape, amplitude, frequency_hz, "
-        "offset, phase)");
+        "m.yaml:3:41: unknown key 'shap' in objects[0].signal (did you mean 'shape'?)");
     EXPECT_EQ(error_of("application: a\nobjects:\n  - {id: 1, name: X, type: XY}\n"),
-              "m.yaml:3:28: unknown type 'XY' (expected AI AO BI BO LI LO MOTOR)");
-    EXPECT_EQ(error_of("application: a\nobjects:\n  - {id: 0, name: X, type: AI}\n"),
-              "m.yaml:3:10: id should be in 1..255 (got 0)");
+              "m.yaml:3:28: objects[0].type: unknown type 'XY' (expected AI AO BI BO LI LO MOTOR)");
+    EXPECT_EQ(error_of("application: a\nobjects:\n  - {id: 0, name: X, type: AI, signal: {}}\n"),
+              "m.yaml:3:10: objects[0].id should be from 1 to 255, got 0");
     EXPECT_EQ(error_of("application: a\nobjects:\n  - {id: 1, name: X, type: AO}\n  - {id: 1, "
                        "name: Y, type: AO}\n"),
-              "m.yaml:4:5: object id 1 is used twice");
+              "m.yaml:4:5: objects[1]: object id 1 is used twice");
     EXPECT_EQ(
         error_of(
             "application: a\nobjects:\n  - {id: 1, name: X, type: AI, plant: {input: Nope}}\n"),
-        "m.yaml:3:5: plant input: no object named 'Nope'");
+        "m.yaml:3:5: objects[0]: plant input: no object named 'Nope'");
     EXPECT_EQ(error_of("application: a\nobjects:\n  - {id: 1, name: X, type: AI, signal: {}}\n"
                        "  - {id: 2, name: Y, type: AI, plant: {input: X}}\n"),
-              "m.yaml:4:5: plant input: 'X' is a AI object");
+              "m.yaml:4:5: objects[1]: plant input: 'X' is a AI object");
     EXPECT_EQ(error_of("application: a\nobjects:\n  - {id: 1, name: X, type: LI, data_type: "
                        "float64, counter: {}}\n"),
-              "m.yaml:3:5: counter: needs an integer data_type (got float64)");
+              "m.yaml:3:5: objects[0]: counter: needs an integer data_type (got float64)");
     EXPECT_EQ(
         error_of(
             "application: a\nobjects:\n  - {id: 1, name: X, type: AI, count: 120, signal: {}}\n"),
-        "m.yaml:3:39: count 120 of float64 does not fit one data packet (at most 118)");
+        "m.yaml:3:39: objects[0].count: 120 of float64 does not fit one data packet (at most "
+        "118)");
     EXPECT_EQ(error_of("application: a\nobjects:\n  - {id: 1, name: X, type: AI}\n"),
-              "m.yaml:3:5: a AI object needs a behaviour (signal:, plant:, within: or counter:)");
+              "m.yaml:3:5: objects[0]: a AI object needs a behaviour (signal:, plant:, within: or "
+              "counter:)");
     EXPECT_EQ(error_of("application: a b\nobjects: []\n"),
-              "m.yaml:1:14: application 'a b' should be 1..39 characters of [A-Za-z0-9_:.-]");
+              "m.yaml:1:14: application: 'a b' should be 1..39 characters of [A-Za-z0-9_:.-]\n"
+              "m.yaml:2:10: objects: should be a non-empty list")
+        << "every error of the file";
     EXPECT_EQ(error_of("application: a\nobjects:\n  - {id: 1, name: X, type: LO, data_type: int8, "
                        "setpoint: {initial: 300}}\n"),
-              "m.yaml:3:69: initial 300 is not a int8 value");
-    EXPECT_EQ(error_of("application: a\nrate_hz: -1\nobjects: []\n"),
-              "m.yaml:2:10: rate_hz should be > 0 (got -1)");
+              "m.yaml:3:69: objects[0].setpoint.initial: 300 is not a int8 value");
+    EXPECT_EQ(error_of("application: a\nrate_hz: -1\nobjects:\n  - {id: 1, name: X, type: AO}\n"),
+              "m.yaml:2:10: rate_hz should be > 0 and <= 100000, got -1");
     EXPECT_EQ(error_of("application: a\nobjects:\n  - {id: 1, name: M, type: MOTOR, motor: "
                        "{hard_limits: [1, 0]}}\n"),
-              "m.yaml:3:56: hard_limits: low 1 should be below high 0");
-    EXPECT_EQ(error_of("application: [a\n"), "m.yaml:2:1: end of sequence flow not found");
+              "m.yaml:3:56: objects[0].motor.hard_limits: low 1 should be below high 0");
+    EXPECT_EQ(error_of("application: [a\n"),
+              "m.yaml:2:1: YAML syntax error: end of sequence flow not found");
     EXPECT_NE(error_of("bogus: 1\n").find("m.yaml:1:1: unknown key 'bogus' in the model"),
               std::string::npos);
 }
