@@ -1,8 +1,7 @@
 #include "ethercat/sim/sim_config.hpp"
 
+#include "config/yaml_reader.hpp"
 #include "core/error.hpp"
-
-#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <arpa/inet.h>
@@ -20,187 +19,157 @@
 namespace beamctl::ethercat::sim {
 namespace {
 
-// YAML reading with file:line:col in every error.
-struct Reader {
-    const std::string& file;
+using config::above;
+using config::at_least;
+using config::between;
+using config::Range;
+using config::YamlNode;
+using config::YamlReader;
 
-    std::string where(const YAML::Node& n) const {
-        return SB() << file << ":" << n.Mark().line + 1 << ":" << n.Mark().column + 1;
+// "s3" (a slave) or "s3.binaryOutput01" (an entry); "ec0." in front is allowed. nullopt after an
+// error (or when absent).
+std::optional<EntryRef> ref(const YamlNode& n, bool want_entry) {
+    auto text = n.string();
+    if (!text) return std::nullopt;
+    std::string s = *text;
+    if (s.rfind("ec", 0) == 0 && s.find('.') != std::string::npos) s = s.substr(s.find('.') + 1);
+    std::size_t dot = s.find('.');
+    std::string head = dot == std::string::npos ? s : s.substr(0, dot);
+    bool ok = head.size() >= 2 && head[0] == 's' &&
+              head.find_first_not_of("0123456789", 1) == std::string::npos && head.size() < 8;
+    if (!ok || want_entry != (dot != std::string::npos) || (want_entry && dot + 1 >= s.size())) {
+        n.error(SB() << "'" << *text << "' should look like "
+                     << (want_entry ? "s<position>.<entry>, e.g. s1.binaryInput01"
+                                    : "s<position>, e.g. s11"));
+        return std::nullopt;
     }
-    [[noreturn]] void fail(const YAML::Node& n, const std::string& msg) const { throw Error(SB() << where(n) << ": " << msg); }
-
-    void map(const YAML::Node& n, const char* what) const {
-        if (!n.IsMap()) fail(n, SB() << what << " should be a mapping");
-    }
-    void only_keys(const YAML::Node& n, std::initializer_list<const char*> keys, const char* what) const {
-        map(n, what);
-        for (auto kv : n) {
-            std::string k = kv.first.as<std::string>();
-            bool ok = false;
-            for (const char* a : keys) ok = ok || k == a;
-            if (!ok) {
-                std::string list;
-                for (const char* a : keys) list += (list.empty() ? "" : ", ") + std::string(a);
-                fail(kv.first, SB() << "unknown key '" << k << "' in " << what << " (expected " << list << ")");
-            }
-        }
-    }
-    double num(const YAML::Node& parent, const char* key, double def) const {
-        YAML::Node n = parent[key];
-        return n ? num(n, key) : def;
-    }
-    double num(const YAML::Node& n, const char* key) const {
-        double v;
-        try {
-            v = n.as<double>();
-        } catch (const YAML::Exception&) {
-            fail(n, SB() << key << " should be a number");
-        }
-        if (!std::isfinite(v)) fail(n, SB() << key << " should be a finite number");
-        return v;
-    }
-    double positive(const YAML::Node& parent, const char* key, double def) const {
-        double v = num(parent, key, def);
-        if (v <= 0) fail(parent[key], SB() << key << " should be > 0 (got " << v << ")");
-        return v;
-    }
-    double non_negative(const YAML::Node& parent, const char* key, double def) const {
-        double v = num(parent, key, def);
-        if (v < 0) fail(parent[key], SB() << key << " should be >= 0 (got " << v << ")");
-        return v;
-    }
-    bool flag(const YAML::Node& parent, const char* key, bool def) const {
-        YAML::Node n = parent[key];
-        if (!n) return def;
-        try {
-            return n.as<bool>();
-        } catch (const YAML::Exception&) {
-            fail(n, SB() << key << " should be true or false");
-        }
-    }
-    std::string str(const YAML::Node& n, const char* what) const {
-        if (!n.IsScalar()) fail(n, SB() << what << " should be a string");
-        return n.as<std::string>();
-    }
-    // "s3" (a slave) or "s3.binaryOutput01" (an entry); "ec0." in front is allowed.
-    EntryRef ref(const YAML::Node& n, bool want_entry) const {
-        std::string s = str(n, want_entry ? "an entry" : "a slave");
-        std::string orig = s;
-        if (s.rfind("ec", 0) == 0 && s.find('.') != std::string::npos) s = s.substr(s.find('.') + 1);
-        std::size_t dot = s.find('.');
-        std::string head = dot == std::string::npos ? s : s.substr(0, dot);
-        bool ok = head.size() >= 2 && head[0] == 's' &&
-                  head.find_first_not_of("0123456789", 1) == std::string::npos && head.size() < 8;
-        if (!ok || want_entry != (dot != std::string::npos) || (want_entry && dot + 1 >= s.size()))
-            fail(n, SB() << "'" << orig << "' should look like "
-                         << (want_entry ? "s<position>.<entry>, e.g. s1.binaryInput01" : "s<position>, e.g. s11"));
-        EntryRef r;
-        r.slave = std::stoi(head.substr(1));
-        if (want_entry) r.entry = s.substr(dot + 1);
-        r.where = where(n);
-        return r;
-    }
-};
-
-SignalModel::Shape parse_shape(const Reader& rd, const YAML::Node& n) {
-    std::string s = rd.str(n, "shape");
-    static const std::pair<const char*, SignalModel::Shape> shapes[] = {
-        {"constant", SignalModel::Shape::Constant}, {"sine", SignalModel::Shape::Sine},
-        {"square", SignalModel::Shape::Square},     {"ramp", SignalModel::Shape::Ramp},
-        {"noise", SignalModel::Shape::Noise}};
-    for (auto& [name, shape] : shapes)
-        if (s == name) return shape;
-    rd.fail(n, SB() << "unknown shape '" << s << "' (expected constant, sine, square, ramp, noise)");
+    EntryRef r;
+    r.slave = std::stoi(head.substr(1));
+    if (want_entry) r.entry = s.substr(dot + 1);
+    r.where = n.where();
+    return r;
 }
 
-StageConfig parse_stage(const Reader& rd, const YAML::Node& n) {
-    rd.only_keys(n, {"name", "drive", "mass", "friction", "damping", "travel", "start", "pitch", "steps_per_rev",
-                     "max_force", "velocity_scale", "quick_stop_decel", "overload_time", "feedback_counts_per_rev",
-                     "encoders", "limits", "home"},
-                 "a stage");
+double num(const YamlNode& n, const char* key, double def, Range r = {}) {
+    return n[key].number(r).value_or(def);
+}
+
+// A stage; nullopt when it cannot be built (no name or drive).
+std::optional<StageConfig> parse_stage(const YamlNode& n) {
+    if (!n.keys({"name", "drive", "mass", "friction", "damping", "travel", "start", "pitch",
+                 "steps_per_rev", "max_force", "velocity_scale", "quick_stop_decel",
+                 "overload_time", "feedback_counts_per_rev", "encoders", "limits", "home"}))
+        return std::nullopt;
     StageConfig c;
-    c.where = rd.where(n);
-    if (!n["name"]) rd.fail(n, "a stage needs name:");
-    if (!n["drive"]) rd.fail(n, "a stage needs drive: (the slave of its drive terminal, e.g. s11)");
-    c.stage.name = rd.str(n["name"], "name");
-    c.drive = rd.ref(n["drive"], false);
-    c.stage.mass = rd.positive(n, "mass", c.stage.mass);
-    c.stage.friction = rd.non_negative(n, "friction", c.stage.friction);
-    c.stage.damping = rd.non_negative(n, "damping", c.stage.damping);
-    if (auto t = n["travel"]) {
-        if (!t.IsSequence() || t.size() != 2) rd.fail(t, "travel should be [min, max]");
-        c.stage.min = rd.num(t[0], "travel min");
-        c.stage.max = rd.num(t[1], "travel max");
-        if (c.stage.min >= c.stage.max) rd.fail(t, SB() << "travel: min " << c.stage.min << " should be below max " << c.stage.max);
+    c.where = n.where();
+    auto name = n.required("name").string();
+    auto drive = ref(n.required("drive", " (the slave of its drive terminal, e.g. s11)"), false);
+    c.stage.name = name.value_or("");
+    c.stage.mass = num(n, "mass", c.stage.mass, above(0));
+    c.stage.friction = num(n, "friction", c.stage.friction, at_least(0));
+    c.stage.damping = num(n, "damping", c.stage.damping, at_least(0));
+    if (YamlNode t = n["travel"]) {
+        auto items = t.list();
+        if (t.is_list() && items.size() != 2) t.error("should be [min, max]");
+        if (items.size() == 2) {
+            auto lo = items[0].number(), hi = items[1].number();
+            if (lo && hi && *lo >= *hi)
+                t.error(SB() << "min " << *lo << " should be below max " << *hi);
+            else if (lo && hi)
+                c.stage.min = *lo, c.stage.max = *hi;
+        }
     }
-    c.stage.start = rd.num(n, "start", 0);
-    if (c.stage.start < c.stage.min || c.stage.start > c.stage.max)
-        rd.fail(n["start"], SB() << "start " << c.stage.start << " is outside travel [" << c.stage.min << ", " << c.stage.max << "]");
-    c.motor.units_per_rev = rd.positive(n, "pitch", c.motor.units_per_rev);
-    c.motor.steps_per_rev = rd.positive(n, "steps_per_rev", c.motor.steps_per_rev);
-    c.motor.max_force = rd.positive(n, "max_force", c.motor.max_force);
-    c.motor.velocity_scale = rd.positive(n, "velocity_scale", c.motor.velocity_scale);
-    c.motor.quick_stop_decel = rd.positive(n, "quick_stop_decel", c.motor.quick_stop_decel);
-    c.motor.overload_time = rd.positive(n, "overload_time", c.motor.overload_time);
-    c.feedback_counts_per_rev = rd.non_negative(n, "feedback_counts_per_rev", 0);
-    if (auto es = n["encoders"]) {
-        if (!es.IsSequence()) rd.fail(es, "encoders should be a list");
-        for (auto e : es) {
-            rd.only_keys(e, {"entry", "counts_per_unit", "absolute", "zero", "index_every", "index_offset"}, "an encoder");
-            if (!e["entry"]) rd.fail(e, "an encoder needs entry: (e.g. s9.positionActual01)");
-            StageConfig::Encoder enc;
-            enc.entry = rd.ref(e["entry"], true);
-            enc.counts_per_unit = rd.num(e, "counts_per_unit", enc.counts_per_unit);
-            if (enc.counts_per_unit == 0) rd.fail(e["counts_per_unit"], "counts_per_unit should not be 0");
-            enc.absolute = rd.flag(e, "absolute", false);
-            enc.zero = rd.num(e, "zero", 0);
-            enc.index_every = rd.non_negative(e, "index_every", 0);
-            enc.index_offset = rd.num(e, "index_offset", 0);
+    if (auto start = n["start"].number()) {
+        if (*start < c.stage.min || *start > c.stage.max)
+            n["start"].error(SB() << *start << " is outside travel [" << c.stage.min << ", "
+                                  << c.stage.max << "]");
+        else
+            c.stage.start = *start;
+    }
+    c.motor.units_per_rev = num(n, "pitch", c.motor.units_per_rev, above(0));
+    c.motor.steps_per_rev = num(n, "steps_per_rev", c.motor.steps_per_rev, above(0));
+    c.motor.max_force = num(n, "max_force", c.motor.max_force, above(0));
+    c.motor.velocity_scale = num(n, "velocity_scale", c.motor.velocity_scale, above(0));
+    c.motor.quick_stop_decel = num(n, "quick_stop_decel", c.motor.quick_stop_decel, above(0));
+    c.motor.overload_time = num(n, "overload_time", c.motor.overload_time, above(0));
+    c.feedback_counts_per_rev = num(n, "feedback_counts_per_rev", 0, at_least(0));
+    for (const YamlNode& e : n["encoders"].list()) {
+        if (!e.keys({"entry", "counts_per_unit", "absolute", "zero", "index_every",
+                     "index_offset"}))
+            continue;
+        StageConfig::Encoder enc;
+        auto entry = ref(e.required("entry", " (e.g. s9.positionActual01)"), true);
+        if (auto cpu = e["counts_per_unit"].number()) {
+            if (*cpu == 0)
+                e["counts_per_unit"].error("should not be 0");
+            else
+                enc.counts_per_unit = *cpu;
+        }
+        enc.absolute = e["absolute"].boolean().value_or(false);
+        enc.zero = num(e, "zero", 0);
+        enc.index_every = num(e, "index_every", 0, at_least(0));
+        enc.index_offset = num(e, "index_offset", 0);
+        if (entry) {
+            enc.entry = *entry;
             c.encoders.push_back(enc);
         }
     }
-    auto sw = [&](const YAML::Node& s, SwitchModel::Kind kind, bool nc_default) {
-        rd.only_keys(s, {"input", "at", "width", "normally_closed"}, kind == SwitchModel::Kind::Home ? "home" : "a limit");
-        if (!s["input"]) rd.fail(s, "a switch needs input: (e.g. s1.binaryInput01)");
-        if (!s["at"]) rd.fail(s, "a switch needs at: (its position in stage units)");
+    auto sw = [&](const YamlNode& s, SwitchModel::Kind kind, bool nc_default) {
+        if (!s.keys({"input", "at", "width", "normally_closed"})) return;
         StageConfig::Switch x;
         x.kind = kind;
-        x.input = rd.ref(s["input"], true);
-        x.at = rd.num(s, "at", 0);
-        x.width = rd.positive(s, "width", 1);
-        x.normally_closed = rd.flag(s, "normally_closed", nc_default);
-        c.switches.push_back(x);
+        auto input = ref(s.required("input", " (e.g. s1.binaryInput01)"), true);
+        x.at = s.required("at", " (its position in stage units)").number().value_or(0);
+        x.width = num(s, "width", 1, above(0));
+        x.normally_closed = s["normally_closed"].boolean().value_or(nc_default);
+        if (input) {
+            x.input = *input;
+            c.switches.push_back(x);
+        }
     };
-    if (auto l = n["limits"]) {
-        rd.only_keys(l, {"forward", "backward"}, "limits");
+    if (YamlNode l = n["limits"]; l.keys({"forward", "backward"})) {
         if (l["forward"]) sw(l["forward"], SwitchModel::Kind::Forward, true);
         if (l["backward"]) sw(l["backward"], SwitchModel::Kind::Backward, true);
     }
-    if (auto h = n["home"]) sw(h, SwitchModel::Kind::Home, false);
+    if (n["home"]) sw(n["home"], SwitchModel::Kind::Home, false);
+    if (!name || !drive) return std::nullopt;
+    c.drive = *drive;
     return c;
 }
 
-SignalConfig parse_signal(const Reader& rd, const YAML::Node& n) {
-    rd.only_keys(n, {"to", "shape", "amplitude", "offset", "frequency", "phase", "stage", "gain", "noise", "full_scale"},
-                 "a signal");
+std::optional<SignalConfig> parse_signal(const YamlNode& n) {
+    if (!n.keys({"to", "shape", "amplitude", "offset", "frequency", "phase", "stage", "gain",
+                 "noise", "full_scale"}))
+        return std::nullopt;
     SignalConfig c;
-    c.where = rd.where(n);
-    if (!n["to"]) rd.fail(n, "a signal needs to: (an analog input, e.g. s5.analogInput01)");
-    c.to = rd.ref(n["to"], true);
-    if (n["stage"] && n["shape"]) rd.fail(n["shape"], "a signal is either a generator (shape:) or a sensor (stage:), not both");
-    if (n["stage"]) {
-        c.stage = rd.str(n["stage"], "stage");
+    c.where = n.where();
+    auto to = ref(n.required("to", " (an analog input, e.g. s5.analogInput01)"), true);
+    if (n.has("stage") && n.has("shape"))
+        n["shape"].error("a signal is either a generator (shape:) or a sensor (stage:), not both");
+    if (auto stage = n["stage"].string()) {
+        c.stage = *stage;
         c.shape = SignalModel::Shape::StagePosition;
-    } else if (n["shape"]) {
-        c.shape = parse_shape(rd, n["shape"]);
+    } else if (auto shape = n["shape"].string()) {
+        static const std::pair<const char*, SignalModel::Shape> shapes[] = {
+            {"constant", SignalModel::Shape::Constant}, {"sine", SignalModel::Shape::Sine},
+            {"square", SignalModel::Shape::Square},     {"ramp", SignalModel::Shape::Ramp},
+            {"noise", SignalModel::Shape::Noise}};
+        bool found = false;
+        for (auto& [name, sh] : shapes)
+            if (*shape == name) c.shape = sh, found = true;
+        if (!found)
+            n["shape"].error(SB() << "unknown shape '" << *shape
+                                  << "' (expected constant, sine, square, ramp, noise)");
     }
-    c.amplitude = rd.num(n, "amplitude", 0);
-    c.offset = rd.num(n, "offset", 0);
-    c.frequency = rd.non_negative(n, "frequency", 1);
-    c.phase = rd.num(n, "phase", 0);
-    c.gain = rd.num(n, "gain", 1);
-    c.noise = rd.non_negative(n, "noise", 0);
-    c.full_scale = rd.positive(n, "full_scale", 10);
+    c.amplitude = num(n, "amplitude", 0);
+    c.offset = num(n, "offset", 0);
+    c.frequency = num(n, "frequency", 1, at_least(0));
+    c.phase = num(n, "phase", 0);
+    c.gain = num(n, "gain", 1);
+    c.noise = num(n, "noise", 0, at_least(0));
+    c.full_scale = num(n, "full_scale", 10, above(0));
+    if (!to) return std::nullopt;
+    c.to = *to;
     return c;
 }
 
@@ -218,68 +187,80 @@ DriveKind drive_kind(const DeviceDesc& d) {
 }
 
 SimConfig SimConfig::load(const std::string& path, const Catalog& catalog) {
+    ErrorList errors;
+    SimConfig c = load(path, catalog, errors);
+    errors.throw_if_any();
+    return c;
+}
+
+SimConfig SimConfig::load(const std::string& path, const Catalog& catalog, ErrorList& errors) {
     std::ifstream f(path);
-    if (!f) throw Error(SB() << path << ": cannot open simulator configuration: " << std::strerror(errno));
+    if (!f) {
+        errors.add(SB() << path << ": cannot open simulator configuration: " << std::strerror(errno));
+        return {};
+    }
     std::stringstream ss;
     ss << f.rdbuf();
-    return parse(ss.str(), path, catalog);
+    return parse(ss.str(), path, catalog, errors);
 }
 
 SimConfig SimConfig::parse(const std::string& text, const std::string& file, const Catalog& catalog) {
-    YAML::Node root;
-    try {
-        root = YAML::Load(text);
-    } catch (const YAML::ParserException& e) {
-        throw Error(SB() << file << ":" << e.mark.line + 1 << ":" << e.mark.column + 1 << ": " << e.msg);
-    }
-    Reader rd{file};
+    ErrorList errors;
+    SimConfig c = parse(text, file, catalog, errors);
+    errors.throw_if_any();
+    return c;
+}
+
+SimConfig SimConfig::parse(const std::string& text, const std::string& file, const Catalog& catalog,
+                           ErrorList& errors) {
+    YamlReader rd(file, text, "the simulator configuration");
     SimConfig c;
-    if (!root || root.IsNull()) return c;
-    if (!root.IsMap()) rd.fail(root, "expected a mapping with slaves:, wiring:, stages:, signals:");
-    rd.only_keys(root, {"slaves", "wiring", "stages", "signals"}, "the simulator configuration");
-    auto list = [&](const char* key) {
-        YAML::Node n = root[key];
-        if (n && !n.IsSequence()) rd.fail(n, SB() << key << ": should be a list");
-        return n;
-    };
-    if (auto s = list("slaves")) {
-        for (auto item : s) {
-            rd.only_keys(item, {"position", "type"}, "a slave");
-            if (!item["position"] || !item["type"]) rd.fail(item, "a slave needs position: and type:");
-            int pos;
-            try {
-                pos = item["position"].as<int>();
-            } catch (const YAML::Exception&) {
-                rd.fail(item["position"], "position should be an integer");
+    YamlNode root = rd.root();
+    if (root && !root.is_null() && !root.is_map())
+        rd.error(rd.loc(root.yaml()), "expected a mapping with slaves:, wiring:, stages:, signals:");
+    else if (root.keys({"slaves", "wiring", "stages", "signals"}) && !root.is_null()) {
+        for (const YamlNode& item : root["slaves"].list()) {
+            if (!item.keys({"position", "type"})) continue;
+            auto pos = item.required("position").integer(between(0, 65534));
+            auto type = item.required("type").string();
+            if (type && !catalog.find(*type)) {
+                SB msg;
+                msg << "unknown device type '" << *type << "'";
+                auto close = config::close_matches(*type, catalog.types());
+                for (std::size_t i = 0; i < close.size(); ++i)
+                    msg << (i ? ", " : " (did you mean ") << close[i];
+                if (!close.empty()) msg << "?)";
+                item["type"].error(msg);
+                type.reset();
             }
-            std::string type = rd.str(item["type"], "type");
-            if (!catalog.find(type)) rd.fail(item["type"], SB() << "unknown device type '" << type << "'");
-            if (pos != int(c.slaves.size()))
-                rd.fail(item["position"], SB() << "positions must be 0, 1, 2, ... in order (got " << pos << ", expected "
-                                               << c.slaves.size() << ")");
-            c.slaves.emplace_back(pos, type);
+            if (pos && *pos != int64_t(c.slaves.size()))
+                item["position"].error(SB() << "positions must be 0, 1, 2, ... in order (got "
+                                            << *pos << ", expected " << c.slaves.size() << ")");
+            if (pos && type && *pos == int64_t(c.slaves.size())) c.slaves.emplace_back(int(*pos), *type);
         }
+        for (const YamlNode& item : root["wiring"].list()) {
+            if (!item.keys({"from", "to"})) continue;
+            auto from = ref(item.required("from"), true);
+            auto to = ref(item.required("to"), true);
+            if (from && to) c.wiring.push_back(Wire{*from, *to});
+        }
+        for (const YamlNode& item : root["stages"].list()) {
+            auto st = parse_stage(item);
+            if (!st) continue;
+            for (const StageConfig& other : c.stages)
+                if (other.stage.name == st->stage.name)
+                    item["name"].error(SB() << "stage '" << st->stage.name
+                                            << "' is defined twice (first at " << other.where << ")");
+            c.stages.push_back(std::move(*st));
+        }
+        for (const YamlNode& item : root["signals"].list())
+            if (auto sg = parse_signal(item)) c.signals.push_back(std::move(*sg));
     }
-    if (auto w = list("wiring")) {
-        for (auto item : w) {
-            rd.only_keys(item, {"from", "to"}, "a wire");
-            if (!item["from"] || !item["to"]) rd.fail(item, "a wire needs from: and to:");
-            c.wiring.push_back(Wire{rd.ref(item["from"], true), rd.ref(item["to"], true)});
-        }
-    }
-    if (auto st = list("stages"))
-        for (auto item : st) {
-            c.stages.push_back(parse_stage(rd, item));
-            for (std::size_t i = 0; i + 1 < c.stages.size(); ++i)
-                if (c.stages[i].stage.name == c.stages.back().stage.name)
-                    rd.fail(item["name"], SB() << "stage '" << c.stages.back().stage.name << "' is defined twice (first at "
-                                               << c.stages[i].where << ")");
-        }
-    if (auto sg = list("signals"))
-        for (auto item : sg) c.signals.push_back(parse_signal(rd, item));
-    if (!c.slaves.empty()) { // check the plant against the slaves now, with the file's places
+    const bool ok = rd.ok();
+    rd.take_errors(errors);
+    if (ok && !c.slaves.empty()) { // the plant against the slaves now, with the file's places
         Segment scratch;
-        c.build(scratch, catalog);
+        c.build(scratch, catalog, errors);
     }
     return c;
 }
@@ -340,39 +321,52 @@ std::unique_ptr<Stage> make_stage(Binder& b, const DeviceDesc& d, int slave, con
 } // namespace
 
 std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog) const {
+    ErrorList errors;
+    auto plant = build(seg, catalog, errors);
+    errors.throw_if_any();
+    return plant;
+}
+
+std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog, ErrorList& errors) const {
     for (auto& [pos, type] : slaves) seg.add(*catalog.find(type));
     auto plant = std::make_shared<Plant>();
     Binder b{seg, {}};
     std::vector<int> claimed_drives;
     for (const StageConfig& sc : stages) {
-        const EntryRef& dr = sc.drive;
-        if (dr.slave >= int(seg.size())) throw Error(SB() << dr.where << ": no slave at position " << dr.slave);
-        const DeviceDesc& d = seg.slave(std::size_t(dr.slave)).desc();
-        if (drive_kind(d) == DriveKind::None)
-            throw Error(SB() << dr.where << ": slave " << dr.slave << " is a " << d.type
-                             << ", not a drive terminal this simulator models (EL70x1 stepper, EL72x1 servo)");
-        for (int c : claimed_drives)
-            if (c == dr.slave) throw Error(SB() << dr.where << ": drive s" << dr.slave << " already moves another stage");
-        claimed_drives.push_back(dr.slave);
-        auto st = make_stage(b, d, dr.slave, sc.stage, sc.motor, sc.feedback_counts_per_rev, sc.where);
-        for (const auto& e : sc.encoders) {
-            b.input(e.entry, "an encoder");
-            try {
-                st->encoders.emplace_back(seg, e.entry.slave, e.entry.entry, e.counts_per_unit, e.absolute, e.zero, sc.stage.start,
-                                          e.index_every, e.index_offset);
-            } catch (const Error& err) {
-                throw Error(SB() << e.entry.where << ": " << err.what());
-            }
-        }
-        for (const auto& s : sc.switches) {
-            SwitchModel m;
-            m.kind = s.kind;
-            m.input = b.input(s.input, "a switch");
-            m.at = s.at;
-            m.width = s.width;
-            m.normally_closed = s.normally_closed;
-            st->switches.push_back(m);
-        }
+        std::unique_ptr<Stage> st;
+        errors.capture([&] {
+            const EntryRef& dr = sc.drive;
+            if (dr.slave >= int(seg.size())) throw Error(SB() << dr.where << ": no slave at position " << dr.slave);
+            const DeviceDesc& d = seg.slave(std::size_t(dr.slave)).desc();
+            if (drive_kind(d) == DriveKind::None)
+                throw Error(SB() << dr.where << ": slave " << dr.slave << " is a " << d.type
+                                 << ", not a drive terminal this simulator models (EL70x1 stepper, EL72x1 servo)");
+            for (int c : claimed_drives)
+                if (c == dr.slave) throw Error(SB() << dr.where << ": drive s" << dr.slave << " already moves another stage");
+            claimed_drives.push_back(dr.slave);
+            st = make_stage(b, d, dr.slave, sc.stage, sc.motor, sc.feedback_counts_per_rev, sc.where);
+        });
+        if (!st) continue;
+        for (const auto& e : sc.encoders)
+            errors.capture([&] {
+                b.input(e.entry, "an encoder");
+                try {
+                    st->encoders.emplace_back(seg, e.entry.slave, e.entry.entry, e.counts_per_unit, e.absolute, e.zero,
+                                              sc.stage.start, e.index_every, e.index_offset);
+                } catch (const Error& err) {
+                    throw Error(SB() << e.entry.where << ": " << err.what());
+                }
+            });
+        for (const auto& s : sc.switches)
+            errors.capture([&] {
+                SwitchModel m;
+                m.kind = s.kind;
+                m.input = b.input(s.input, "a switch");
+                m.at = s.at;
+                m.width = s.width;
+                m.normally_closed = s.normally_closed;
+                st->switches.push_back(m);
+            });
         plant->stages_.push_back(std::move(st));
     }
     // Every other drive moves a default stage: 1 kg, 1 N friction, no hard stops, no switches.
@@ -383,37 +377,41 @@ std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog) co
             continue;
         StageParams sp;
         sp.name = SB() << "s" << p;
-        plant->stages_.push_back(make_stage(b, d, int(p), sp, MotorParams{}, 0, SB() << "the default stage of s" << p));
+        errors.capture([&] {
+            plant->stages_.push_back(make_stage(b, d, int(p), sp, MotorParams{}, 0, SB() << "the default stage of s" << p));
+        });
     }
-    for (const SignalConfig& sc : signals) {
-        IoPoint to = b.input(sc.to, "a signal");
-        if (to.loc.bits != 16)
-            throw Error(SB() << sc.to.where << ": " << sc.to.entry << " has " << int(to.loc.bits)
-                             << " bits; a signal drives a 16-bit analog input");
-        SignalModel m;
-        m.shape = sc.shape;
-        m.amplitude = sc.amplitude;
-        m.offset = sc.offset;
-        m.frequency = sc.frequency;
-        m.phase = sc.phase;
-        m.gain = sc.gain;
-        m.noise = sc.noise;
-        if (!sc.stage.empty()) {
-            m.stage = plant->find_stage(sc.stage);
-            if (!m.stage) throw Error(SB() << sc.where << ": no stage named '" << sc.stage << "'");
-        }
-        m.channel = std::make_unique<AnalogInputChannel>(seg, sc.to.slave, sc.to.entry, sc.full_scale);
-        plant->signals.push_back(std::move(m));
-    }
-    for (const Wire& w : wiring) {
-        WireModel m;
-        m.from = b.bind(w.from);
-        m.to = b.input(w.to, "a wire");
-        if (m.from.loc.bits != m.to.loc.bits)
-            throw Error(SB() << w.from.where << ": " << w.from.entry << " has " << int(m.from.loc.bits) << " bits but "
-                             << w.to.entry << " has " << int(m.to.loc.bits));
-        plant->wires.push_back(m);
-    }
+    for (const SignalConfig& sc : signals)
+        errors.capture([&] {
+            IoPoint to = b.input(sc.to, "a signal");
+            if (to.loc.bits != 16)
+                throw Error(SB() << sc.to.where << ": " << sc.to.entry << " has " << int(to.loc.bits)
+                                 << " bits; a signal drives a 16-bit analog input");
+            SignalModel m;
+            m.shape = sc.shape;
+            m.amplitude = sc.amplitude;
+            m.offset = sc.offset;
+            m.frequency = sc.frequency;
+            m.phase = sc.phase;
+            m.gain = sc.gain;
+            m.noise = sc.noise;
+            if (!sc.stage.empty()) {
+                m.stage = plant->find_stage(sc.stage);
+                if (!m.stage) throw Error(SB() << sc.where << ": no stage named '" << sc.stage << "'");
+            }
+            m.channel = std::make_unique<AnalogInputChannel>(seg, sc.to.slave, sc.to.entry, sc.full_scale);
+            plant->signals.push_back(std::move(m));
+        });
+    for (const Wire& w : wiring)
+        errors.capture([&] {
+            WireModel m;
+            m.from = b.bind(w.from);
+            m.to = b.input(w.to, "a wire");
+            if (m.from.loc.bits != m.to.loc.bits)
+                throw Error(SB() << w.from.where << ": " << w.from.entry << " has " << int(m.from.loc.bits) << " bits but "
+                                 << w.to.entry << " has " << int(m.to.loc.bits));
+            plant->wires.push_back(m);
+        });
     // Terminal behaviour that needs no configuration: EL3702 sample counters, EL1252 latches.
     for (std::size_t p = 0; p < seg.size(); ++p) {
         for (std::string ch : {"01", "02", "03", "04"}) {

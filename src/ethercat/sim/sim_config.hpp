@@ -8,6 +8,7 @@
 // (no hard stops, no switches), so a bus can be tried before anyone writes a plant.
 #pragma once
 
+#include "core/error_list.hpp"
 #include "ethercat/catalog.hpp"
 #include "ethercat/sim/io_point.hpp"
 #include "ethercat/sim/plant.hpp"
@@ -70,14 +71,23 @@ struct SimConfig {
     std::vector<Wire> wiring;
     std::vector<StageConfig> stages;
     std::vector<SignalConfig> signals;
-    // Loads SIM.yaml; every error has file:line:col. Unknown keys are errors. With slaves:, the
-    // whole plant is also checked against them (entries exist, inputs driven once, ...).
+    // Loads SIM.yaml with config::YamlReader; throws one MultiError with every error of the file
+    // (file:line:col, key path). Unknown keys are errors. With slaves:, the whole plant is also
+    // checked against them (entries exist, inputs driven once, ...) once the file itself is
+    // correct.
     static SimConfig load(const std::string& path, const Catalog& catalog);
     static SimConfig parse(const std::string& text, const std::string& filename, const Catalog& catalog);
+    // The same, recording every error in `errors` and returning what could be read.
+    static SimConfig load(const std::string& path, const Catalog& catalog, ErrorList& errors);
+    static SimConfig parse(const std::string& text, const std::string& filename, const Catalog& catalog,
+                           ErrorList& errors);
     // Adds the slaves (if `slaves` is given) and builds the plant over the segment, installed as
     // its on_frame hook. Errors (file:line:col) when an entry, drive or stage does not fit the
-    // segment. An empty configuration still gives every drive its default stage.
+    // segment, all of them in one MultiError. An empty configuration still gives every drive its
+    // default stage.
     std::shared_ptr<Plant> build(Segment& seg, const Catalog& catalog) const;
+    // The same, recording every error in `errors` (the plant then lacks what did not fit).
+    std::shared_ptr<Plant> build(Segment& seg, const Catalog& catalog, ErrorList& errors) const;
 };
 
 // Runs a segment behind a UDP socket: every datagram is an EtherCAT frame, processed and sent
