@@ -1,10 +1,11 @@
 #include "ethercat/catalog.hpp"
 
+#include "config/yaml_reader.hpp"
 #include "core/error.hpp"
+#include "core/error_list.hpp"
 #include "ethercat/sii.hpp"
 
 #include <tinyxml2.h>
-#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <cctype>
@@ -43,120 +44,6 @@ std::string read_file(const std::string& path) {
     return ss.str();
 }
 
-// ---------------------------------------------------------------------------------------------
-// YAML
-
-class YamlReader {
-public:
-    explicit YamlReader(std::string file)
-        : file_(std::move(file)) {}
-
-    [[noreturn]] void fail(const YAML::Node& at, const std::string& path,
-                           const std::string& what) const {
-        YAML::Mark m = at.Mark();
-        SourceLoc loc{file_, m.is_null() ? 0 : m.line + 1, m.is_null() ? 0 : m.column + 1};
-        throw Error(SB() << loc.str() << ": " << (path.empty() ? "" : path + ": ") << what);
-    }
-
-    // `node` must be a map whose keys are all in `allowed`.
-    void check_map(const YAML::Node& node, const std::string& path,
-                   std::initializer_list<std::string_view> allowed) const {
-        if (!node.IsMap())
-            fail(node, path,
-                 path.empty() ? "the file should be a mapping (one device)"
-                              : "should be a mapping");
-        for (const auto& kv : node) {
-            std::string key = kv.first.Scalar();
-            if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
-            std::string list;
-            for (std::string_view a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
-            fail(kv.first, path,
-                 SB() << "unknown key '" << key << "' (expected one of: " << list << ")");
-        }
-    }
-
-    static std::string join(const std::string& path, const std::string& key) {
-        return path.empty() ? key : path + "." + key;
-    }
-
-    // Member `key` of map `node`; nullopt if absent or null (or fails if `required`).
-    std::optional<YAML::Node> member(const YAML::Node& node, const std::string& path,
-                                     const std::string& key, bool required) const {
-        YAML::Node v = node[key];
-        if (!v.IsDefined() || v.IsNull()) {
-            if (required) fail(node, path, SB() << "missing required key '" << key << "'");
-            return std::nullopt;
-        }
-        return v;
-    }
-
-    uint64_t uint(const YAML::Node& node, const std::string& path, uint64_t max) const {
-        if (!node.IsScalar()) fail(node, path, "should be an unsigned integer");
-        const std::string& s = node.Scalar();
-        uint64_t v = 0;
-        size_t i = 0;
-        int base = 10;
-        if (s.size() > 2 && s[0] == '0' && (s[1] == 'x' || s[1] == 'X')) {
-            base = 16;
-            i = 2;
-        }
-        if (i == s.size()) fail(node, path, SB() << "'" << s << "' is not an unsigned integer");
-        for (; i < s.size(); ++i) {
-            int digit;
-            char c = static_cast<char>(std::tolower(static_cast<unsigned char>(s[i])));
-            if (c >= '0' && c <= '9')
-                digit = c - '0';
-            else if (base == 16 && c >= 'a' && c <= 'f')
-                digit = c - 'a' + 10;
-            else
-                fail(node, path, SB() << "'" << s << "' is not an unsigned integer");
-            if (v > (UINT64_MAX - digit) / base)
-                v = UINT64_MAX; // saturate; caught below
-            else
-                v = v * base + digit;
-        }
-        if (v > max) fail(node, path, SB() << s << " is out of range (maximum " << max << ")");
-        return v;
-    }
-
-    uint64_t uint_member(const YAML::Node& node, const std::string& path, const std::string& key,
-                         uint64_t max, bool required, uint64_t def = 0) const {
-        auto v = member(node, path, key, required);
-        return v ? uint(*v, join(path, key), max) : def;
-    }
-
-    bool bool_member(const YAML::Node& node, const std::string& path, const std::string& key,
-                     bool def) const {
-        auto v = member(node, path, key, false);
-        if (!v) return def;
-        if (v->IsScalar()) {
-            const std::string& s = v->Scalar();
-            if (s == "true" || s == "True") return true;
-            if (s == "false" || s == "False") return false;
-        }
-        fail(*v, join(path, key), "should be true or false");
-    }
-
-    std::string string_member(const YAML::Node& node, const std::string& path,
-                              const std::string& key, bool required) const {
-        auto v = member(node, path, key, required);
-        if (!v) return {};
-        if (!v->IsScalar()) fail(*v, join(path, key), "should be a string");
-        return v->Scalar();
-    }
-
-    // A sequence member; nullopt if absent.
-    std::optional<YAML::Node> seq_member(const YAML::Node& node, const std::string& path,
-                                         const std::string& key) const {
-        auto v = member(node, path, key, false);
-        if (v && !v->IsSequence()) fail(*v, join(path, key), "should be a list");
-        return v;
-    }
-
-private:
-    std::string file_;
-};
-
 std::optional<SmType> sm_type_from(const std::string& s) {
     if (s == "MBoxOut") return SmType::MailboxOut;
     if (s == "MBoxIn") return SmType::MailboxIn;
@@ -182,71 +69,69 @@ const char* sm_type_name(SmType t) {
     return "Unused";
 }
 
-DeviceDesc parse_yaml_device(const YamlReader& r, const YAML::Node& root) {
-    r.check_map(root, "",
-                {"type", "variant_of", "name", "vendor", "product", "revision", "coe", "dc_assign_activate",
-                 "ebus_current_ma", "sync_managers", "rx_pdos", "tx_pdos"});
+// ---------------------------------------------------------------------------------------------
+// YAML
+
+template <typename T> T uint_of(const config::YamlNode& n, uint64_t max, T def = 0) {
+    return static_cast<T>(n.unsigned_integer(max).value_or(def));
+}
+
+// One device file; every error goes to the reader.
+DeviceDesc parse_yaml_device(const config::YamlNode& root) {
     DeviceDesc d;
-    d.type = r.string_member(root, "", "type", true);
-    d.variant_of = r.string_member(root, "", "variant_of", false);
-    if (d.type.empty() ||
-        std::any_of(d.type.begin(), d.type.end(), [](unsigned char c) { return std::isspace(c); }))
-        r.fail(root["type"], "type",
-               SB() << "'" << d.type
-                    << "' should be a non-empty name "
-                       "without spaces");
-    d.name = r.string_member(root, "", "name", true);
-    d.vendor = static_cast<uint32_t>(r.uint_member(root, "", "vendor", 0xFFFFFFFF, true));
-    d.product = static_cast<uint32_t>(r.uint_member(root, "", "product", 0xFFFFFFFF, true));
-    d.revision = static_cast<uint32_t>(r.uint_member(root, "", "revision", 0xFFFFFFFF, true));
-    d.coe = r.bool_member(root, "", "coe", false);
-    d.dc_assign_activate =
-        static_cast<uint16_t>(r.uint_member(root, "", "dc_assign_activate", 0xFFFF, false));
-    d.ebus_current_ma =
-        static_cast<uint16_t>(r.uint_member(root, "", "ebus_current_ma", 0xFFFF, false));
+    if (!root.keys({"type", "variant_of", "name", "vendor", "product", "revision", "coe",
+                    "dc_assign_activate", "ebus_current_ma", "sync_managers", "rx_pdos",
+                    "tx_pdos"}))
+        return d;
+    d.type = root.required("type").string().value_or("");
+    d.variant_of = root["variant_of"].string().value_or("");
+    if (root.has("type") &&
+        (d.type.empty() || std::any_of(d.type.begin(), d.type.end(),
+                                       [](unsigned char c) { return std::isspace(c); })))
+        root["type"].error(SB() << "'" << d.type << "' should be a non-empty name without spaces");
+    d.name = root.required("name").string().value_or("");
+    d.vendor = uint_of<uint32_t>(root.required("vendor"), 0xFFFFFFFF);
+    d.product = uint_of<uint32_t>(root.required("product"), 0xFFFFFFFF);
+    d.revision = uint_of<uint32_t>(root.required("revision"), 0xFFFFFFFF);
+    d.coe = root["coe"].boolean().value_or(false);
+    d.dc_assign_activate = uint_of<uint16_t>(root["dc_assign_activate"], 0xFFFF);
+    d.ebus_current_ma = uint_of<uint16_t>(root["ebus_current_ma"], 0xFFFF);
 
     // Sync managers.
-    std::vector<YAML::Node> sm_nodes;
-    std::vector<bool> sm_size_given;
-    if (auto sms = r.seq_member(root, "", "sync_managers")) {
-        for (size_t i = 0; i < sms->size(); ++i) {
-            const YAML::Node n = (*sms)[i];
-            std::string path = SB() << "sync_managers[" << i << "]";
-            r.check_map(n, path,
-                        {"index", "start", "size", "control", "type", "enable", "virtual"});
-            SyncManagerDesc sm;
-            uint64_t index = r.uint_member(n, path, "index", 255, true);
-            if (index != i)
-                r.fail(n["index"], path + ".index",
-                       SB() << index << " should be " << i
-                            << " (sync managers are listed in SM order)");
-            sm.index = static_cast<uint8_t>(index);
-            sm.start = static_cast<uint16_t>(r.uint_member(n, path, "start", 0xFFFF, true));
-            sm.default_size = static_cast<uint16_t>(r.uint_member(n, path, "size", 0xFFFF, false));
-            sm.control = static_cast<uint8_t>(r.uint_member(n, path, "control", 0xFF, true));
-            std::string type = r.string_member(n, path, "type", true);
-            auto t = sm_type_from(type);
-            if (!t)
-                r.fail(n["type"], path + ".type",
-                       SB() << "'" << type
-                            << "' should be one of MBoxOut, MBoxIn, Outputs, Inputs, Unused");
-            sm.type = *t;
-            sm.enable = r.bool_member(n, path, "enable", true);
-            sm.is_virtual = r.bool_member(n, path, "virtual", false);
-            bool mailbox = sm.type == SmType::MailboxOut || sm.type == SmType::MailboxIn;
-            if (mailbox && sm.default_size == 0)
-                r.fail(n, path, SB() << "a " << type << " sync manager needs a size > 0");
-            if (mailbox && sm.is_virtual)
-                r.fail(n["virtual"], path + ".virtual", "a mailbox cannot be virtual");
-            for (const SyncManagerDesc& other : d.sms)
-                if (mailbox && other.type == sm.type)
-                    r.fail(n, path,
-                           SB() << "second " << type << " sync manager (SM" << unsigned(other.index)
-                                << " is one already)");
-            d.sms.push_back(sm);
-            sm_nodes.push_back(n);
-            sm_size_given.push_back(n["size"].IsDefined() && !n["size"].IsNull());
-        }
+    std::vector<config::YamlNode> sm_nodes;
+    const auto sms = root["sync_managers"].list();
+    for (size_t i = 0; i < sms.size(); ++i) {
+        const config::YamlNode& n = sms[i];
+        if (!n.keys({"index", "start", "size", "control", "type", "enable", "virtual"})) continue;
+        SyncManagerDesc sm;
+        auto index = n.required("index").unsigned_integer(255);
+        if (index && *index != i)
+            n["index"].error(SB() << *index << " should be " << i
+                                  << " (sync managers are listed in SM order)");
+        sm.index = static_cast<uint8_t>(i);
+        sm.start = uint_of<uint16_t>(n.required("start"), 0xFFFF);
+        sm.default_size = uint_of<uint16_t>(n["size"], 0xFFFF);
+        sm.control = uint_of<uint8_t>(n.required("control"), 0xFF);
+        auto type = n.required("type").string();
+        std::optional<SmType> t = type ? sm_type_from(*type) : std::nullopt;
+        if (type && !t)
+            n["type"].error(SB() << "'" << *type
+                                 << "' should be one of MBoxOut, MBoxIn, Outputs, Inputs, Unused");
+        sm.type = t.value_or(SmType::Unused);
+        sm.enable = n["enable"].boolean().value_or(true);
+        sm.is_virtual = n["virtual"].boolean().value_or(false);
+        bool mailbox = sm.type == SmType::MailboxOut || sm.type == SmType::MailboxIn;
+        if (mailbox && sm.default_size == 0)
+            n.error(SB() << "a " << *type << " sync manager needs a size > 0");
+        if (mailbox && sm.is_virtual) n["virtual"].error("a mailbox cannot be virtual");
+        for (const SyncManagerDesc& other : d.sms)
+            if (mailbox && other.type == sm.type) {
+                n.error(SB() << "second " << *type << " sync manager (SM"
+                             << unsigned(other.index) << " is one already)");
+                break;
+            }
+        d.sms.push_back(sm);
+        sm_nodes.push_back(n);
     }
     bool has_mbx_out = false, has_mbx_in = false;
     for (const SyncManagerDesc& sm : d.sms) {
@@ -254,88 +139,71 @@ DeviceDesc parse_yaml_device(const YamlReader& r, const YAML::Node& root) {
         has_mbx_in |= sm.type == SmType::MailboxIn;
     }
     if (d.coe && !(has_mbx_out && has_mbx_in))
-        r.fail(root["coe"], "coe", "true needs an MBoxOut and an MBoxIn sync manager");
+        root["coe"].error("true needs an MBoxOut and an MBoxIn sync manager");
 
     // PDOs.
     std::set<uint16_t> pdo_indices;
     std::map<std::string, std::string> entry_names; // name -> path of first use
     std::vector<std::pair<uint8_t, uint16_t>> rx_assign, tx_assign;
     for (bool rx : {true, false}) {
-        const std::string key = rx ? "rx_pdos" : "tx_pdos";
-        auto pdos = r.seq_member(root, "", key);
-        if (!pdos) continue;
-        for (size_t i = 0; i < pdos->size(); ++i) {
-            const YAML::Node n = (*pdos)[i];
-            std::string path = SB() << key << "[" << i << "]";
-            r.check_map(n, path, {"index", "name", "sm", "entries"});
+        for (const config::YamlNode& n : root[rx ? "rx_pdos" : "tx_pdos"].list()) {
+            if (!n.keys({"index", "name", "sm", "entries"})) continue;
             Pdo p;
-            p.index = static_cast<uint16_t>(r.uint_member(n, path, "index", 0xFFFF, true));
+            p.index = uint_of<uint16_t>(n.required("index"), 0xFFFF);
             uint16_t lo = rx ? 0x1600 : 0x1A00, hi = rx ? 0x17FF : 0x1BFF;
-            if (p.index < lo || p.index > hi)
-                r.fail(n["index"], path + ".index",
-                       SB() << hex(p.index) << " should be in " << hex(lo) << "-" << hex(hi)
-                            << (rx ? " (RxPDO, outputs)" : " (TxPDO, inputs)"));
-            if (!pdo_indices.insert(p.index).second)
-                r.fail(n["index"], path + ".index",
-                       SB() << "PDO " << hex(p.index) << " is defined twice");
-            p.name = r.string_member(n, path, "name", false);
-            if (auto smv = r.member(n, path, "sm", false)) {
-                const YAML::Node& smn = *smv;
-                uint64_t sm = r.uint(smn, path + ".sm", 255);
+            if (n.has("index") && (p.index < lo || p.index > hi))
+                n["index"].error(SB() << hex(p.index) << " should be in " << hex(lo) << "-"
+                                      << hex(hi) << (rx ? " (RxPDO, outputs)" : " (TxPDO, inputs)"));
+            else if (n.has("index") && !pdo_indices.insert(p.index).second)
+                n["index"].error(SB() << "PDO " << hex(p.index) << " is defined twice");
+            p.name = n["name"].string().value_or("");
+            if (auto sm = n["sm"].unsigned_integer(255)) {
                 SmType want = rx ? SmType::Outputs : SmType::Inputs;
-                if (sm >= d.sms.size())
-                    r.fail(smn, path + ".sm",
-                           SB() << "SM" << sm << " does not exist (" << d.sms.size()
-                                << " sync managers)");
-                if (d.sms[sm].type != want)
-                    r.fail(smn, path + ".sm",
-                           SB() << "SM" << sm << " is " << sm_type_name(d.sms[sm].type) << ", a "
-                                << (rx ? "RxPDO" : "TxPDO") << " needs " << sm_type_name(want));
-                (rx ? rx_assign : tx_assign).emplace_back(static_cast<uint8_t>(sm), p.index);
+                if (*sm >= d.sms.size())
+                    n["sm"].error(SB() << "SM" << *sm << " does not exist (" << d.sms.size()
+                                       << " sync managers)");
+                else if (d.sms[*sm].type != want)
+                    n["sm"].error(SB() << "SM" << *sm << " is " << sm_type_name(d.sms[*sm].type)
+                                       << ", a " << (rx ? "RxPDO" : "TxPDO") << " needs "
+                                       << sm_type_name(want));
+                else
+                    (rx ? rx_assign : tx_assign).emplace_back(static_cast<uint8_t>(*sm), p.index);
             }
-            if (auto entries = r.seq_member(n, path, "entries")) {
-                for (size_t j = 0; j < entries->size(); ++j) {
-                    const YAML::Node en = (*entries)[j];
-                    std::string epath = SB() << path << ".entries[" << j << "]";
-                    r.check_map(en, epath, {"index", "sub", "bits", "name", "datatype"});
-                    PdoEntry e;
-                    e.index =
-                        static_cast<uint16_t>(r.uint_member(en, epath, "index", 0xFFFF, true));
-                    e.sub = static_cast<uint8_t>(r.uint_member(en, epath, "sub", 0xFF, false));
-                    e.bits = static_cast<uint8_t>(r.uint_member(en, epath, "bits", 0xFF, true));
-                    e.name = r.string_member(en, epath, "name", false);
-                    e.datatype = r.string_member(en, epath, "datatype", false);
-                    if (e.bits == 0) r.fail(en["bits"], epath + ".bits", "0 should be > 0");
-                    if (e.index == 0) {
-                        if (e.sub != 0)
-                            r.fail(en["sub"], epath + ".sub", "padding (index 0) has no subindex");
-                        if (!e.name.empty())
-                            r.fail(en["name"], epath + ".name", "padding (index 0) has no name");
-                        if (!e.datatype.empty())
-                            r.fail(en["datatype"], epath + ".datatype",
-                                   "padding (index 0) has no datatype");
-                    } else {
-                        if (e.name.empty())
-                            r.fail(en, epath, "missing required key 'name' (the ecmc entry name)");
-                        if (e.datatype.empty())
-                            r.fail(en, epath, "missing required key 'datatype'");
-                        unsigned width = coe_datatype_bits(e.datatype);
-                        if (width == 0)
-                            r.fail(en["datatype"], epath + ".datatype",
-                                   SB() << "unknown datatype '" << e.datatype
-                                        << "' (BOOL, BIT2-BIT8, INT8-INT64, UINT8-UINT64, "
-                                           "REAL32, REAL64)");
-                        if (width != e.bits)
-                            r.fail(en["bits"], epath + ".bits",
-                                   SB() << unsigned(e.bits) << " should be " << width
-                                        << " for datatype " << e.datatype);
-                        auto [it, fresh] = entry_names.emplace(e.name, epath);
+            for (const config::YamlNode& en : n["entries"].list()) {
+                if (!en.keys({"index", "sub", "bits", "name", "datatype"})) continue;
+                PdoEntry e;
+                e.index = uint_of<uint16_t>(en.required("index"), 0xFFFF);
+                e.sub = uint_of<uint8_t>(en["sub"], 0xFF);
+                auto bits = en.required("bits").unsigned_integer(0xFF);
+                e.bits = static_cast<uint8_t>(bits.value_or(0));
+                e.name = en["name"].string().value_or("");
+                e.datatype = en["datatype"].string().value_or("");
+                if (bits && *bits == 0) en["bits"].error("0 should be > 0");
+                const bool has_index = en.has("index");
+                if (has_index && e.index == 0) {
+                    if (e.sub != 0) en["sub"].error("padding (index 0) has no subindex");
+                    if (!e.name.empty()) en["name"].error("padding (index 0) has no name");
+                    if (!e.datatype.empty())
+                        en["datatype"].error("padding (index 0) has no datatype");
+                } else if (has_index) {
+                    if (!en.has("name")) en.required("name", " (the ecmc entry name)");
+                    if (!en.has("datatype")) en.required("datatype");
+                    unsigned width = e.datatype.empty() ? 0 : coe_datatype_bits(e.datatype);
+                    if (!e.datatype.empty() && width == 0)
+                        en["datatype"].error(SB() << "unknown datatype '" << e.datatype
+                                                  << "' (BOOL, BIT2-BIT8, INT8-INT64, "
+                                                     "UINT8-UINT64, REAL32, REAL64)");
+                    if (width != 0 && bits && *bits != 0 && width != e.bits)
+                        en["bits"].error(SB() << unsigned(e.bits) << " should be " << width
+                                              << " for datatype " << e.datatype);
+                    if (!e.name.empty()) {
+                        auto [it, fresh] = entry_names.emplace(e.name, en.path());
                         if (!fresh)
-                            r.fail(en["name"], epath + ".name",
-                                   SB() << "'" << e.name << "' is already used by " << it->second);
+                            en["name"].error(SB() << "'" << e.name << "' is already used by "
+                                                  << it->second);
                     }
-                    p.entries.push_back(std::move(e));
                 }
+                p.entries.push_back(std::move(e));
             }
             (rx ? d.rx_pdos : d.tx_pdos).push_back(std::move(p));
         }
@@ -349,13 +217,12 @@ DeviceDesc parse_yaml_device(const YamlReader& r, const YAML::Node& root) {
         if (sm.type != SmType::Outputs && sm.type != SmType::Inputs) continue;
         if (sm.is_virtual) continue;
         uint32_t bytes = d.sm_bytes(sm.index);
-        if (sm_size_given[i] && sm.default_size != bytes)
-            r.fail(sm_nodes[i]["size"], SB() << "sync_managers[" << i << "].size",
-                   SB() << sm.default_size << " should be " << bytes
-                        << " (bytes of the PDOs assigned to SM" << i << ")");
+        if (sm_nodes[i].has("size") && sm.default_size != bytes)
+            sm_nodes[i]["size"].error(SB() << sm.default_size << " should be " << bytes
+                                           << " (bytes of the PDOs assigned to SM" << i << ")");
         if (bytes > 0xFFFF)
-            r.fail(sm_nodes[i], SB() << "sync_managers[" << i << "]",
-                   SB() << "assigned PDOs need " << bytes << " bytes, more than an SM holds");
+            sm_nodes[i].error(SB() << "assigned PDOs need " << bytes
+                                   << " bytes, more than an SM holds");
         sm.default_size = static_cast<uint16_t>(bytes);
     }
     return d;
@@ -688,41 +555,24 @@ Catalog::Catalog(Catalog&&) noexcept = default;
 Catalog& Catalog::operator=(Catalog&&) noexcept = default;
 
 void Catalog::load_yaml(const std::string& path) {
-    YamlReader r(path);
-    YAML::Node root;
-    try {
-        root = YAML::Load(read_file(path));
-    } catch (const YAML::Exception& e) {
-        SourceLoc loc{path, e.mark.is_null() ? 0 : e.mark.line + 1,
-                      e.mark.is_null() ? 0 : e.mark.column + 1};
-        throw Error(SB() << loc.str() << ": YAML syntax error: " << e.msg);
-    }
-    if (!root.IsDefined() || root.IsNull())
-        throw Error(SB() << SourceLoc{path, 1, 1}.str() << ": empty file, expected a device");
+    config::YamlReader r = config::YamlReader::load(path, "the device");
+    config::YamlNode root = r.root();
+    if (root.is_null()) r.error(r.top(), "empty file, expected a device");
     DeviceDesc d;
-    try {
-        d = parse_yaml_device(r, root);
-    } catch (const YAML::Exception& e) { // e.g. a key that is itself a mapping
-        SourceLoc loc{path, e.mark.is_null() ? 0 : e.mark.line + 1,
-                      e.mark.is_null() ? 0 : e.mark.column + 1};
-        throw Error(SB() << loc.str() << ": " << e.msg);
-    }
+    if (root && !root.is_null()) d = parse_yaml_device(root);
+    r.throw_if_errors(); // a bad file changes nothing
     if (!d.variant_of.empty()) { // an operating-mode variant: its own type, the base's identity
         for (auto& it : impl_->items)
-            if (it->desc.type == d.type) {
-                YAML::Mark m = root.Mark();
-                throw Error(SB() << SourceLoc{path, m.line + 1, m.column + 1}.str() << ": type " << d.type
+            if (it->desc.type == d.type)
+                throw Error(SB() << r.loc(root.yaml()).str() << ": type " << d.type
                                  << " is already defined in " << it->source);
-            }
         impl_->items.push_back(std::make_unique<Impl::Item>(Impl::Item{std::move(d), path, false}));
         return;
     }
     if (Impl::Item* old = impl_->find_identity(d.vendor, d.product, d.revision)) {
-        if (!old->from_esi) {
-            YAML::Mark m = root.Mark();
-            throw Error(SB() << SourceLoc{path, m.line + 1, m.column + 1}.str() << ": "
-                             << identity_str(d) << " is already defined in " << old->source);
-        }
+        if (!old->from_esi)
+            throw Error(SB() << r.loc(root.yaml()).str() << ": " << identity_str(d)
+                             << " is already defined in " << old->source);
         old->desc = std::move(d);
         old->source = path;
         old->from_esi = false;
@@ -756,8 +606,10 @@ void Catalog::load_dir(const std::string& dir) {
     if (ec) throw Error(SB() << dir << ": cannot list: " << ec.message());
     std::sort(yaml.begin(), yaml.end());
     std::sort(xml.begin(), xml.end());
-    for (const std::string& p : yaml) load_yaml(p);
-    for (const std::string& p : xml) load_esi(p);
+    ErrorList errors; // every bad file, each with all its errors
+    for (const std::string& p : yaml) errors.capture([&] { load_yaml(p); });
+    for (const std::string& p : xml) errors.capture([&] { load_esi(p); });
+    errors.throw_if_any();
 }
 
 const DeviceDesc* Catalog::find(std::string_view type) const {

@@ -47,10 +47,12 @@ public:
     Catalog(Catalog&&) noexcept;
     Catalog& operator=(Catalog&&) noexcept;
 
-    // Loads every *.yaml / *.yml file (sorted by name), then every *.xml file as ESI.
+    // Loads every *.yaml / *.yml file (sorted by name), then every *.xml file as ESI; a bad file
+    // does not stop the others: one MultiError at the end lists every error of every file.
     void load_dir(const std::string& dir);
-    // One device per file. Errors name file:line:col, the key and what is wrong. Defining an
-    // identity (vendor, product, revision) that another YAML file already defined is an error.
+    // One device per file, read with config::YamlReader: one MultiError lists every error of the
+    // file (file:line:col, the key and what is wrong), and a bad file changes nothing. Defining
+    // an identity (vendor, product, revision) that another YAML file already defined is an error.
     void load_yaml(const std::string& path);
     // EtherCATInfo XML; every Descriptions/Devices/Device. An ESI device replaces an earlier
     // device of the same identity. Entry names are "<PdoName>.<EntryName>" without spaces,

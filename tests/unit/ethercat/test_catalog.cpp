@@ -414,14 +414,15 @@ TEST(CatalogYaml, ErrorsNameFileLineColumnKeyAndProblem) {
     const std::vector<Case> cases = {
         {"sub: 1, bits: 1, name: binaryInput01, datatype: BOOL",
          "sub: 1, bits: 1, name: binaryInput01, datatyp: BOOL", "datatyp",
-         "tx_pdos[0].entries[0]: unknown key 'datatyp'"},
-        {"name: \"XT0001", "nmae: \"XT0001", "nmae", "unknown key 'nmae'"},
+         "unknown key 'datatyp' in tx_pdos[0].entries[0] (did you mean 'datatype'?)"},
+        {"name: \"XT0001", "nmae: \"XT0001", "nmae",
+         "unknown key 'nmae' in the device (did you mean 'name'?)"},
         {"bits: 1, name", "bits: 2, name", "2, name",
          "tx_pdos[0].entries[0].bits: 2 should be 1 for datatype BOOL"},
         {"product: 0x00013052", "product: 0x0001G052", "0x0001G052",
-         "product: '0x0001G052' is not an unsigned integer"},
+         "product should be an unsigned integer, got '0x0001G052'"},
         {"vendor: 2", "vendor: 0x100000000", "0x100000000",
-         "vendor: 0x100000000 is out of range (maximum 4294967295)"},
+         "vendor should be from 0 to 4294967295, got 0x100000000"},
         {"    sm: 0", "    sm: 1", "1\n    entries", "tx_pdos[0].sm: SM1 does not exist"},
         {"type: Inputs}", "type: Input}", "Input}",
          "sync_managers[0].type: 'Input' should be one of"},
@@ -434,11 +435,11 @@ TEST(CatalogYaml, ErrorsNameFileLineColumnKeyAndProblem) {
         {"{index: 0, bits: 7}", "{index: 0, bits: 7, name: gap}", "gap",
          "tx_pdos[0].entries[1].name: padding (index 0) has no name"},
         {"index: 0, start", "index: 1, start", "1, start", "sync_managers[0].index: 1 should be 0"},
-        {"revision: 0x00100000\n", "", "type", "missing required key 'revision'"},
+        {"revision: 0x00100000\n", "", "type", "the device: missing required key 'revision'"},
         {"vendor: 2\n", "vendor: 2\ncoe: true\n", "true", "coe: true needs an MBoxOut"},
         {"    entries:\n      - {index: 0x6000, sub: 1, bits: 1, name: binaryInput01, datatype: "
          "BOOL}\n      - {index: 0, bits: 7}\n",
-         "    entries: 3\n", "3\n", "tx_pdos[0].entries: should be a list"},
+         "    entries: 3\n", "3\n", "tx_pdos[0].entries should be a list, got a single value"},
     };
     for (const Case& c : cases) {
         SCOPED_TRACE(c.to);
@@ -481,7 +482,8 @@ TEST(CatalogYaml, EmptyAndMissingFiles) {
     EXPECT_EQ(error_of([&] { Catalog().load_yaml(empty); }),
               empty + ":1:1: empty file, expected a device");
     std::string missing = dir.path() + "/nope.yaml";
-    EXPECT_EQ(error_of([&] { Catalog().load_yaml(missing); }), missing + ": cannot open");
+    EXPECT_EQ(error_of([&] { Catalog().load_yaml(missing); }),
+              missing + ": cannot open: No such file or directory");
 }
 
 TEST(CatalogYaml, SameIdentityTwiceIsAnError) {
