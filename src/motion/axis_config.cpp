@@ -1,6 +1,7 @@
 #include "motion/axis_config.hpp"
 
-#include <yaml-cpp/yaml.h>
+#include "config/yaml_reader.hpp"
+#include "core/error_list.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -16,71 +17,13 @@
 namespace beamctl::motion {
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr const char* kSignalForm =
     "the form is ec<master>.s<slave>.<entry>[.<bit>], e.g. ec0.s3.driveStatus01.3";
 
-// ---- scalar syntax (PyYAML's YAML 1.1 forms, as ecmccfg reads the file) -----------------------
-
-std::optional<int64_t> parse_int(std::string_view s) {
-    bool neg = false;
-    if (!s.empty() && (s[0] == '+' || s[0] == '-')) {
-        neg = s[0] == '-';
-        s.remove_prefix(1);
-    }
-    int base = 10;
-    if (s.size() > 2 && s[0] == '0' && (s[1] == 'x' || s[1] == 'X')) {
-        base = 16;
-        s.remove_prefix(2);
-    }
-    if (s.empty()) return std::nullopt;
-    uint64_t v = 0;
-    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v, base);
-    if (ec != std::errc() || end != s.data() + s.size()) return std::nullopt;
-    const uint64_t max = uint64_t(std::numeric_limits<int64_t>::max());
-    if (!neg && v > max) return std::nullopt;
-    if (neg && v > max + 1) return std::nullopt;
-    return neg ? int64_t(0 - v) : int64_t(v);
-}
-
-std::optional<double> parse_double(std::string_view s) {
-    if (auto i = parse_int(s)) return double(*i);
-    if (!s.empty() && s[0] == '+') s.remove_prefix(1);
-    // [-]digits[.digits][e[+-]digits] or [-].digits...; no inf, nan or hex floats
-    std::size_t i = 0, digits = 0;
-    if (i < s.size() && s[i] == '-') ++i;
-    while (i < s.size() && std::isdigit(static_cast<unsigned char>(s[i]))) ++i, ++digits;
-    if (i < s.size() && s[i] == '.') {
-        ++i;
-        while (i < s.size() && std::isdigit(static_cast<unsigned char>(s[i]))) ++i, ++digits;
-    }
-    if (digits == 0) return std::nullopt;
-    if (i < s.size() && (s[i] == 'e' || s[i] == 'E')) {
-        ++i;
-        if (i < s.size() && (s[i] == '+' || s[i] == '-')) ++i;
-        std::size_t exp_digits = 0;
-        while (i < s.size() && std::isdigit(static_cast<unsigned char>(s[i]))) ++i, ++exp_digits;
-        if (exp_digits == 0) return std::nullopt;
-    }
-    if (i != s.size()) return std::nullopt;
-    double v = 0;
-    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (ec != std::errc() || end != s.data() + s.size() || !std::isfinite(v)) return std::nullopt;
-    return v;
-}
-
-// YAML 1.1 booleans as PyYAML reads them; 0 and 1 are accepted as well.
-std::optional<bool> parse_bool(std::string_view s) {
-    static constexpr std::string_view yes[] = {"true", "True", "TRUE", "yes", "Yes",
-                                               "YES",  "on",   "On",   "ON",  "1"};
-    static constexpr std::string_view no[] = {"false", "False", "FALSE", "no",  "No",
-                                              "NO",    "off",   "Off",   "OFF", "0"};
-    for (auto y : yes)
-        if (s == y) return true;
-    for (auto n : no)
-        if (s == n) return false;
-    return std::nullopt;
-}
+using config::above;
+using config::at_least;
+using config::between;
+using config::Range;
 
 bool is_ident_start(char c) {
     return std::isalpha(static_cast<unsigned char>(c)) || c == '_';
@@ -148,53 +91,6 @@ std::string parse_signal(std::string_view s, SignalRef& r) {
     return {};
 }
 
-std::size_t edit_distance(std::string_view a, std::string_view b) {
-    std::vector<std::size_t> row(b.size() + 1);
-    for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-    for (std::size_t i = 1; i <= a.size(); ++i) {
-        std::size_t diag = row[0];
-        row[0] = i;
-        for (std::size_t j = 1; j <= b.size(); ++j) {
-            const std::size_t up = row[j];
-            const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) ==
-                              std::tolower(static_cast<unsigned char>(b[j - 1]));
-            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (same ? 0 : 1)});
-            diag = up;
-        }
-    }
-    return row[b.size()];
-}
-
-const char* describe_node(const YAML::Node& n) {
-    if (n.IsMap()) return "a mapping";
-    if (n.IsSequence()) return "a list";
-    if (n.IsNull()) return "nothing";
-    return "a single value";
-}
-
-// A closed or half-open range of allowed numbers, for messages such as "should be > 0".
-struct Range {
-    double lo = -kInf;
-    double hi = kInf;
-    bool lo_open = false;
-
-    bool ok(double v) const { return (lo_open ? v > lo : v >= lo) && v <= hi; }
-    std::string str() const {
-        if (lo_open) return SB() << "> " << lo;
-        if (hi == kInf) return SB() << ">= " << lo;
-        if (lo == -kInf) return SB() << "<= " << hi;
-        return SB() << "from " << lo << " to " << hi;
-    }
-};
-Range above(double lo) {
-    return {lo, kInf, true};
-}
-Range at_least(double lo) {
-    return {lo, kInf, false};
-}
-Range between(double lo, double hi) {
-    return {lo, hi, false};
-}
 const Range kBit = between(0, 63);
 
 // A value as written, macros expanded, with the place of its first character.
@@ -203,57 +99,30 @@ struct Scalar {
     SourceLoc at;
 };
 
-// ---- one file: locations, problems, warnings, macro and var expansion -------------------------
+// ---- one file: the shared reader, with ECMC's macro and var expansion and link syntax ---------
 
 class Reader {
 public:
-    Reader(std::string file, std::string_view text, const MacroMap& macros, bool collect)
-        : file_(std::move(file))
-        , text_(text)
-        , macros_(macros)
-        , collect_(collect) {
-        line_starts_.push_back(0);
-        for (std::size_t i = 0; i < text_.size(); ++i)
-            if (text_[i] == '\n') line_starts_.push_back(i + 1);
+    // `yr` outlives the Reader; every scalar it reads is expanded by expand().
+    Reader(config::YamlReader& yr, const MacroMap& macros)
+        : yr_(yr)
+        , macros_(macros) {
+        yr_.set_expander([this](const std::string& raw, const SourceLoc& at,
+                                const std::string& path) { return expand(raw, at, path); });
     }
+    Reader(const Reader&) = delete;
+    Reader& operator=(const Reader&) = delete;
 
-    const std::string& file() const { return file_; }
-    SourceLoc top() const { return {file_, 1, 1}; }
-
-    // Where `n` starts; a quoted scalar starts after its quote.
-    SourceLoc loc(const YAML::Node& n) const {
-        const YAML::Mark m = n.Mark();
-        if (m.line < 0 || m.column < 0) return top();
-        SourceLoc l{file_, m.line + 1, m.column + 1};
-        if (n.IsScalar() && n.Tag() == "!" && std::size_t(m.line) < line_starts_.size()) {
-            const std::size_t at = line_starts_[std::size_t(m.line)] + std::size_t(m.column);
-            if (at < text_.size() && (text_[at] == '\'' || text_[at] == '"')) ++l.col;
-        }
-        return l;
-    }
-
-    void problem(const SourceLoc& at, const std::string& msg) {
-        std::string text = SB() << at.str() << ": " << msg;
-        if (!collect_) throw Error(text);
-        problems_.push_back({at, std::move(text)});
-    }
-    void warn(const SourceLoc& at, const std::string& msg) {
-        warnings_.push_back(SB() << at.str() << ": " << msg);
-    }
-    std::vector<std::string> take_warnings() { return std::move(warnings_); }
-
-    // Appends the problems, ordered by position, to `out`.
-    void finish(std::vector<Error>& out) {
-        std::stable_sort(problems_.begin(), problems_.end(), [](const auto& a, const auto& b) {
-            return std::pair(a.first.line, a.first.col) < std::pair(b.first.line, b.first.col);
-        });
-        for (auto& p : problems_) out.emplace_back(p.second);
-        problems_.clear();
-    }
+    config::YamlReader& yaml() { return yr_; }
+    const std::string& file() const { return yr_.file(); }
+    SourceLoc top() const { return yr_.top(); }
+    SourceLoc loc(const YAML::Node& n) const { return yr_.loc(n); }
+    void problem(const SourceLoc& at, const std::string& msg) { yr_.error(at, msg); }
+    void warn(const SourceLoc& at, const std::string& msg) { yr_.warn(at, msg); }
 
     void set_vars(std::map<std::string, std::string> vars) { vars_ = std::move(vars); }
 
-    // The value of a scalar node: `{{ var.X }}` substituted, then macros expanded.
+    // The value of a scalar: `{{ var.X }}` substituted, then macros expanded.
     std::optional<std::string> expand(const std::string& raw, const SourceLoc& at,
                                       const std::string& path) {
         std::string s = raw;
@@ -271,25 +140,15 @@ public:
         }
     }
 
-    // The scalar text of `n` (`key_at` locates a null value), or a problem.
-    std::optional<Scalar> scalar(const YAML::Node& n, const SourceLoc& key_at,
-                                 const std::string& path, std::string_view what) {
-        if (n.IsNull()) {
-            problem(key_at, SB() << path << " has no value (should be " << what << ")");
-            return std::nullopt;
-        }
-        if (!n.IsScalar()) {
-            problem(loc(n), SB() << path << " should be " << what << ", got " << describe_node(n));
-            return std::nullopt;
-        }
-        const SourceLoc at = loc(n);
-        auto text = expand(n.Scalar(), at, path);
+    // The scalar text of `n` (expanded) with its place, or a problem; nullopt if absent.
+    std::optional<Scalar> scalar(const config::YamlNode& n, std::string_view what) {
+        auto text = n.scalar(what);
         if (!text) return std::nullopt;
-        return Scalar{std::move(*text), at};
+        return Scalar{std::move(*text), n.loc()};
     }
 
     std::optional<double> number(const Scalar& s, const std::string& path, Range r = {}) {
-        const auto v = parse_double(s.text);
+        const auto v = config::parse_number(s.text);
         if (!v) {
             problem(s.at, SB() << path << " should be a number, got '" << s.text << "'");
             return std::nullopt;
@@ -301,7 +160,7 @@ public:
         return v;
     }
     std::optional<int64_t> integer(const Scalar& s, const std::string& path, Range r = {}) {
-        const auto v = parse_int(s.text);
+        const auto v = config::parse_integer(s.text);
         if (!v) {
             problem(s.at, SB() << path << " should be an integer, got '" << s.text << "'");
             return std::nullopt;
@@ -313,7 +172,7 @@ public:
         return v;
     }
     std::optional<bool> boolean(const Scalar& s, const std::string& path) {
-        const auto v = parse_bool(s.text);
+        const auto v = config::parse_boolean(s.text);
         if (!v) problem(s.at, SB() << path << " should be true or false, got '" << s.text << "'");
         return v;
     }
@@ -394,103 +253,37 @@ private:
         problem(where, SB() << path << ": " << msg);
     }
 
-    std::string file_;
-    std::string_view text_;
+    config::YamlReader& yr_;
     const MacroMap& macros_;
-    bool collect_;
-    std::vector<std::size_t> line_starts_;
-    std::vector<std::pair<SourceLoc, std::string>> problems_;
-    std::vector<std::string> warnings_;
     std::map<std::string, std::string> vars_;
 };
 
-// ---- one YAML mapping with its key path: allowed keys, typed values ---------------------------
+// ---- one YAML mapping of ECMC's schema: allowed keys, typed values, links ---------------------
 
-// A key outside the schema that ecmccfg drops without a word but that its own manual or
-// examples use: documented ones load with a warning, misplaced ones are errors with a hint.
-struct Known {
-    std::string_view key;
-    std::string_view hint; // what to use instead
-    bool misplaced = false;
-};
 using Keys = std::initializer_list<std::string_view>;
-using KnownKeys = std::initializer_list<Known>;
+using KnownKeys = std::initializer_list<config::KnownKey>;
 
 class Map {
 public:
-    // A section that is not in the file.
-    Map(Reader& rd, std::string path, SourceLoc at)
+    // `node` is the value (a mapping, or null for an empty section), maybe absent.
+    Map(Reader& rd, config::YamlNode node, Keys allowed = {}, KnownKeys known = {})
         : rd_(&rd)
-        , path_(std::move(path))
-        , loc_(std::move(at)) {}
-
-    // `node` is the value (a mapping, or null for an empty section); `at` is where its key is.
-    Map(Reader& rd, const YAML::Node& node, std::string path, SourceLoc at, Keys allowed,
-        KnownKeys known = {})
-        : rd_(&rd)
-        , path_(std::move(path))
-        , loc_(std::move(at))
-        , present_(true) {
-        if (node.IsNull()) return;
-        if (!node.IsMap()) {
-            bad_ = true;
-            rd.problem(rd.loc(node), SB() << name()
-                                          << " should be a mapping (key: value lines), got "
-                                          << describe_node(node));
-            return;
-        }
-        for (auto it = node.begin(); it != node.end(); ++it) {
-            const YAML::Node k = it->first;
-            if (!k.IsScalar()) {
-                rd.problem(rd.loc(k), SB() << "keys in " << name() << " should be names, got "
-                                           << describe_node(k));
-                continue;
-            }
-            Item item{k.Scalar(), rd.loc(k), it->second};
-            const auto same = std::find_if(items_.begin(), items_.end(),
-                                           [&](const Item& i) { return i.key == item.key; });
-            if (same != items_.end()) {
-                rd.problem(item.key_at, SB() << "duplicate key '" << item.key << "' in " << name()
-                                             << " (also at line " << same->key_at.line << ")");
-                *same = std::move(item); // the last one counts, as in PyYAML
-                continue;
-            }
-            if (std::find(allowed.begin(), allowed.end(), item.key) != allowed.end()) {
-                items_.push_back(std::move(item));
-                continue;
-            }
-            const auto kn = std::find_if(known.begin(), known.end(),
-                                         [&](const Known& i) { return i.key == item.key; });
-            if (kn != known.end() && kn->misplaced) {
-                rd.problem(item.key_at, SB() << "unknown key '" << item.key << "' in " << name()
-                                             << ": ecmccfg ignores it here; " << kn->hint);
-                continue;
-            }
-            if (kn != known.end()) {
-                rd.warn(item.key_at, SB() << "'" << sub(item.key) << "' is ignored by ecmccfg ("
-                                          << kn->hint << ")");
-                continue;
-            }
-            unknown(item, allowed);
-        }
+        , node_(std::move(node)) {
+        if (node_.present()) bad_ = !node_.keys(allowed, known);
     }
 
-    bool present() const { return present_; }
-    const std::string& path() const { return path_; }
-    const SourceLoc& loc() const { return loc_; }
-    bool has(std::string_view key) const { return find(key) != nullptr; }
+    bool present() const { return node_.present(); }
+    const std::string& path() const { return node_.path(); }
+    SourceLoc loc() const { return node_.key_loc(); } // where the section's key is
+    bool has(std::string_view key) const { return !bad_ && node_.has(key); }
     std::string sub(std::string_view key) const {
-        return path_.empty() ? std::string(key) : SB() << path_ << "." << key;
+        return path().empty() ? std::string(key) : std::string(SB() << path() << "." << key);
     }
-    SourceLoc key_loc(std::string_view key) const {
-        const Item* i = find(key);
-        return i ? i->key_at : loc_;
-    }
+    SourceLoc key_loc(std::string_view key) const { return node_[key].key_loc(); }
 
-    // A required key that is missing is a problem (once: not for a section that is itself wrong).
+    // A required key that is missing is a problem (not for a section that is itself wrong).
     void require(std::string_view key, std::string_view hint = {}) const {
-        if (!present_ || bad_ || has(key)) return;
-        rd_->problem(loc_, SB() << name() << ": missing required key '" << key << "'" << hint);
+        if (present() && !bad_) node_.required(key, hint);
     }
     // The schema's `dependencies`: when `key` is given, `needs` must be given too.
     void depends(std::string_view key, Keys needs) const {
@@ -501,20 +294,15 @@ public:
     }
 
     Map map(std::string_view key, Keys allowed, KnownKeys known = {}) const {
-        const Item* i = find(key);
-        if (!i) return Map(*rd_, sub(key), loc_);
-        return Map(*rd_, i->value, sub(key), i->key_at, allowed, known);
+        return Map(*rd_, child(key), allowed, known);
     }
-    // The raw value node (lists); null when absent.
-    const YAML::Node* node(std::string_view key) const {
-        const Item* i = find(key);
-        return i ? &i->value : nullptr;
+    // The value of `key`; absent when not given (or when this section is not a mapping).
+    config::YamlNode child(std::string_view key) const {
+        return bad_ ? config::YamlNode() : node_[key];
     }
 
     std::optional<Scalar> scalar(std::string_view key, std::string_view what) const {
-        const Item* i = find(key);
-        if (!i) return std::nullopt;
-        return rd_->scalar(i->value, i->key_at, sub(key), what);
+        return rd_->scalar(child(key), what);
     }
     std::optional<std::string> string(std::string_view key) const {
         auto s = scalar(key, "a text");
@@ -538,7 +326,7 @@ public:
                                   std::string_view names) const {
         auto s = scalar(key, "an integer");
         if (!s) return std::nullopt;
-        const auto v = parse_int(s->text);
+        const auto v = config::parse_integer(s->text);
         if (!v || std::find(allowed.begin(), allowed.end(), *v) == allowed.end()) {
             rd_->problem(s->at, SB() << sub(key) << " should be " << names << ", got " << s->text);
             return std::nullopt;
@@ -583,42 +371,11 @@ public:
     }
 
 private:
-    struct Item {
-        std::string key;
-        SourceLoc key_at;
-        YAML::Node value;
-    };
-
-    std::string name() const { return path_.empty() ? std::string("the file") : path_; }
-
-    const Item* find(std::string_view key) const {
-        for (const Item& i : items_)
-            if (i.key == key) return &i;
-        return nullptr;
-    }
-
-    void unknown(const Item& item, Keys allowed) {
-        SB msg;
-        msg << "unknown key '" << item.key << "' in " << name();
-        std::string_view best;
-        std::size_t best_d = 3;
-        for (auto a : allowed) {
-            const std::size_t d = edit_distance(item.key, a);
-            if (d < best_d && d < item.key.size()) best_d = d, best = a;
-        }
-        if (!best.empty()) msg << "; did you mean '" << best << "'?";
-        msg << " (allowed:";
-        for (auto a : allowed) msg << " " << a;
-        rd_->problem(item.key_at, msg << ")");
-    }
-
     Reader* rd_;
-    std::string path_;
-    SourceLoc loc_;
-    bool present_ = false;
+    config::YamlNode node_;
     bool bad_ = false; // present but not a mapping
-    std::vector<Item> items_;
 };
+
 
 // ---- sections ---------------------------------------------------------------------------------
 
@@ -729,32 +486,35 @@ EpicsConfig parse_epics(Reader& rd, const Map& m) {
 }
 
 // drive.error / encoder.error: up to 3 bits of `status` or links.
+// A bit of a status that is given but bad (reported already) is skipped without a word.
 std::vector<SignalRef> parse_error_list(Reader& rd, const Map& m,
                                         const std::optional<SignalRef>& status) {
     std::vector<SignalRef> out;
-    const YAML::Node* n = m.node("error");
+    const config::YamlNode n = m.child("error");
     if (!n) return out;
     const std::string path = m.sub("error");
-    if (!n->IsSequence()) {
-        rd.problem(n->IsNull() ? m.key_loc("error") : rd.loc(*n),
+    if (!n.is_list()) {
+        rd.problem(n.is_null() ? m.key_loc("error") : n.loc(),
                    SB() << path << " should be a list of status bits or links, got "
-                        << describe_node(*n));
+                        << config::describe(n.yaml()));
         return out;
     }
-    if (n->size() > kMaxErrorBits)
-        rd.problem(rd.loc((*n)[kMaxErrorBits]), SB() << path << " should have at most "
-                                                     << kMaxErrorBits << " entries, got "
-                                                     << n->size());
-    for (std::size_t k = 0; k < n->size() && k < kMaxErrorBits; ++k) {
-        const std::string item_path = SB() << path << "[" << k << "]";
-        auto s = rd.scalar((*n)[k], m.key_loc("error"), item_path, "a status bit or a link");
+    const auto items = n.list();
+    if (items.size() > kMaxErrorBits)
+        rd.problem(items[kMaxErrorBits].loc(), SB() << path << " should have at most "
+                                                    << kMaxErrorBits << " entries, got "
+                                                    << items.size());
+    for (std::size_t k = 0; k < items.size() && k < kMaxErrorBits; ++k) {
+        const std::string item_path = items[k].path();
+        auto s = rd.scalar(items[k], "a status bit or a link");
         if (!s) continue;
-        if (parse_int(s->text)) {
+        if (config::parse_integer(s->text)) {
             const auto b = rd.integer(*s, item_path, kBit);
             if (!b) continue;
             if (!status) {
-                rd.problem(s->at, SB() << item_path << " is a bit of " << m.sub("status")
-                                       << ", which is not given");
+                if (!m.has("status"))
+                    rd.problem(s->at, SB() << item_path << " is a bit of " << m.sub("status")
+                                           << ", which is not given");
                 continue;
             }
             SignalRef r = status->with_bit(int(*b));
@@ -846,7 +606,7 @@ const Keys kHomingKeys = {"type",           "position",
                           "timeout",        "refToEncIDAtStartup",
                           "refAtHome",      "tolToPrim",
                           "trigg",          "ready"};
-const KnownKeys kHomingKnown = {{"switchPolarity", "use input.homePolarity"}};
+const KnownKeys kHomingKnown = {{"switchPolarity", "is ignored by ecmccfg (use input.homePolarity)"}};
 
 std::optional<FilterConfig> parse_filter(const Map& m, FilterConfig defaults) {
     if (!m.present()) return std::nullopt;
@@ -954,9 +714,10 @@ const Keys kEncoderKeys = {
     "desc",          "position",  "control",     "status", "warning",   "ready",
     "reset",         "error",     "filter",      "latch",  "primary",   "homing",
     "useAsCSPDrvEnc"};
-const KnownKeys kEncoderKnown = {{"velocityFilterSize", "use encoder.filter.velocity.size"},
-                                 {"positionFilterSize", "use encoder.filter.position.size"},
-                                 {"positionFilterEnable", "use encoder.filter.position.enable"}};
+const KnownKeys kEncoderKnown = {
+    {"velocityFilterSize", "is ignored by ecmccfg (use encoder.filter.velocity.size)"},
+    {"positionFilterSize", "is ignored by ecmccfg (use encoder.filter.position.size)"},
+    {"positionFilterEnable", "is ignored by ecmccfg (use encoder.filter.position.enable)"}};
 
 ControllerConfig parse_controller(const Map& m) {
     ControllerConfig c;
@@ -1123,18 +884,15 @@ AxisPlcConfig parse_plc(Reader& rd, const Map& m) {
     p.external_commands = m.boolean("externalCommands").value_or(false);
     p.file = m.string("file").value_or("");
     p.macros = m.string("macros").value_or("");
-    if (const YAML::Node* code = m.node("code")) {
-        const std::string path = m.sub("code");
-        if (!code->IsSequence()) {
-            rd.problem(code->IsNull() ? m.key_loc("code") : rd.loc(*code),
-                       SB() << path << " should be a list of PLC lines, got "
-                            << describe_node(*code));
+    if (const config::YamlNode code = m.child("code")) {
+        if (!code.is_list()) {
+            rd.problem(code.is_null() ? m.key_loc("code") : code.loc(),
+                       SB() << code.path() << " should be a list of PLC lines, got "
+                            << config::describe(code.yaml()));
         } else {
-            for (std::size_t k = 0; k < code->size(); ++k) {
-                if (auto s = rd.scalar((*code)[k], m.key_loc("code"),
-                                       SB() << path << "[" << k << "]", "a line of PLC code"))
+            for (const config::YamlNode& line : code.list())
+                if (auto s = rd.scalar(line, "a line of PLC code"))
                     p.code.push_back(std::move(s->text));
-            }
         }
     }
     const Keys filter_keys = {"enable", "size"};
@@ -1172,7 +930,7 @@ void read_vars(Reader& rd, const YAML::Node& root) {
         const YAML::Node v = it->second;
         if (v.IsNull()) continue;
         if (!v.IsMap()) {
-            rd.problem(rd.loc(v), SB() << "var should be a mapping, got " << describe_node(v));
+            rd.problem(rd.loc(v), SB() << "var should be a mapping, got " << config::describe(v));
             continue;
         }
         for (auto kv = v.begin(); kv != v.end(); ++kv)
@@ -1183,32 +941,19 @@ void read_vars(Reader& rd, const YAML::Node& root) {
 }
 
 // The root mapping, or nullopt after a problem (syntax error, empty file, not a mapping).
-std::optional<YAML::Node> load_root(Reader& rd, std::string_view text, std::string_view needs) {
-    std::vector<YAML::Node> docs;
-    try {
-        docs = YAML::LoadAll(std::string(text));
-    } catch (const YAML::Exception& e) {
-        SourceLoc at = rd.top();
-        if (e.mark.line >= 0 && e.mark.column >= 0)
-            at = {rd.file(), e.mark.line + 1, e.mark.column + 1};
-        rd.problem(at, SB() << "YAML syntax error: " << e.msg);
-        return std::nullopt;
-    }
-    if (docs.size() > 1) {
-        rd.problem(rd.loc(docs[1]),
-                   "only one YAML document is expected (a second one starts here)");
-        return std::nullopt;
-    }
-    if (docs.empty() || docs[0].IsNull()) {
+std::optional<config::YamlNode> load_root(Reader& rd, std::string_view needs) {
+    config::YamlNode root = rd.yaml().root();
+    if (!root) return std::nullopt; // the reader said why
+    if (root.is_null()) {
         rd.problem(rd.top(), SB() << "the file is empty; it needs " << needs);
         return std::nullopt;
     }
-    if (!docs[0].IsMap()) {
-        rd.problem(rd.loc(docs[0]), SB() << "the file should be a mapping of sections (" << needs
-                                         << "), got " << describe_node(docs[0]));
+    if (!root.is_map()) {
+        rd.problem(root.loc(), SB() << "the file should be a mapping of sections (" << needs
+                                    << "), got " << config::describe(root.yaml()));
         return std::nullopt;
     }
-    return docs[0];
+    return root;
 }
 
 const Keys kTopKeys = {"axis",       "epics", "drive",  "encoder",    "controller",
@@ -1217,15 +962,16 @@ const Keys kTopKeys = {"axis",       "epics", "drive",  "encoder",    "controlle
 const Keys kMetaKeys = {"author", "facility", "device",     "date",        "md5",
                         "ecb",    "ecbBuild", "ecbVersion", "schemaNumber"};
 
-void parse_axis_file(Reader& rd, std::string_view text, AxisConfig& cfg) {
-    const auto root = load_root(rd, text,
-                                "axis:, encoder:, trajectory:, input: and, for a joint "
-                                "axis, drive:");
+void parse_axis_file(Reader& rd, AxisConfig& cfg) {
+    const auto root = load_root(rd, "axis:, encoder:, trajectory:, input: and, for a joint "
+                                    "axis, drive:");
     if (!root) return;
-    read_vars(rd, *root);
-    Map top(rd, *root, "", rd.top(), kTopKeys,
-            {{"output", "use axis.healthOutput and drive.brake.output"},
-             {"motorRecord", "it is the old form of epics: and epics.motorRecord:", true}});
+    read_vars(rd, root->yaml());
+    Map top(rd, *root, kTopKeys,
+            {{"output", "is ignored by ecmccfg (use axis.healthOutput and drive.brake.output)"},
+             {"motorRecord",
+              "ecmccfg ignores it here; it is the old form of epics: and epics.motorRecord:",
+              true}});
     for (const char* k : {"axis", "encoder", "trajectory", "input"}) top.require(k);
 
     const Map axis = top.map("axis", {"id", "type", "mode", "parameters", "healthOutput",
@@ -1234,7 +980,9 @@ void parse_axis_file(Reader& rd, std::string_view text, AxisConfig& cfg) {
     cfg.axis = parse_axis_section(rd, axis);
     cfg.epics = parse_epics(rd, top.map("epics",
                                         {"name", "precision", "unit", "description", "motorRecord"},
-                                        {{"fieldInit", "use epics.motorRecord.fieldInit", true}}));
+                                        {{"fieldInit",
+                                          "ecmccfg ignores it here; use epics.motorRecord.fieldInit",
+                                          true}}));
     const Keys drive_keys = {"numerator",
                              "denominator",
                              "type",
@@ -1296,12 +1044,12 @@ void parse_axis_file(Reader& rd, std::string_view text, AxisConfig& cfg) {
     cfg.meta = parse_meta(top.map("meta", kMetaKeys));
 }
 
-void parse_encoder_file(Reader& rd, std::string_view text, EncoderConfig& enc) {
-    const auto root = load_root(rd, text, "encoder:");
+void parse_encoder_file(Reader& rd, EncoderConfig& enc) {
+    const auto root = load_root(rd, "encoder:");
     if (!root) return;
-    read_vars(rd, *root);
-    Map top(rd, *root, "", rd.top(), {"encoder", "meta", "var"},
-            {{"homing", "use encoder.homing", true}});
+    read_vars(rd, root->yaml());
+    Map top(rd, *root, {"encoder", "meta", "var"},
+            {{"homing", "ecmccfg ignores it here; use encoder.homing", true}});
     top.require("encoder");
     Map e = top.map("encoder", kEncoderKeys, kEncoderKnown);
     if (e.present()) enc = parse_encoder(rd, e);
@@ -1317,6 +1065,19 @@ std::optional<std::string> read_file(const std::string& path, std::string& error
     std::ostringstream ss;
     ss << f.rdbuf();
     return ss.str();
+}
+
+// The reader's errors (sorted by position) appended to `out`.
+void take_errors(config::YamlReader& yr, std::vector<Error>& out) {
+    const ErrorList errors = yr.take_errors();
+    for (const auto& m : errors.messages()) out.emplace_back(m);
+}
+
+// One MultiError with every error, if there is one.
+void throw_all(const std::vector<Error>& errors) {
+    ErrorList l;
+    for (const auto& e : errors) l.add(std::string(e.what()));
+    l.throw_if_any();
 }
 
 } // namespace
@@ -1349,30 +1110,29 @@ std::size_t AxisConfig::primary_encoder() const {
 
 AxisConfig parse_axis_config(std::string_view text, const std::string& filename,
                              const MacroMap& macros) {
-    Reader rd(filename, text, macros, false);
-    AxisConfig cfg;
-    cfg.file = filename;
-    parse_axis_file(rd, text, cfg);
-    cfg.warnings = rd.take_warnings();
+    std::vector<Error> errors;
+    AxisConfig cfg = parse_axis_config(text, filename, macros, errors);
+    throw_all(errors);
     return cfg;
 }
 
 AxisConfig parse_axis_config(std::string_view text, const std::string& filename,
                              const MacroMap& macros, std::vector<Error>& errors) {
-    Reader rd(filename, text, macros, true);
+    config::YamlReader yr(filename, std::string(text));
+    Reader rd(yr, macros);
     AxisConfig cfg;
     cfg.file = filename;
-    parse_axis_file(rd, text, cfg);
-    cfg.warnings = rd.take_warnings();
-    rd.finish(errors);
+    parse_axis_file(rd, cfg);
+    cfg.warnings = yr.take_warnings();
+    take_errors(yr, errors);
     return cfg;
 }
 
 AxisConfig load_axis_config(const std::string& path, const MacroMap& macros) {
-    std::string error;
-    const auto text = read_file(path, error);
-    if (!text) throw Error(error);
-    return parse_axis_config(*text, path, macros);
+    std::vector<Error> errors;
+    AxisConfig cfg = load_axis_config(path, macros, errors);
+    throw_all(errors);
+    return cfg;
 }
 
 AxisConfig load_axis_config(const std::string& path, const MacroMap& macros,
@@ -1390,28 +1150,28 @@ AxisConfig load_axis_config(const std::string& path, const MacroMap& macros,
 
 EncoderConfig parse_encoder_config(std::string_view text, const std::string& filename,
                                    const MacroMap& macros) {
-    Reader rd(filename, text, macros, false);
-    EncoderConfig enc;
-    parse_encoder_file(rd, text, enc);
-    enc.warnings = rd.take_warnings();
+    std::vector<Error> errors;
+    EncoderConfig enc = parse_encoder_config(text, filename, macros, errors);
+    throw_all(errors);
     return enc;
 }
 
 EncoderConfig parse_encoder_config(std::string_view text, const std::string& filename,
                                    const MacroMap& macros, std::vector<Error>& errors) {
-    Reader rd(filename, text, macros, true);
+    config::YamlReader yr(filename, std::string(text));
+    Reader rd(yr, macros);
     EncoderConfig enc;
-    parse_encoder_file(rd, text, enc);
-    enc.warnings = rd.take_warnings();
-    rd.finish(errors);
+    parse_encoder_file(rd, enc);
+    enc.warnings = yr.take_warnings();
+    take_errors(yr, errors);
     return enc;
 }
 
 EncoderConfig load_encoder_config(const std::string& path, const MacroMap& macros) {
-    std::string error;
-    const auto text = read_file(path, error);
-    if (!text) throw Error(error);
-    return parse_encoder_config(*text, path, macros);
+    std::vector<Error> errors;
+    EncoderConfig enc = load_encoder_config(path, macros, errors);
+    throw_all(errors);
+    return enc;
 }
 
 EncoderConfig load_encoder_config(const std::string& path, const MacroMap& macros,

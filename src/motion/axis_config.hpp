@@ -7,8 +7,8 @@
 // expands them in the rendered script: comments are never expanded and a macro cannot change the
 // structure of the file. `{{ var.NAME }}` in a value takes NAME from the file's `var:` section.
 //
-// Every problem is an Error "file:line:col: <key path> ...": YAML syntax, unknown keys (with the
-// keys allowed there), duplicate keys, missing required keys, bad values ("trajectory.axis.velocity
+// The files are read with config::YamlReader. Every problem is an error "file:line:col: <key
+// path> ...": YAML syntax, unknown keys (with the closest allowed key), duplicate keys, missing required keys, bad values ("trajectory.axis.velocity
 // should be > 0, got -1"), malformed signal links, undefined macros. Units: positions in the
 // axis unit [EGU]; times in control cycles where ECMC counts cycles (fields named `_cycles`) and
 // in seconds where it uses seconds (`_s`).
@@ -352,7 +352,8 @@ struct AxisConfig {
     std::size_t primary_encoder() const;
 };
 
-// Reads an axis file (loadYamlAxis.cmd). The first problem throws an Error.
+// Reads an axis file (loadYamlAxis.cmd). Every problem of the file is found in one pass and
+// thrown as one MultiError (ordered by position; the first line is the first problem).
 AxisConfig load_axis_config(const std::string& path, const MacroMap& macros);
 AxisConfig parse_axis_config(std::string_view text, const std::string& filename,
                              const MacroMap& macros);

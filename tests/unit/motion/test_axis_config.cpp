@@ -403,17 +403,17 @@ TEST(AxisConfigFixtures, BadAxisFileReportsEveryProblemInOrder) {
                      "64 should be 0..63; the form is ec<master>.s<slave>.<entry>[.<bit>], e.g. "
                      "ec0.s3.driveStatus01.3");
     EXPECT_EQ(std::string(errors[2].what())
-                  .rfind(path + ":16:3: unknown key 'bitz' in encoder; did you mean 'bits'? "
-                                "(allowed: source numerator denominator type",
-                         0),
+                  .rfind(path + ":16:3: unknown key 'bitz' in encoder (did you mean 'bits'?)", 0),
               0u)
         << errors[2].what();
     EXPECT_EQ(std::string(errors[3].what()),
               path + ":18:3: trajectory.axis: missing required key 'acceleration'");
     EXPECT_EQ(std::string(errors[4].what()),
               path + ":19:15: trajectory.axis.velocity should be > 0, got -1");
-    // Without the out-parameter the first problem found is thrown.
-    EXPECT_EQ(error_of([&] { load_axis_config(path, {}); }), errors[0].what());
+    // Without the out-parameter every problem is thrown at once, the first one first.
+    std::string all;
+    for (const auto& e : errors) all += (all.empty() ? "" : "\n") + std::string(e.what());
+    EXPECT_EQ(error_of([&] { load_axis_config(path, {}); }), all);
 }
 
 TEST(AxisConfigFixtures, MissingFile) {
@@ -446,10 +446,15 @@ TEST(AxisConfigMacros, UndefinedMacroNamesTheReference) {
     const std::string at = where_in(text, "$(DRV_SLAVE)");
     const std::string setpoint = where_in(text, "  setpoint: ");
     EXPECT_EQ(at, setpoint.substr(0, setpoint.find(':')) + ":18"); // "  setpoint: ec0.s" + 1
-    EXPECT_EQ(error_of([&] {
-                  load_axis_config(path, {{"ENC_SLAVE", "4"}});
-              }),
+    const std::string e = error_of([&] { load_axis_config(path, {{"ENC_SLAVE", "4"}}); });
+    EXPECT_EQ(e.substr(0, e.find('\n')),
               path + ":" + at + ": drive.setpoint: undefined macro 'DRV_SLAVE'");
+    // and every other use of it, each at its own place, without follow-on errors
+    std::istringstream lines(e);
+    std::size_t n = 0;
+    for (std::string line; std::getline(lines, line); ++n)
+        EXPECT_NE(line.find(": undefined macro 'DRV_SLAVE'"), std::string::npos) << line;
+    EXPECT_EQ(n, 8u) << e;
 }
 
 TEST(AxisConfigMacros, EveryUndefinedMacroIsReported) {
@@ -675,7 +680,7 @@ TEST(AxisConfigErrors, EverySectionCatchesUnknownKeys) {
         const std::string text = with_value(path, YAML::Node(1));
         const std::string in = std::string(section).empty() ? "the file" : section;
         const std::string expected = "axis.yaml:" + where_in(text, "bogusKey") +
-                                     ": unknown key 'bogusKey' in " + in + " (allowed: ";
+                                     ": unknown key 'bogusKey' in " + in + " (expected one of: ";
         EXPECT_TRUE(contains(errors_of(text), expected)) << section << "\n"
                                                          << text << joined(errors_of(text));
     }
@@ -685,7 +690,7 @@ TEST(AxisConfigErrors, EverySectionCatchesUnknownKeys) {
                          {}, errors);
     ASSERT_EQ(errors.size(), 1u);
     EXPECT_EQ(std::string(errors[0].what()),
-              "enc.yaml:4:1: unknown key 'extra' in the file (allowed: encoder meta var)");
+              "enc.yaml:4:1: unknown key 'extra' in the file (expected one of: encoder, meta, var)");
 }
 
 TEST(AxisConfigErrors, CollectedErrorsFollowTheFileNotTheReadingOrder) {
@@ -715,15 +720,16 @@ monitoring:
                   "axis.yaml:3:15: trajectory.axis.velocity should be > 0, got 0",
                   "axis.yaml:6:9: axis.mode should be CSV, CSP or CSP_PC, got 'CSX'"}));
     EXPECT_EQ(error_of([&] { parse_axis_config(text, "axis.yaml", {}); }),
-              "axis.yaml:6:9: axis.mode should be CSV, CSP or CSP_PC, got 'CSX'");
+              "axis.yaml:3:15: trajectory.axis.velocity should be > 0, got 0\n"
+              "axis.yaml:6:9: axis.mode should be CSV, CSP or CSP_PC, got 'CSX'")
+        << "thrown: every error, in file order";
 }
 
 TEST(AxisConfigErrors, UnknownKeySuggestsTheNearestKey) {
     const std::string text = with_value("trajectory.axis.decceleration", YAML::Node(1));
     EXPECT_TRUE(contains(errors_of(text),
-                         "unknown key 'decceleration' in trajectory.axis; did you mean "
-                         "'deceleration'? (allowed: velocity acceleration jerk deceleration "
-                         "emergencyDeceleration)"));
+                         "unknown key 'decceleration' in trajectory.axis (did you mean "
+                         "'deceleration'?)"));
 }
 
 TEST(AxisConfigErrors, MissingRequiredKeys) {
