@@ -1,5 +1,7 @@
 #include "pv/db_file.hpp"
 
+#include "core/error_list.hpp"
+
 #include <cctype>
 #include <cerrno>
 #include <cstring>
@@ -100,6 +102,24 @@ public:
         skip_space();
         if (!at_end() && (peek() == '{' || peek() == '[')) return read_json();
         return next();
+    }
+
+    // After an error: moves to the start of the next line that begins (after blanks) with
+    // `record` or `grecord` and then '(' or a blank. False when there is none.
+    bool skip_to_next_record() {
+        while (!at_end()) {
+            while (!at_end() && peek() != '\n') advance();
+            if (at_end()) return false;
+            advance(); // the newline
+            std::size_t p = pos_;
+            while (p < text_.size() && (text_[p] == ' ' || text_[p] == '\t')) ++p;
+            for (std::string_view kw : {"record", "grecord"}) {
+                if (text_.substr(p, kw.size()) != kw) continue;
+                const char c = p + kw.size() < text_.size() ? text_[p + kw.size()] : '\0';
+                if (c == '(' || c == ' ' || c == '\t') return true;
+            }
+        }
+        return false;
     }
 
 private:
@@ -396,6 +416,7 @@ struct Context {
     const MacroMap& macros;
     const std::vector<std::string>& include_path;
     std::vector<std::string> open_files; // include chain, canonical paths, outermost first
+    ErrorList errors;                    // every error of every file, in the order found
 };
 
 std::string canonical_name(const std::string& path) {
@@ -406,28 +427,72 @@ std::string canonical_name(const std::string& path) {
 
 class FileParser {
 public:
-    FileParser(Context& ctx, std::string_view text, const std::string& filename)
+    // `trail` follows every error of this file: "\n  included from file:line:col" for each
+    // include on the way to it, innermost first.
+    FileParser(Context& ctx, std::string_view text, const std::string& filename,
+               std::string trail = {})
         : ctx_(ctx)
         , lex_(text, filename, ctx.macros)
-        , filename_(filename) {}
+        , filename_(filename)
+        , trail_(std::move(trail)) {}
 
-    // A whole .db file: records, aliases, includes.
+    // A whole .db file: records, aliases, includes. An error is recorded and parsing goes on
+    // at the next record.
     void parse_top() {
         while (true) {
+            try {
+                if (!parse_top_item()) return;
+            } catch (const Error& e) {
+                if (!recover(e)) return;
+            }
+        }
+    }
+
+    // An included file inside a record body: body items up to the end of the file.
+    void parse_body_items(std::size_t rec, const std::string& rec_name) {
+        while (true) {
+            try {
+                Token t = take();
+                if (t.kind == Tok::end) return;
+                if (!parse_body_item(t, rec, rec_name)) {
+                    fail(t.loc, SB() << "expected 'field', 'info', 'alias' or 'include' for record '"
+                                     << rec_name << "', found " << describe(t));
+                }
+            } catch (const Error& e) {
+                if (!recover(e)) return;
+            }
+        }
+    }
+
+private:
+    // Records the error; true when parsing can go on (at the next record).
+    bool recover(const Error& e) {
+        ctx_.errors.add(SB() << e.what() << trail_);
+        ahead_.reset();
+        try {
+            return lex_.skip_to_next_record();
+        } catch (const Error&) {
+            return false;
+        }
+    }
+
+    // One top-level item; false at the end of the file.
+    bool parse_top_item() {
+        {
             Token t = take();
-            if (t.kind == Tok::end) return;
+            if (t.kind == Tok::end) return false;
             if (t.kind == Tok::word) {
                 if (t.text == "record" || t.text == "grecord") {
                     parse_record(t);
-                    continue;
+                    return true;
                 }
                 if (t.text == "alias") {
                     parse_top_alias(t);
-                    continue;
+                    return true;
                 }
                 if (t.text == "include") {
                     parse_include(t, std::nullopt);
-                    continue;
+                    return true;
                 }
                 if (t.text == "path" || t.text == "addpath") {
                     fail(t.loc, SB() << "'" << t.text << "' is not supported in .db files; "
@@ -448,19 +513,6 @@ public:
         }
     }
 
-    // An included file inside a record body: body items up to the end of the file.
-    void parse_body_items(std::size_t rec, const std::string& rec_name) {
-        while (true) {
-            Token t = take();
-            if (t.kind == Tok::end) return;
-            if (!parse_body_item(t, rec, rec_name)) {
-                fail(t.loc, SB() << "expected 'field', 'info', 'alias' or 'include' for record '"
-                                 << rec_name << "', found " << describe(t));
-            }
-        }
-    }
-
-private:
     Token& peek() {
         if (!ahead_) ahead_ = lex_.next();
         return *ahead_;
@@ -581,15 +633,11 @@ private:
         }
         const std::string text = read_file(path);
         ctx_.open_files.push_back(canonical);
-        try {
-            FileParser sub(ctx_, text, path);
-            if (body) {
-                sub.parse_body_items(body->first, body->second);
-            } else {
-                sub.parse_top();
-            }
-        } catch (const Error& e) {
-            throw Error(SB() << e.what() << "\n  included from " << kw.loc.str());
+        FileParser sub(ctx_, text, path, SB() << "\n  included from " << kw.loc.str() << trail_);
+        if (body) {
+            sub.parse_body_items(body->first, body->second);
+        } else {
+            sub.parse_top();
         }
         ctx_.open_files.pop_back();
     }
@@ -617,6 +665,7 @@ private:
     Context& ctx_;
     Lexer lex_;
     std::string filename_;
+    std::string trail_;
     std::optional<Token> ahead_;
 };
 
@@ -626,9 +675,10 @@ DbFile parse_db(std::string_view text, const std::string& filename, const MacroM
                 const std::vector<std::string>& include_path) {
     DbFile out;
     Builder builder(out);
-    Context ctx{builder, macros, include_path, {}};
+    Context ctx{builder, macros, include_path, {}, {}};
     if (!filename.empty()) ctx.open_files.push_back(canonical_name(filename));
     FileParser(ctx, text, filename).parse_top();
+    ctx.errors.throw_if_any();
     return out;
 }
 

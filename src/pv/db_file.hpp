@@ -30,8 +30,10 @@
 // from the same parse is an error. Includes are resolved against the including file's directory,
 // then `include_path` in order; include cycles are errors.
 //
-// Errors throw beamctl::Error "file:line:col: what was expected, found what"; an error inside an
-// included file continues with lines "\n  included from file:line:col".
+// Errors are "file:line:col: what was expected, found what"; an error inside an included file
+// continues with lines "\n  included from file:line:col". After an error the parser goes on at
+// the next line that starts with `record`/`grecord`, so one MultiError (core/error_list.hpp)
+// reports every error of the file and its includes, in the order found.
 #pragma once
 
 #include "core/error.hpp"

@@ -1,5 +1,7 @@
 #include "pv/db_file.hpp"
 
+#include "core/error_list.hpp"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -8,6 +10,7 @@
 
 using beamctl::Error;
 using beamctl::MacroMap;
+using beamctl::MultiError;
 using beamctl::SourceLoc;
 using beamctl::pv::DbField;
 using beamctl::pv::DbFile;
@@ -471,6 +474,32 @@ TEST(ParseDb, LexicalErrors) {
     EXPECT_EQ(parse_error("record(ai, x) $"), "t.db:1:15: invalid '$'");
     EXPECT_EQ(parse_error("record(*, x)"), "t.db:1:8: invalid '*'"); // EPICS needs "*" quoted
     EXPECT_EQ(parse_error(std::string("record(ai, x)\x01")), "t.db:1:14: invalid character 0x01");
+}
+
+TEST(ParseDb, EveryErrorOfAFileRecoveringAtTheNextRecord) {
+    const std::string text = "record(ai, a) {\n"         // 1
+                             "  field(VAL 1)\n"          // 2: ',' missing
+                             "}\n"                       // 3
+                             "record(ai, b) {\n"         // 4: fine
+                             "  field(DESC, \"ok\")\n" // 5
+                             "}\n"                       // 6
+                             "record(ai, c) { field(EGU, @) }\n" // 7: bad character
+                             "  record(bo, b)\n"         // 8: b is an ai
+                             "grecord(ai, \"d e\")\n"  // 9: bad name
+                             "record(ai, f) { field(PREC, 2) }\n";
+    try {
+        parse_db(text, "t.db", {});
+        FAIL() << "no error";
+    } catch (const MultiError& e) {
+        const std::vector<std::string> want = {
+            "t.db:2:13: expected ',' after field name 'VAL', found '1'",
+            "t.db:7:28: invalid '@'",
+            "t.db:8:10: record 'b' redefined with type 'bo', but it has type 'ai' (defined at "
+            "t.db:4:1)",
+            "t.db:9:13: invalid ' ' in record name 'd e'",
+        };
+        EXPECT_EQ(e.errors(), want) << e.what();
+    }
 }
 
 TEST(ParseDb, JsonErrors) {
