@@ -1,6 +1,7 @@
 #include "ioc/ioc.hpp"
 
 #include "ioc/pv_util.hpp"
+#include "motion/axis_setup.hpp"
 
 #include "bridge/rcp/bridge.hpp"
 
@@ -16,6 +17,7 @@
 #include <cinttypes>
 #include <csignal>
 #include <cstdio>
+#include <map>
 #include <unistd.h>
 
 namespace beamctl::ioc {
@@ -275,6 +277,14 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
 void Ioc::make_entry_pvs(BusRt& b) {
     // Binds every entry PV to the master's signal of the same name (after bring-up).
     ethercat::Bus& bus = *b.bus;
+    // Outputs the axes write every cycle (drive control word, velocity setpoint, brake, latch arm)
+    // and who writes them.
+    std::map<std::string, std::string> owners;
+    for (std::size_t i = 0; i < axes_->size(); ++i)
+        for (const auto& r : motion::axis_signal_refs(axes_->config(i)))
+            if (r.bus == bus.id() && r.slave >= 0 && !r.is_constant())
+                owners[SB() << "ec" << r.bus << ".s" << r.slave << "." << r.entry] =
+                    SB() << "axis " << axes_->params(i).id << " (" << axes_->name(i) << ")";
     std::string m = SB() << cfg_.prefix << "m" << bus.id();
     for (const auto& sig : bus.master().signals()) {
         if (sig.slave < 0) continue; // the master's own signals (ec0.masterstatus) have bus PVs
@@ -287,7 +297,17 @@ void Ioc::make_entry_pvs(BusRt& b) {
         pv::Record* rec = db_.find(name);
         if (!rec) continue; // an entry outside the default assignment: no PV (yet)
         EntryPv e{rec, &sig, sig.output};
-        if (sig.output) {
+        auto owner = owners.find(sig.name);
+        if (sig.output && owner != owners.end()) {
+            // One writer per output: the axis writes it every cycle, so CA may only read it; the
+            // PV shows what is sent on the bus, and DESC names the owner.
+            e.owned = true;
+            rec->val_read_only = true;
+            std::string desc = ("set by " + owner->second).substr(0, 39);
+            const pv::FieldDesc* fd = rec->type().find("DESC");
+            pv::Elements el = rec->elements(*fd);
+            pv::put_element(*rec, *fd, el, 0, pv::Prim::String, desc.c_str());
+        } else if (sig.output) {
             ethercat::Bus* busp = &bus;
             const ethercat::SignalInfo* sg = &sig;
             rec->put_hook = [busp, sg](pv::Record& r, const pv::FieldDesc& f) {
@@ -392,7 +412,7 @@ void Ioc::publish() {
             upd(b.slave_status[i].second, online && s.slave_al[i] == 8 ? 1 : 0);
         }
         for (auto& e : b.entries) {
-            if (e.output) continue;
+            if (e.output && !e.owned) continue;
             double v = to_double(ethercat::Bus::get(s.image, *e.sig), e.sig->bits, is_signed(e.sig->datatype));
             bool bad = !ok;
             if (v != e.last || bad != (e.rec->sevr == pv::kInvalid)) {

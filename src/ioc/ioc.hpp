@@ -62,6 +62,7 @@ private:
         const ethercat::SignalInfo* sig;
         bool output;
         double last = NAN;
+        bool owned = false; // an output an axis writes every cycle: read-only, shows the image
     };
     struct BusRt {
         std::unique_ptr<ethercat::sim::Segment> segment;

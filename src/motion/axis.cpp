@@ -816,6 +816,7 @@ void Axis::run(double dt) noexcept {
     st_.ext_moving = st_.ext_limited = false;
     if (traj_source_ == 1 && enabled) { // the PLC gives the setpoint (ax<n>.traj.extsetpos)
         double x = p_.virtual_axis ? vars_.traj.extsetpos : hold_at_limits(vars_.traj.extsetpos);
+        if (ext_hold_ && std::isfinite(last_ext_set_)) x = last_ext_set_;
         double v = std::isfinite(last_ext_set_) && dt > 0 ? (x - last_ext_set_) / dt : 0;
         // moving while the setpoint changed within the last kExtSettleCycles cycles
         bool changed = std::isfinite(last_ext_set_) && std::fabs(x - last_ext_set_) > 1e-12 * std::max(1.0, std::fabs(x));

@@ -212,6 +212,10 @@ public:
     // RT: ends the running motion short with the emergency deceleration and the warning `id`
     // (move_failed), e.g. when a real axis of its kinematics group reached a limit.
     void abort_motion(uint32_t id, Interlock why) noexcept;
+    // RT: while on, a PLC-fed setpoint (traj.source 1) is held where it is: the real axes of a
+    // kinematics group stop together, at once, when one of them reaches a limit (the geometry
+    // holds: a slit's centre does not shift). Released when the group is at rest.
+    void hold_external(bool on) noexcept { ext_hold_ = on; }
 
     const AxisStatus& status() const noexcept { return st_; }
     // ECMC's ax<n>.* variables: PLC code reads and writes them between the axis's cycles.
@@ -249,6 +253,7 @@ private:
     double last_ext_set_ = NAN, last_ext_act_ = NAN;
     static constexpr int kExtSettleCycles = 20; // a PLC setpoint unchanged this long: at rest
     int ext_still_cycles_ = kExtSettleCycles;
+    bool ext_hold_ = false;
     bool plc_ilock_fwd_ = false, plc_ilock_bwd_ = false; // motion blocked by PLC interlocks
 
     Seq seq_ = Seq::Idle;

@@ -125,7 +125,10 @@ KinematicsVerdict Kinematics::supervise(std::span<const std::unique_ptr<Axis>> a
         coupled = coupled || (s.busy && !s.following);
     }
     if (!coupled || stopping_) {
-        stopping_ = stopping_ && coupled; // until every virtual axis of the group has stopped
+        if (stopping_ && !coupled) { // the group is at rest: the real axes follow again
+            stopping_ = false;
+            for (std::size_t k : spec_.real) axes[k]->hold_external(false);
+        }
         return {};
     }
     KinematicsVerdict v;
@@ -139,6 +142,7 @@ KinematicsVerdict Kinematics::supervise(std::span<const std::unique_ptr<Axis>> a
         const AxisStatus& s = axes[i]->status();
         if (s.busy && !s.following) axes[i]->abort_motion(v.code, Interlock::Plc);
     }
+    for (std::size_t k : spec_.real) axes[k]->hold_external(true); // every real axis stops at once
     stopping_ = true;
     return v;
 }

@@ -7,8 +7,9 @@
 //     needs a real axis that is disabled or in error, is refused (the virtual axis raises the
 //     soft-limit warning, or the real axis's error, and the command ends as refused);
 //   - during a coupled move, a real axis held at a limit (Axis: ext_limited) or in error stops
-//     every moving virtual axis of the group with its emergency deceleration, and the virtual
-//     moves end short (move_failed) with the real axis's warning or error;
+//     every real axis of the group at once where it is (the geometry holds) and every moving
+//     virtual axis with its emergency deceleration; the virtual moves end short (move_failed)
+//     with the real axis's warning or error;
 //   - off the RT thread, the same transform gives each virtual axis the range its real axes allow
 //     (derived soft limits: the IOC applies them to the virtual motor records).
 // Threading: check() and supervise() on the RT thread (AxisGroup::run); range() on one non-RT

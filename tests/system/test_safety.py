@@ -89,7 +89,7 @@ def test_a_blade_on_its_limit_switch_stops_the_coupled_move_in_alarm(demo):
     top, bottom = get("SlitTop-PosAct"), get("SlitBottom-PosAct")
     assert 11.5 < top < 12.5, top
     # both blades stopped together: the centre stayed where it was
-    assert abs((top + bottom) / 2 - 2.5) < 0.05, (top, bottom)
+    assert abs((top + bottom) / 2 - 2.5) < 0.01, (top, bottom)
     assert wait_for(lambda: "SlitTop" in epics.caget(P + "SlitVGap-MsgTxt"), timeout=5)
     assert abs(gap.get("VAL") - gap.get("RBV")) < 0.01  # VAL took the readback
 
@@ -189,3 +189,26 @@ def test_sigterm_stops_a_running_move_disables_the_drives_and_exits_0(tmp_path):
         srv.kill()
         forget_pvs(P)
         release_port(port)
+
+
+def test_outputs_an_axis_drives_are_read_only_and_show_what_is_sent(demo):
+    enabled("SlitTop")
+    vel = epics.PV(P + "m0s011-velocitySetpoint01")
+    ctrl = epics.PV(P + "m0s011-driveControl01")
+    assert vel.wait_for_connection(5) and ctrl.wait_for_connection(5)
+    assert not vel.write_access and not ctrl.write_access
+    assert "SlitTop" in epics.caget(P + "m0s011-velocitySetpoint01.DESC")
+    # the control word of an enabled drive has its enable bit set, and the PV is not UDF/INVALID
+    assert wait_for(lambda: int(ctrl.get(use_monitor=False)) & 1 == 1, timeout=5), ctrl.get()
+    assert ca.get(connect(P + "m0s011-driveControl01.SEVR")) == 0
+    # a put is refused and changes nothing
+    with ca_raw.Circuit("127.0.0.1", demo.port) as c:
+        ch = c.create(P + "m0s011-velocitySetpoint01")
+        assert ch["access"] & 2 == 0  # no write access
+        assert c.write_notify(ch, [10000.0], dtype=ca_raw.DOUBLE).p1 != ca_raw.ECA_NORMAL
+    assert vel.get(use_monitor=False) == 0
+    # while the blade moves, the PV shows the velocity sent to the drive
+    top = epics.Motor(P + "SlitTop", timeout=5)
+    top.move(4, wait=False)
+    assert wait_for(lambda: abs(vel.get(use_monitor=False)) > 1000, timeout=5), vel.get()
+    assert wait_for(lambda: top.get("DMOV") == 1, timeout=30)

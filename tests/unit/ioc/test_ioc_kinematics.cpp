@@ -94,17 +94,17 @@ TEST(IocKinematics, MirrorMovePastAJackLimitIsRefused) {
     // the virtual soft limit (10 mrad) would refuse it first, so go via roll instead: roll moves
     // YUI/YUO by +-150 * tan(roll): 10 mrad is 1.5 mm, allowed.
     d.move("MirrorRoll", 9);
-    d.cycles(5000);
+    d.cycles(12000);
     EXPECT_FALSE(d.st("MirrorRoll").move_failed);
     EXPECT_NEAR(d.st("MirrorRoll").act_pos, 9, 0.002);
     // Centre Y 10 mm (allowed by its own limit) with the jacks already at up to +1.35 mm takes
     // YUI to about 11.35 mm: allowed. Then the X jacks: centre X beyond their reach is not (their
     // soft limits are +-15, the virtual's +-10): Y 10 and pitch 8 mrad puts YUI past 15.
     d.move("MirrorY", 10);
-    d.cycles(8000);
+    d.cycles(14000);
     EXPECT_FALSE(d.st("MirrorY").move_failed);
     d.move("MirrorPitch", 8); // YUI: 10 + 1.35 + 400 * tan(8 mrad) = 14.55 -> allowed
-    d.cycles(8000);
+    d.cycles(12000);
     EXPECT_FALSE(d.st("MirrorPitch").move_failed) << d.st("MirrorPitch").warning_id;
     d.move("MirrorPitch", 10); // + 400 * tan(2 mrad) = 0.8 more: YUI 15.35 > 15: refused
     double peak = d.peak("MirrorYUI", 3000);
@@ -120,49 +120,62 @@ TEST(IocKinematics, ABladeOnItsLimitSwitchStopsTheWholeCoupledMove) {
     d.cycles(3000);
     // SlitTop's forward switch is at 12 mm of its axis: GAP 20 around 2.5 reaches it at 12.
     d.move("SlitVGap", 20);
-    d.cycles(8000);
+    d.cycles(14000);
     const auto& top = d.st("SlitTop");
     const auto& bottom = d.st("SlitBottom");
-    EXPECT_TRUE(top.limit_fwd);
     EXPECT_TRUE(d.st("SlitVGap").move_failed);
     EXPECT_FALSE(d.st("SlitVGap").busy);
     EXPECT_EQ(d.st("SlitVGap").warning_id, motion::error_id::kHardLimitFwd);
     EXPECT_LT(top.act_pos, 12.6);
-    // the other blade stopped with it: the centre held
-    EXPECT_NEAR((top.set_pos + bottom.set_pos) / 2, 2.5, 1e-6);
-    EXPECT_NEAR(d.st("SlitVCen").set_pos, 2.5, 1e-6);
+    EXPECT_GT(top.act_pos, 11.5);
+    // the other blade stopped with it, in the same cycle: the centre held (to one cycle of the
+    // blades' motion, 1 mm/s x 1 ms)
+    EXPECT_NEAR((top.set_pos + bottom.set_pos) / 2, 2.5, 1e-3);
+    EXPECT_NEAR(d.st("SlitVCen").set_pos, 2.5, 1e-3);
     // further out is refused, back in is allowed
     d.move("SlitVGap", 1, motion::CommandType::MoveRelative);
     d.cycles(1000);
     EXPECT_TRUE(d.st("SlitVGap").move_failed);
     d.move("SlitVGap", 8);
-    d.cycles(8000);
+    d.cycles(10000);
     EXPECT_FALSE(d.st("SlitVGap").move_failed);
-    EXPECT_NEAR(d.st("SlitTop").set_pos, 6.5, 1e-9);
+    EXPECT_NEAR(d.st("SlitTop").set_pos - d.st("SlitBottom").set_pos, 8, 1e-5);
+    EXPECT_NEAR(d.st("SlitTop").set_pos, 6.5, 2e-3);
 }
 
 TEST(IocKinematics, ARealAxisNeverFollowsAPlcSetpointPastItsSoftLimit) {
     Demo d;
-    motion::Axis& top = d.axis("SlitTop");
-    // What a faulty PLC could do: take the blade and ramp its setpoint to 20 mm.
-    top.variables().traj.source = 1;
+    motion::Axis& jack = d.axis("MirrorXU"); // soft limits +-15, no limit switches
+    // What a faulty PLC could do: take the jack and ramp its setpoint to 20 mm.
+    jack.variables().traj.source = 1;
     double x = 0;
     double peak = -1e300;
-    for (int i = 0; i < 5000; ++i) {
-        x = std::min(x + 0.004, 20.0);
+    for (int i = 0; i < 12000; ++i) {
+        x = std::min(x + 0.002, 20.0);
+        jack.variables().traj.extsetpos = x;
+        d.cycles(1);
+        peak = std::max(peak, jack.status().set_pos);
+    }
+    EXPECT_LE(peak, 15.0);
+    EXPECT_NEAR(jack.status().set_pos, 15.0, 1e-9);
+    EXPECT_EQ(jack.status().warning_id, motion::error_id::kSoftLimitFwd);
+    EXPECT_TRUE(jack.status().ext_limited);
+    jack.variables().traj.extsetpos = 14.999; // back inside is followed
+    d.cycles(2);
+    EXPECT_NEAR(jack.status().set_pos, 14.999, 1e-9);
+    EXPECT_FALSE(jack.status().ext_limited);
+    // a blade on its limit switch: held where it is (SlitTop's switch is at 12 mm of its axis)
+    motion::Axis& top = d.axis("SlitTop");
+    top.variables().traj.source = 1;
+    x = 0;
+    for (int i = 0; i < 8000; ++i) {
+        x = std::min(x + 0.002, 16.0);
         top.variables().traj.extsetpos = x;
         d.cycles(1);
-        peak = std::max(peak, top.status().set_pos);
     }
-    EXPECT_LE(peak, 17.0);
-    EXPECT_NEAR(top.status().set_pos, 17.0, 1e-9);
-    EXPECT_EQ(top.status().warning_id, motion::error_id::kSoftLimitFwd);
-    EXPECT_TRUE(top.status().ext_limited);
-    top.variables().traj.extsetpos = 16; // back inside is followed
-    d.cycles(2);
-    EXPECT_NEAR(top.status().set_pos, 16.0, 1e-9);
-    EXPECT_FALSE(top.status().ext_limited);
-    top.variables().traj.source = 0;
+    EXPECT_LT(top.status().set_pos, 15.0); // held short of where the PLC wanted it (16)
+    EXPECT_EQ(top.status().warning_id, motion::error_id::kHardLimitFwd);
+    EXPECT_EQ(top.status().last_interlock, motion::Interlock::HardFwd);
 }
 
 TEST(IocKinematics, VirtualLimitsFollowTheRealAxes) {
