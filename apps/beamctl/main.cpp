@@ -18,6 +18,7 @@
 #include "config/ioc_config.hpp"
 #include "ethercat/catalog.hpp"
 #include "bridge/rcp/rcp_sim.hpp"
+#include "ioc/check.hpp"
 #include "ioc/ioc.hpp"
 #include "plc/runtime.hpp"
 #include "rt/engine.hpp"
@@ -264,12 +265,7 @@ int main(int argc, char** argv) {
             ioc::Ioc ioc(config::IocConfig::load(run_file), clock);
             return ioc.run();
         }
-        if (*checkcmd) {
-            rt::MonotonicClock clock;
-            ioc::Ioc ioc(config::IocConfig::load(check_file), clock);
-            std::printf("%s: OK (%zu PVs, %zu bus(es))\n", check_file.c_str(), ioc.database().size(), ioc.bus_count());
-            return 0;
-        }
+        if (*checkcmd) return ioc::run_check(check_file); // every error of every file
         if (*dbcmd) {
             if (dbo.files.size() == 1 && dbo.files[0].size() > 5 &&
                 (dbo.files[0].ends_with(".yaml") || dbo.files[0].ends_with(".yml"))) {

@@ -1,0 +1,206 @@
+#include "ioc/check.hpp"
+
+#include "ca/access_security.hpp"
+#include "config/ioc_config.hpp"
+#include "config/yaml_reader.hpp"
+#include "core/error_list.hpp"
+#include "ethercat/catalog.hpp"
+#include "ethercat/sim/segment.hpp"
+#include "ethercat/sim/sim_config.hpp"
+#include "ioc/ioc.hpp"
+#include "ioc/plcs.hpp"
+#include "motion/axis_config.hpp"
+#include "plc/plugin.hpp"
+#include "plc/program.hpp"
+#include "plc/runtime.hpp"
+#include "pv/database.hpp"
+#include "pv/db_file.hpp"
+#include "rt/engine.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <memory>
+
+namespace beamctl::ioc {
+namespace {
+
+class Checker {
+public:
+    explicit Checker(ErrorList& errors)
+        : errors_(errors) {}
+
+    // True when `file` can be read; else an error at `where` (its place in the IOC file).
+    bool readable(const std::string& where, const std::string& key, const std::string& file) {
+        if (file.empty()) return false; // not given: the IOC file's own error
+        std::ifstream f(file, std::ios::binary);
+        if (f) return true;
+        const int e = errno;
+        errors_.add(SB() << (where.empty() ? std::string() : where + ": ") << key << ": " << file
+                         << ": " << std::strerror(e));
+        return false;
+    }
+
+    // Every error of running f(): a CompileError's each, a MultiError's each, an Error.
+    template <typename F> void collect(F&& f, const std::string& context = {}) {
+        try {
+            f();
+        } catch (const plc::CompileError& e) {
+            for (const auto& m : e.errors()) errors_.add(in(context, m));
+        } catch (const MultiError& e) {
+            for (const auto& m : e.errors()) errors_.add(in(context, m));
+        } catch (const Error& e) {
+            errors_.add(in(context, e.what()));
+        }
+    }
+
+    void buses(const config::IocConfig& cfg, const ethercat::Catalog& catalog) {
+        for (std::size_t b = 0; b < cfg.buses.size(); ++b) {
+            const config::BusConfig& bc = cfg.buses[b];
+            bool types_ok = true;
+            for (const auto& s : bc.slaves) {
+                if (catalog.find(s.type)) continue;
+                types_ok = false;
+                SB msg;
+                msg << s.type_where << ": buses[" << b << "] position " << s.position
+                    << ": unknown device type '" << s.type << "'";
+                auto close = config::close_matches(s.type, catalog.types(), 5);
+                for (std::size_t i = 0; i < close.size(); ++i)
+                    msg << (i ? ", " : "; close matches in the catalog: ") << close[i];
+                errors_.add(msg);
+            }
+            if (bc.link.type != "sim" || bc.link.plant.empty()) continue;
+            const std::string key = SB() << "buses[" << b << "].link.plant";
+            if (!readable(bc.link.plant_where, key, bc.link.plant)) continue;
+            ErrorList plant_errors;
+            ethercat::sim::SimConfig sim =
+                ethercat::sim::SimConfig::load(bc.link.plant, catalog, plant_errors);
+            if (plant_errors.empty() && !sim.slaves.empty())
+                plant_errors.add(SB() << bc.link.plant
+                                      << ": a plant file used by an IOC takes its slaves from the "
+                                         "IOC file; remove 'slaves:'");
+            if (plant_errors.empty() && types_ok) {
+                // The plant against the bus as the IOC builds it: its slaves in position order,
+                // an EK1100 in every gap.
+                ethercat::sim::Segment seg;
+                int last = -1;
+                for (const auto& s : bc.slaves) last = std::max(last, s.position);
+                for (int p = 0; p <= last; ++p) {
+                    std::string type = "EK1100";
+                    for (const auto& s : bc.slaves)
+                        if (s.position == p) type = s.type;
+                    seg.add(*catalog.find(type));
+                }
+                sim.build(seg, catalog, plant_errors);
+            }
+            errors_.append(plant_errors);
+        }
+    }
+
+    void axes(const config::IocConfig& cfg) {
+        for (std::size_t i = 0; i < cfg.axes.size(); ++i) {
+            const config::AxisEntry& a = cfg.axes[i];
+            if (readable(a.file_where, SB() << "axes[" << i << "].file", a.file)) {
+                std::vector<Error> errors;
+                motion::load_axis_config(a.file, a.macros, errors);
+                for (const auto& e : errors) errors_.add(e);
+            }
+            for (std::size_t k = 0; k < a.encoders.size(); ++k) {
+                const auto& enc = a.encoders[k];
+                if (!readable(enc.file_where, SB() << "axes[" << i << "].encoders[" << k << "].file",
+                              enc.file))
+                    continue;
+                std::vector<Error> errors;
+                motion::load_encoder_config(enc.file, enc.macros, errors);
+                for (const auto& e : errors) errors_.add(e);
+            }
+        }
+    }
+
+    // Plugins are loaded (PLC code may call their functions); general PLCs compiled with every
+    // well-formed name of the known namespaces accepted (the names are bound in the second pass).
+    void plcs(const config::IocConfig& cfg) {
+        std::vector<std::unique_ptr<plc::Plugin>> plugins;
+        for (std::size_t i = 0; i < cfg.plugins.size(); ++i) {
+            const config::PluginEntry& p = cfg.plugins[i];
+            if (!readable(p.file_where, SB() << "plugins[" << i << "].file", p.file)) continue;
+            collect([&] { plugins.push_back(plc::Plugin::load(p.file, p.config)); }, p.where);
+        }
+        plc::PlcRuntime::Options opt;
+        opt.check_only = true;
+        opt.cycle_s = 1.0 / cfg.rate_hz;
+        for (const auto& p : plugins) opt.plugins.push_back(p.get());
+        plc::PlcRuntime check(opt);
+        for (std::size_t i = 0; i < cfg.plcs.size(); ++i) {
+            const config::PlcEntry& p = cfg.plcs[i];
+            if (!readable(p.file_where, SB() << "plcs[" << i << "].file", p.file)) continue;
+            collect([&] { check.add(plc_source(p)); });
+        }
+        for (std::size_t i = 0; i < cfg.kinematics.size(); ++i) {
+            const config::KinematicsEntry& k = cfg.kinematics[i];
+            if (!k.file.empty())
+                readable(k.file_where, SB() << "kinematics[" << i << "].file", k.file);
+        }
+    }
+
+    void databases(const config::IocConfig& cfg) {
+        pv::Database db;
+        for (std::size_t i = 0; i < cfg.db.size(); ++i) {
+            const config::DbConfig& d = cfg.db[i];
+            if (!readable(d.file_where, SB() << "db[" << i << "].file", d.file)) continue;
+            collect([&] { db.load(pv::load_db_file(d.file, d.macros)); });
+        }
+        if (!cfg.acf.empty() && readable(cfg.acf_where, "ca.acf", cfg.acf))
+            collect([&] { ca::AccessSecurity::load_file(cfg.acf); });
+    }
+
+private:
+    static std::string in(const std::string& context, const std::string& m) {
+        return context.empty() ? m : context + ": " + m;
+    }
+
+    ErrorList& errors_;
+};
+
+} // namespace
+
+CheckReport check_ioc(const std::string& path, const MacroMap& macros) {
+    CheckReport report;
+    ErrorList errors;
+    config::IocConfig cfg = config::IocConfig::load(path, errors, macros);
+    std::ifstream probe(path);
+    if (probe) { // the files it names, each with all its errors
+        Checker c(errors);
+        const ethercat::Catalog* catalog = nullptr;
+        errors.capture([&] { catalog = &ethercat::Catalog::builtin(); });
+        if (catalog) c.buses(cfg, *catalog);
+        c.axes(cfg);
+        c.plcs(cfg);
+        c.databases(cfg);
+    }
+    if (errors.empty()) { // the errors between the files: the IOC as `run` builds it
+        rt::MonotonicClock clock;
+        Checker(errors).collect([&] {
+            Ioc ioc(cfg, clock);
+            report.pvs = ioc.database().size();
+            report.buses = ioc.bus_count();
+        });
+    }
+    report.errors = errors.messages();
+    return report;
+}
+
+int run_check(const std::string& path, const MacroMap& macros, std::FILE* out, std::FILE* err) {
+    CheckReport r = check_ioc(path, macros);
+    for (const auto& e : r.errors) std::fprintf(err, "%s\n", e.c_str());
+    if (!r.ok()) {
+        std::fprintf(err, "%s: %zu error%s\n", path.c_str(), r.errors.size(),
+                     r.errors.size() == 1 ? "" : "s");
+        return 1;
+    }
+    std::fprintf(out, "%s: OK (%zu PVs, %zu bus(es))\n", path.c_str(), r.pvs, r.buses);
+    return 0;
+}
+
+} // namespace beamctl::ioc

@@ -1,0 +1,122 @@
+"""`beamctl check` reports every error at once, each with file:line:col: those of the IOC file, of
+each file it names (an axis file, a PLC file, a .db file), and a file that cannot be read at the
+place of the IOC file that names it; an unknown slave type comes with the catalog's close matches."""
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+from conftest import BEAMCTL, require_binary
+
+DATA = Path(__file__).parent / "data" / "axes"
+
+IOC = """ioc: {name: CHK}
+engine: {rate_hz: 0, cpus: 1}
+buses:
+  - id: 0
+    link: {type: sim, plant: noplant.yaml}
+    slaves:
+      - {position: 0, type: EK1100}
+      - {position: 1, type: EL1008}
+      - {position: 2, type: EL7041}
+      - {position: 3, type: EL7014}
+axes:
+  - {file: stepper.yaml, macros: {AX_NAME: X, DRV_SLAVE: 2}}
+  - {file: axes/nothere.yaml, macros: {AX_NAME: Y}}
+plcs:
+  - {file: main.plc}
+db:
+  - {file: extra.db}
+"""
+
+PLC = "static.a := 1;\nstatic.b := nosuch + 1;\n"
+
+DB = 'record(ai, "CHK:a") {\n  field(VAL 1)\n}\nrecord(ai, "CHK:b") {\n  field(EGU, @)\n}\n'
+
+
+def where(path, needle):
+    """'path:line:col' of the first `needle` in the file (columns count from 1)."""
+    for n, line in enumerate(Path(path).read_text().splitlines(), start=1):
+        col = line.find(needle)
+        if col >= 0:
+            return f"{path}:{n}:{col + 1}"
+    raise AssertionError(f"{needle!r} is not in {path}")
+
+
+def check(cfg):
+    require_binary()
+    return subprocess.run([str(BEAMCTL), "check", str(cfg)], capture_output=True, text=True,
+                          timeout=60)
+
+
+def test_every_error_of_the_ioc_file_and_the_files_it_names(tmp_path):
+    ioc = tmp_path / "ioc.yaml"
+    ioc.write_text(IOC)
+    axis = tmp_path / "stepper.yaml"
+    axis.write_text((DATA / "stepper.yaml").read_text()
+                    .replace("velocity: 5", "velocity: -5")
+                    .replace("Kp: 10", "Kpp: 10")
+                    .replace("bits: 16", "bits: 99"))
+    plc = tmp_path / "main.plc"
+    plc.write_text(PLC)
+    db = tmp_path / "extra.db"
+    db.write_text(DB)
+
+    r = check(ioc)
+    assert r.returncode == 1, r.stdout + r.stderr
+    expected = [
+        # the IOC file
+        f"{where(ioc, '0, cpus')}: engine.rate_hz should be from 1 to 20000, got 0",
+        f"{where(ioc, 'cpus')}: unknown key 'cpus' in engine (did you mean 'cpu'?)",
+        # files that cannot be read, at the line of the IOC file that names them
+        f"{where(ioc, 'noplant.yaml')}: buses[0].link.plant: {tmp_path}/noplant.yaml: "
+        "No such file or directory",
+        f"{where(ioc, 'axes/nothere.yaml')}: axes[1].file: {tmp_path}/axes/nothere.yaml: "
+        "No such file or directory",
+        # an unknown slave type, with the close matches of the catalog
+        f"{where(ioc, 'EL7014')}: buses[0] position 3: unknown device type 'EL7014'; "
+        "close matches in the catalog: EL7041",
+        # the axis file
+        f"{where(axis, '-5')}: trajectory.axis.velocity should be > 0, got -5",
+        f"{where(axis, 'Kpp')}: unknown key 'Kpp' in controller (did you mean 'Kp'?)",
+        f"{where(axis, '99')}: encoder.bits should be from 0 to 64, got 99",
+        # the PLC file
+        f"{where(plc, 'nosuch')}: unknown name 'nosuch'",
+        # the .db file: both errors, the parser goes on at the next record
+        f"{where(db, '1)')}: expected ',' after field name 'VAL', found '1'",
+        f"{where(db, '@')}: invalid '@'",
+    ]
+    missing = [e for e in expected if e not in r.stderr]
+    assert not missing, "missing:\n" + "\n".join(missing) + "\n\nstderr:\n" + r.stderr
+    errors = [line for line in r.stderr.splitlines() if re.match(r"^/\S+:\d+:\d+: ", line)]
+    assert len(errors) == len(expected), r.stderr
+    assert r.stderr.rstrip().endswith(f"{ioc}: {len(expected)} errors"), r.stderr
+    assert "OK" not in r.stdout
+
+
+def test_a_correct_ioc_is_ok_and_errors_between_files_come_once_each_file_is_right(tmp_path):
+    shutil.copy(DATA / "plant.yaml", tmp_path / "plant.yaml")
+    shutil.copy(DATA / "stepper.yaml", tmp_path / "stepper.yaml")
+    ioc = tmp_path / "ioc.yaml"
+    ioc.write_text(IOC.replace("rate_hz: 0, cpus: 1", "rate_hz: 1000")
+                   .replace("noplant.yaml", "plant.yaml")
+                   .replace("      - {position: 3, type: EL7014}\n", "")
+                   .replace("  - {file: axes/nothere.yaml, macros: {AX_NAME: Y}}\n", "")
+                   .replace("plcs:\n  - {file: main.plc}\ndb:\n  - {file: extra.db}\n", ""))
+    r = check(ioc)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith(f"{ioc}: OK ("), r.stdout
+    # a link to an entry the bus does not have: known only when the IOC is built
+    axis = tmp_path / "stepper.yaml"
+    axis.write_text(axis.read_text().replace("positionActual01", "positionActual09"))
+    r = check(ioc)
+    assert r.returncode == 1
+    assert f"{where(axis, 'ec0.s$(DRV_SLAVE).positionActual09')}: no signal " \
+           "'ec0.s2.positionActual09'" in r.stderr, r.stderr
+
+
+def test_an_ioc_file_that_cannot_be_read(tmp_path):
+    r = check(tmp_path / "none.yaml")
+    assert r.returncode == 1
+    assert f"{tmp_path}/none.yaml: cannot open: No such file or directory" in r.stderr, r.stderr
