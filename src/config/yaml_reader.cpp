@@ -245,8 +245,7 @@ SourceLoc YamlReader::loc(const YAML::Node& n) const {
 
 void YamlReader::error(const SourceLoc& at, const std::string& what) {
     std::string text = SB() << at.str() << ": " << what;
-    for (const auto& e : errors_)
-        if (e.second == text) return;
+    if (!seen_.insert(text).second) return;
     errors_.emplace_back(at, std::move(text));
 }
 
@@ -262,6 +261,7 @@ void YamlReader::take_errors(ErrorList& into) {
     });
     for (auto& e : errors_) into.add(std::move(e.second));
     errors_.clear();
+    seen_.clear();
 }
 
 ErrorList YamlReader::take_errors() {

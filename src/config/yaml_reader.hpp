@@ -32,6 +32,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -197,6 +198,7 @@ private:
     bool parsed_ = false;
     Expander expander_;
     std::vector<std::pair<SourceLoc, std::string>> errors_;
+    std::unordered_set<std::string> seen_; // the texts of errors_, for dropping repeats
     std::vector<std::string> warnings_;
 };
 

@@ -1,6 +1,5 @@
 #include "core/error_list.hpp"
 
-#include <algorithm>
 
 namespace beamctl {
 namespace {
@@ -21,7 +20,7 @@ MultiError::MultiError(std::vector<std::string> errors)
     , errors_(std::move(errors)) {}
 
 void ErrorList::add(std::string message) {
-    if (std::find(errors_.begin(), errors_.end(), message) != errors_.end()) return;
+    if (!seen_.insert(message).second) return;
     errors_.push_back(std::move(message));
 }
 

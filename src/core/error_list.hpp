@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <string>
 #include <string_view>
+#include <unordered_set>
 #include <vector>
 
 namespace beamctl {
@@ -58,6 +59,8 @@ public:
 private:
     static std::string with_context(std::string_view context, const std::string& m);
     std::vector<std::string> errors_;
+    std::unordered_set<std::string> seen_; // errors_, for dropping repeats
+
 };
 
 } // namespace beamctl

@@ -417,7 +417,10 @@ struct Context {
     const std::vector<std::string>& include_path;
     std::vector<std::string> open_files; // include chain, canonical paths, outermost first
     ErrorList errors;                    // every error of every file, in the order found
+    bool stopped = false;                // too many errors: nothing more is read
 };
+
+constexpr std::size_t kMaxErrors = 100;
 
 std::string canonical_name(const std::string& path) {
     std::error_code ec;
@@ -439,7 +442,7 @@ public:
     // A whole .db file: records, aliases, includes. An error is recorded and parsing goes on
     // at the next record.
     void parse_top() {
-        while (true) {
+        while (!ctx_.stopped) {
             try {
                 if (!parse_top_item()) return;
             } catch (const Error& e) {
@@ -450,7 +453,7 @@ public:
 
     // An included file inside a record body: body items up to the end of the file.
     void parse_body_items(std::size_t rec, const std::string& rec_name) {
-        while (true) {
+        while (!ctx_.stopped) {
             try {
                 Token t = take();
                 if (t.kind == Tok::end) return;
@@ -468,6 +471,12 @@ private:
     // Records the error; true when parsing can go on (at the next record).
     bool recover(const Error& e) {
         ctx_.errors.add(SB() << e.what() << trail_);
+        if (ctx_.errors.size() >= kMaxErrors) {
+            ctx_.errors.add(SB() << filename_ << ": too many errors (" << kMaxErrors
+                                 << "); the rest is not read" << trail_);
+            ctx_.stopped = true;
+            return false;
+        }
         ahead_.reset();
         try {
             return lex_.skip_to_next_record();
@@ -675,7 +684,7 @@ DbFile parse_db(std::string_view text, const std::string& filename, const MacroM
                 const std::vector<std::string>& include_path) {
     DbFile out;
     Builder builder(out);
-    Context ctx{builder, macros, include_path, {}, {}};
+    Context ctx{builder, macros, include_path, {}, {}, false};
     if (!filename.empty()) ctx.open_files.push_back(canonical_name(filename));
     FileParser(ctx, text, filename).parse_top();
     ctx.errors.throw_if_any();

@@ -33,7 +33,8 @@
 // Errors are "file:line:col: what was expected, found what"; an error inside an included file
 // continues with lines "\n  included from file:line:col". After an error the parser goes on at
 // the next line that starts with `record`/`grecord`, so one MultiError (core/error_list.hpp)
-// reports every error of the file and its includes, in the order found.
+// reports every error of the file and its includes, in the order found (at most 100; then
+// "<file>: too many errors (100); the rest is not read").
 #pragma once
 
 #include "core/error.hpp"

@@ -502,6 +502,19 @@ TEST(ParseDb, EveryErrorOfAFileRecoveringAtTheNextRecord) {
     }
 }
 
+TEST(ParseDb, AtMostAHundredErrors) {
+    std::string text;
+    for (int i = 0; i < 500; ++i) text += "record(ai, x) { field(A 1) }\n";
+    try {
+        parse_db(text, "t.db", {});
+        FAIL() << "no error";
+    } catch (const MultiError& e) {
+        ASSERT_EQ(e.errors().size(), 101u);
+        EXPECT_EQ(e.errors()[99], "t.db:100:25: expected ',' after field name 'A', found '1'");
+        EXPECT_EQ(e.errors()[100], "t.db: too many errors (100); the rest is not read");
+    }
+}
+
 TEST(ParseDb, JsonErrors) {
     EXPECT_EQ(parse_error("record(ai, x) {\n  field(INP, {a: [1}})\n}"),
               "t.db:2:20: mismatched '}' in JSON value: expected ']'");
