@@ -4,6 +4,8 @@
 //   softioc  serve EPICS database files over Channel Access (like EPICS softIoc)
 //   db       print the loaded database as .db text
 //   sim      run a simulated EtherCAT segment behind a UDP socket or on a network interface
+//   plc check    compile PLC files and report every error
+//   rcp-sim  stand in for a rapid-control-prototyping machine
 //   ca-repeater  the Channel Access repeater (also when invoked as `caRepeater`, EPICS's name)
 #include "ca/access_security.hpp"
 #include "ca/repeater.hpp"
@@ -27,6 +29,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <csignal>
 #include <filesystem>
 #include <fstream>
@@ -50,12 +53,16 @@ struct DbOptions {
     std::vector<std::string> include_path;
 };
 
-void load_databases(pv::Database& db, const DbOptions& o) {
+// -m "A=x,B=y" options (repeatable; a later definition wins) as one map; errors name "-m".
+MacroMap macro_options(const std::vector<std::string>& defs) {
     MacroMap macros;
-    for (auto& m : o.macros) {
-        MacroMap more = parse_macro_defs(m, SourceLoc{"-m", 1, 1});
-        for (auto& [k, v] : more) macros[k] = v;
-    }
+    for (const auto& d : defs)
+        for (auto& [k, v] : parse_macro_defs(d, SourceLoc{"-m", 1, 1})) macros[k] = v;
+    return macros;
+}
+
+void load_databases(pv::Database& db, const DbOptions& o) {
+    MacroMap macros = macro_options(o.macros);
     for (auto& f : o.files) db.load(pv::load_db_file(f, macros, o.include_path));
     db.init_records();
 }
@@ -73,14 +80,19 @@ int run_plc_check(const PlcCheckOptions& o) {
     std::unique_ptr<ioc::Ioc> ioc;
     plc::PlcRuntime::Options opt;
     opt.check_only = true;
+    std::vector<std::string> include_path = o.include_path;
     if (!o.ioc_file.empty()) {
+        config::IocConfig cfg = config::IocConfig::load(o.ioc_file);
+        // FILE is compiled as the IOC's PLCs are: with their include directories after -I's.
+        for (const auto& plc : cfg.plcs)
+            for (const auto& dir : plc.include)
+                if (std::find(include_path.begin(), include_path.end(), dir) == include_path.end())
+                    include_path.push_back(dir);
         clock = std::make_unique<rt::MonotonicClock>();
-        ioc = std::make_unique<ioc::Ioc>(config::IocConfig::load(o.ioc_file), *clock);
+        ioc = std::make_unique<ioc::Ioc>(std::move(cfg), *clock);
         opt = ioc->plcs().check_options();
     }
-    MacroMap macros;
-    for (const auto& m : o.macros)
-        for (auto& [k, v] : parse_macro_defs(m)) macros[k] = v;
+    MacroMap macros = macro_options(o.macros);
     plc::PlcRuntime check(opt);
     int failed = 0, id = 0;
     for (const auto& f : o.files) {
@@ -97,7 +109,7 @@ int run_plc_check(const PlcCheckOptions& o) {
         src.file = f;
         src.text = ss.str();
         src.macros = macros;
-        src.include_path = o.include_path;
+        src.include_path = include_path;
         src.rate_ms = o.rate_ms;
         try {
             check.add(src);
@@ -167,6 +179,127 @@ int run_sim(const std::string& file, const std::string& bind, int port, const st
     return 0;
 }
 
+// `beamctl run` / `check` options: the IOC file, -m macros for its text, --ca-port.
+struct IocOptions {
+    std::string file;
+    std::vector<std::string> macros;
+    int ca_port = 0; // 0: ioc.yaml's ca: port, else EPICS_CAS_SERVER_PORT, else 5064
+    config::IocConfig load() const {
+        config::IocConfig cfg = config::IocConfig::load(file, macro_options(macros));
+        if (ca_port) cfg.ca_port = uint16_t(ca_port);
+        return cfg;
+    }
+};
+
+void add_ioc_options(CLI::App& cmd, IocOptions& o) {
+    cmd.add_option("-m,--macros", o.macros,
+                   "Macros for the IOC file's $(NAME) / ${NAME} references, e.g. \"P=LAB:,PORT=5070\"")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    cmd.add_option("--ca-port", o.ca_port,
+                   "Channel Access server port (overrides ca: port in the IOC file and EPICS_CAS_SERVER_PORT)")
+        ->check(CLI::Range(1, 65535));
+    cmd.add_option("file", o.file, "IOC configuration (ioc.yaml)")->required();
+}
+
+// Levenshtein distance, for "did you mean" on a mistyped subcommand or option.
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+    std::vector<std::size_t> row(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        std::size_t diag = row[0];
+        row[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j) {
+            std::size_t up = row[j];
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+            diag = up;
+        }
+    }
+    return row[b.size()];
+}
+
+// " (did you mean 'check'?)" when one of `names` is close to `word`, else "".
+std::string did_you_mean(const std::string& word, const std::vector<std::string>& names) {
+    std::string best;
+    std::size_t best_d = std::max<std::size_t>(1, word.size() / 3) + 1; // a third of it may differ
+    if (word.size() < 3) return best;
+    for (const auto& n : names) {
+        std::size_t d = edit_distance(word, n);
+        if (d < best_d) best_d = d, best = n;
+    }
+    return best.empty() ? std::string() : " (did you mean '" + best + "'?)";
+}
+
+std::vector<std::string> subcommand_names(const CLI::App& cmd) {
+    std::vector<std::string> names;
+    for (const CLI::App* sub : cmd.get_subcommands([](const CLI::App*) { return true; }))
+        if (!sub->get_name().empty()) names.push_back(sub->get_name());
+    return names;
+}
+
+std::vector<std::string> option_names(const CLI::App& cmd) {
+    std::vector<std::string> names{"--help"};
+    for (const CLI::Option* opt : cmd.get_options()) {
+        for (const auto& l : opt->get_lnames()) names.push_back("--" + l);
+        for (const auto& s : opt->get_snames()) names.push_back("-" + s);
+    }
+    return names;
+}
+
+// A command-line error, reported on stderr with the command it belongs to: every unknown
+// subcommand, option or surplus argument by name (with the closest known one), then CLI11's own
+// complaint unless the unknown words explain it, then where help is. Returns exit code 2.
+int report_usage_error(const CLI::App& app, const CLI::ParseError& e) {
+    // The chain of subcommands that were recognised: beamctl, beamctl plc, beamctl plc check.
+    std::vector<const CLI::App*> chain{&app};
+    while (!chain.back()->get_subcommands().empty()) chain.push_back(chain.back()->get_subcommands().front());
+    auto path = [&](std::size_t upto) {
+        std::string p = "beamctl";
+        for (std::size_t i = 1; i <= upto; ++i) p += " " + chain[i]->get_name();
+        return p;
+    };
+    bool unknown_subcommand = false;
+    std::size_t help_at = chain.size() - 1;
+    for (std::size_t i = 0; i < chain.size(); ++i) {
+        const CLI::App& cmd = *chain[i];
+        for (const std::string& word : cmd.remaining(false)) {
+            const std::vector<std::string> subs = subcommand_names(cmd);
+            if (word.size() > 1 && word[0] == '-') {
+                std::string name = word.substr(0, word.find('='));
+                std::fprintf(stderr, "%s: unknown option '%s'%s\n", path(i).c_str(), name.c_str(),
+                             did_you_mean(name, option_names(cmd)).c_str());
+            } else if (!subs.empty() && cmd.get_subcommands().empty()) {
+                std::string list;
+                for (const auto& s : subs) list += " " + s;
+                std::fprintf(stderr, "%s: unknown subcommand '%s'%s; subcommands:%s\n", path(i).c_str(),
+                             word.c_str(), did_you_mean(word, subs).c_str(), list.c_str());
+                unknown_subcommand = true;
+                help_at = std::min(help_at, i);
+                break; // the words after it were meant for that subcommand
+            } else {
+                std::fprintf(stderr, "%s: unexpected argument '%s'\n", path(i).c_str(), word.c_str());
+            }
+            help_at = std::min(help_at, i);
+        }
+    }
+    const bool explained = dynamic_cast<const CLI::ExtrasError*>(&e) ||
+                           (unknown_subcommand && dynamic_cast<const CLI::RequiredError*>(&e));
+    if (!explained) {
+        std::string what = e.what();
+        if (what == "A subcommand is required") {
+            std::string list;
+            for (const auto& s : subcommand_names(*chain.back())) list += " " + s;
+            what = "a subcommand is required:" + list;
+        }
+        std::fprintf(stderr, "%s: %s\n", path(chain.size() - 1).c_str(), what.c_str());
+        help_at = chain.size() - 1;
+    }
+    std::fprintf(stderr, "Run '%s --help' for %s.\n", path(help_at).c_str(),
+                 chain[help_at]->get_subcommands([](const CLI::App*) { return true; }).empty()
+                     ? "its options" : "the subcommands and options");
+    return 2;
+}
+
 } // namespace
 
 int main(int argc, char** argv) {
@@ -191,7 +324,7 @@ int main(int argc, char** argv) {
 
     DbOptions dbo;
     auto* dbcmd = app.add_subcommand("db", "Print the loaded database as .db text");
-    dbcmd->add_option("-m,--macros", dbo.macros, "Macro definitions, e.g. \"P=DEMO:,R=x\"")
+    dbcmd->add_option("-m,--macros", dbo.macros, "Macro definitions, e.g. \"P=DEMO:,R=x\" (for an ioc.yaml: its $(NAME) references)")
         ->allow_extra_args(false)
         ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
     dbcmd->add_option("-I,--include", dbo.include_path, "Search path for include \"file\"")
@@ -199,11 +332,11 @@ int main(int argc, char** argv) {
         ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
     dbcmd->add_option("files", dbo.files, "Database files (.db)")->required();
 
-    std::string run_file, check_file;
+    IocOptions runo, checko;
     auto* runcmd = app.add_subcommand("run", "Run an IOC: buses, RT engine, PVs and CA server (ioc.yaml)");
-    runcmd->add_option("file", run_file, "IOC configuration")->required();
+    add_ioc_options(*runcmd, runo);
     auto* checkcmd = app.add_subcommand("check", "Load an IOC configuration and report errors (exit 1 on any)");
-    checkcmd->add_option("file", check_file, "IOC configuration")->required();
+    add_ioc_options(*checkcmd, checko);
 
     PlcCheckOptions plco;
     auto* plccmd = app.add_subcommand("plc", "Soft PLC tools");
@@ -251,7 +384,13 @@ int main(int argc, char** argv) {
     repcmd->add_option("--port", repeater_port, "UDP port (default: EPICS_CA_REPEATER_PORT, else 5065)")
         ->check(CLI::Range(1, 65535));
 
-    CLI11_PARSE(app, argc, argv);
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::Success& e) { // --help, --version
+        return app.exit(e);
+    } catch (const CLI::ParseError& e) {
+        return report_usage_error(app, e);
+    }
     try {
         log::validate(); // BEAMCTL_LOG, against the loggers registered during static initialisation
         if (*softioc) return run_softioc(soft, acf);
@@ -262,15 +401,15 @@ int main(int argc, char** argv) {
         if (*simcmd) return run_sim(sim_file, sim_bind, sim_port, sim_iface, sim_busy_poll);
         if (*runcmd) {
             rt::MonotonicClock clock;
-            ioc::Ioc ioc(config::IocConfig::load(run_file), clock);
+            ioc::Ioc ioc(runo.load(), clock);
             return ioc.run();
         }
-        if (*checkcmd) return ioc::run_check(check_file); // every error of every file
+        if (*checkcmd) return ioc::run_check(checko.file, macro_options(checko.macros)); // every error
         if (*dbcmd) {
             if (dbo.files.size() == 1 && dbo.files[0].size() > 5 &&
                 (dbo.files[0].ends_with(".yaml") || dbo.files[0].ends_with(".yml"))) {
                 rt::MonotonicClock clock;
-                ioc::Ioc ioc(config::IocConfig::load(dbo.files[0]), clock);
+                ioc::Ioc ioc(config::IocConfig::load(dbo.files[0], macro_options(dbo.macros)), clock);
                 ioc.database().write_db(std::cout);
                 return 0;
             }
