@@ -14,14 +14,19 @@
 namespace beamctl {
 namespace {
 log::Logger lg("signals");
-}
 
-void block_stop_signals() {
+sigset_t stop_signals() {
     sigset_t mask;
     sigemptyset(&mask);
     sigaddset(&mask, SIGTERM);
     sigaddset(&mask, SIGINT);
     sigaddset(&mask, SIGHUP);
+    return mask;
+}
+} // namespace
+
+void block_stop_signals() {
+    sigset_t mask = stop_signals();
     pthread_sigmask(SIG_BLOCK, &mask, nullptr);
 }
 
@@ -33,11 +38,7 @@ bool LoopSignals::stop_pending() {
 }
 
 LoopSignals::LoopSignals(EventLoop& loop, std::function<void()> on_hup) : loop_(loop) {
-    sigset_t mask;
-    sigemptyset(&mask);
-    sigaddset(&mask, SIGTERM);
-    sigaddset(&mask, SIGINT);
-    sigaddset(&mask, SIGHUP);
+    sigset_t mask = stop_signals();
     pthread_sigmask(SIG_BLOCK, &mask, nullptr);
     fd_ = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC);
     if (fd_ < 0) throw Error(SB() << "signalfd: " << std::strerror(errno));

@@ -145,13 +145,8 @@ void IocKinematics::publish() {
         if (busy) continue;
         std::vector<motion::RealLimits> limits;
         for (std::size_t k : g->real) {
-            const motion::AxisParams& p = axes_.params(k);
-            motion::RealLimits l;
-            l.soft_fwd_enable = p.soft_fwd_enable;
-            l.soft_bwd_enable = p.soft_bwd_enable;
-            l.soft_fwd = p.soft_fwd;
-            l.soft_bwd = p.soft_bwd;
-            l.position = axes_.status(k).set_pos;
+            motion::RealLimits l = motion::real_limits(axes_.params(k), axes_.status(k));
+            l.switch_fwd = l.switch_bwd = false; // switches come and go: the range is the soft limits'
             limits.push_back(l);
         }
         auto same = [](const std::vector<double>& a, const std::vector<double>& b) {

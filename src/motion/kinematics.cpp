@@ -8,19 +8,6 @@ namespace {
 
 double tolerance(double limit) { return 1e-9 * std::max(1.0, std::fabs(limit)); }
 
-RealLimits limits_of(const Axis& a) {
-    const AxisStatus& s = a.status();
-    const AxisParams& p = a.params();
-    RealLimits l;
-    l.soft_fwd_enable = p.soft_fwd_enable;
-    l.soft_bwd_enable = p.soft_bwd_enable;
-    l.soft_fwd = p.soft_fwd;
-    l.soft_bwd = p.soft_bwd;
-    l.switch_fwd = s.limit_fwd;
-    l.switch_bwd = s.limit_bwd;
-    l.position = s.set_pos;
-    return l;
-}
 
 // The target of a motion command as Axis::command() will compute it; false for commands that have
 // no target (velocity, homing): those are supervised while they run.
@@ -43,6 +30,18 @@ bool is_motion(CommandType t) {
 }
 
 } // namespace
+
+RealLimits real_limits(const AxisParams& p, const AxisStatus& s) noexcept {
+    RealLimits l;
+    l.soft_fwd_enable = p.soft_fwd_enable;
+    l.soft_bwd_enable = p.soft_bwd_enable;
+    l.soft_fwd = p.soft_fwd;
+    l.soft_bwd = p.soft_bwd;
+    l.switch_fwd = s.limit_fwd;
+    l.switch_bwd = s.limit_bwd;
+    l.position = s.set_pos;
+    return l;
+}
 
 uint32_t real_violation(const RealLimits& l, double x, double* limit) noexcept {
     if (!std::isfinite(x)) {
@@ -90,7 +89,7 @@ KinematicsVerdict Kinematics::check(std::span<const std::unique_ptr<Axis>> axes,
         const AxisStatus& s = axes[spec_.real[k]]->status();
         if (s.error_id) return {s.error_id, int(k), s.act_pos, 0};
         if (!s.enabled) return {error_id::kNotEnabled, int(k), s.act_pos, 0};
-        limits_[k] = limits_of(*axes[spec_.real[k]]);
+        limits_[k] = real_limits(axes[spec_.real[k]]->params(), s);
     }
     std::size_t me = spec_.virt.size();
     for (std::size_t i = 0; i < spec_.virt.size(); ++i) {

@@ -58,6 +58,10 @@ struct RealLimits {
     double position = 0;                         // present setpoint [units]
 };
 
+// A real axis's limits from its parameters (soft limits, which PLC code may change: read them from
+// the axis on the RT thread) and its latest status (switches, setpoint).
+RealLimits real_limits(const AxisParams& p, const AxisStatus& s) noexcept;
+
 // 0, or the id why a real axis may not go to `x` from where it is (moving back in is allowed).
 uint32_t real_violation(const RealLimits& l, double x, double* limit) noexcept;
 
