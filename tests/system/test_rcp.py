@@ -373,7 +373,9 @@ def test_rcp_sim_data_before_its_beacon_is_not_malformed(tmp_path, prefix):
         try:
             p = f"{prefix}RCP:"
             assert ca.get(connect(p + "Applications")) == 0
-            assert wait_for(lambda: exists(p + "sgDemo:Stage"), timeout=5)
+            # the next beacon comes within 3 s; libca's searches for a name not found yet back off,
+            # so allow it time to see the new PV (a bound on waiting, not a deadline asserted)
+            assert wait_for(lambda: exists(p + "sgDemo:Stage"), timeout=20)
             time.sleep(1.1)  # the counters are published once a second
             assert ca.get(connect(p + "DataBeforeBeacon")) >= 50  # 100 Hz for about 2 s
             for reason in ("UnknownApplication", "UnknownObject", "TypeMismatch"):
