@@ -106,7 +106,8 @@ def test_engine_refuses_a_virtual_move_that_bypasses_the_motor_record(demo):
         epics.caput(P + "SlitVGap-ExeCmd", 1, wait=True)
         assert wait_for(lambda: get("SlitVGap-WrnId") == SOFT_LIMIT_FWD, timeout=5), get("SlitVGap-WrnId")
         assert wait_for(lambda: "SlitTop" in epics.caget(P + "SlitVGap-MsgTxt"), timeout=5), epics.caget(P + "SlitVGap-MsgTxt")
-        assert int(epics.caget(P + "SlitVGap.MSTA")) & MSTA_PROBLEM
+        # the record polls its axis every 0.1 s
+        assert wait_for(lambda: int(epics.caget(P + "SlitVGap.MSTA")) & MSTA_PROBLEM, timeout=5)
         time.sleep(0.5)
         assert top.max <= 17.0 + 1e-6, top.max
         assert abs(get("SlitTop-PosAct") - 2.5) < 0.01
