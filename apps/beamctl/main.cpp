@@ -1,7 +1,7 @@
 // beamctl: the command-line program. Subcommands:
 //   run      run an IOC from its configuration (buses, RT engine, PVs, CA server)
 //   check    load a configuration and report every error
-//   softioc  serve EPICS database files over Channel Access (like EPICS softIoc)
+//   softioc  serve EPICS databases over Channel Access: softIoc's command line, st.cmd scripts
 //   db       print the loaded database as .db text
 //   sim      run a simulated EtherCAT segment behind a UDP socket or on a network interface
 //   plc check    compile PLC files and report every error
@@ -17,6 +17,7 @@
 #include "core/signals.hpp"
 #include "pv/database.hpp"
 #include "pv/db_file.hpp"
+#include "pv/iocsh.hpp"
 #include "config/ioc_config.hpp"
 #include "ethercat/catalog.hpp"
 #include "bridge/rcp/rcp_sim.hpp"
@@ -35,7 +36,9 @@
 #include <fstream>
 #include <sstream>
 #include <cstdio>
+#include <cstring>
 #include <iostream>
+#include <map>
 #include <unistd.h>
 
 #ifndef BEAMCTL_VERSION
@@ -125,28 +128,143 @@ int run_plc_check(const PlcCheckOptions& o) {
     return failed ? 1 : 0;
 }
 
-int run_softioc(const DbOptions& o, const std::string& acf_path) {
-    pv::Database db;
-    load_databases(db, o);
-    ca::AccessSecurity acf;
-    if (!acf_path.empty()) acf = ca::AccessSecurity::load_file(acf_path);
+// `beamctl softioc`: softIoc's command line. Steps in command-line order (-m, -d, -x, -a and
+// positional files); -m applies to the -d / -a after it, each -m replacing the one before.
+struct SoftIocStep {
+    enum Kind { Macros, Db, Exit, Acf, File } kind;
+    std::string value;
+};
 
+struct SoftIocOptions {
+    std::vector<std::string> macros, dbs, exits, acfs, files, include_path;
+    std::string dbd;                                           // -D: accepted, not needed
+    bool no_shell = false, old_shell = false, verbose = false; // -S, -s, -v
+    std::vector<SoftIocStep> steps;
+};
+
+// A positional file is a database when it ends in .db, .vdb or .template, else a startup script.
+bool is_database_file(const std::string& f) {
+    for (const char* ext : {".db", ".vdb", ".template"})
+        if (f.size() > std::strlen(ext) && f.ends_with(ext)) return true;
+    return false;
+}
+
+// The access-security file, with asSetSubstitutions' macros (if any) expanded in its text.
+ca::AccessSecurity load_acf(const std::string& path, const std::string& substitutions) {
+    if (substitutions.empty()) return ca::AccessSecurity::load_file(path);
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw Error(SB() << path << ": cannot open: " << std::strerror(errno));
+    std::stringstream ss;
+    ss << in.rdbuf();
+    MacroMap m = parse_macro_defs(substitutions, SourceLoc{"asSetSubstitutions", 1, 1});
+    return ca::AccessSecurity::parse(expand_macros(ss.str(), m, SourceLoc{path, 1, 1}), path);
+}
+
+int run_softioc(const SoftIocOptions& o) {
+    pv::Database db;
     EventLoop loop;
-    ca::Server server(loop, db, ca::ServerConfig::from_env());
-    server.set_access_security(acf);
-    server.start();
+    std::unique_ptr<ca::Server> server;
+    int exit_status = 0;
+    pv::IocShell* shell_ptr = nullptr;
+    pv::IocShellHooks hooks;
+    hooks.init = [&] { // iocInit: access security and the CA server (EPICS_CAS_* read now)
+        ca::AccessSecurity acf;
+        if (!shell_ptr->acf_file().empty())
+            acf = load_acf(shell_ptr->acf_file(), shell_ptr->acf_substitutions());
+        server = std::make_unique<ca::Server>(loop, db, ca::ServerConfig::from_env());
+        server->set_access_security(acf);
+        server->start();
+    };
+    hooks.exit = [&](int status) { // a put to PREFIX:exit (-x): answer it, then stop
+        exit_status = status;
+        loop.call_after(0.05, [&loop] { loop.stop(); });
+    };
+    pv::IocShellOptions so;
+    so.include_path = o.include_path;
+    pv::IocShell shell(db, so, hooks);
+    shell_ptr = &shell;
+
+    std::string macros, all_macros; // the -m in effect; every -m joined (for positional .db files)
+    for (const auto& m : o.macros) all_macros += (all_macros.empty() ? "" : ",") + m;
+    std::vector<std::string> scripts;
+    bool loaded = false;
+    auto verbose = [&](const std::string& line) {
+        if (o.verbose) std::printf("%s\n", line.c_str());
+    };
+    for (const auto& step : o.steps) {
+        switch (step.kind) {
+        case SoftIocStep::Macros: macros = step.value; break;
+        case SoftIocStep::Db:
+            verbose(SB() << "dbLoadRecords(\"" << step.value << "\""
+                         << (macros.empty() ? "" : ", \"" + macros + "\"") << ")");
+            shell.load_records(step.value, macros, "-m");
+            loaded = true;
+            break;
+        case SoftIocStep::Exit:
+            verbose(SB() << "dbLoadRecords(\"softIocExit.db\", \"IOC=" << step.value << "\")");
+            shell.load_exit_records(step.value, "beamctl " BEAMCTL_VERSION);
+            loaded = true;
+            break;
+        case SoftIocStep::Acf:
+            if (!macros.empty()) verbose(SB() << "asSetSubstitutions(\"" << macros << "\")");
+            verbose(SB() << "asSetFilename(\"" << step.value << "\")");
+            shell.set_access_security(step.value, macros);
+            break;
+        case SoftIocStep::File:
+            if (is_database_file(step.value)) {
+                verbose(SB() << "dbLoadRecords(\"" << step.value << "\""
+                             << (all_macros.empty() ? "" : ", \"" + all_macros + "\"") << ")");
+                shell.load_records(step.value, all_macros, "-m");
+                loaded = true;
+            } else {
+                scripts.push_back(step.value);
+            }
+            break;
+        }
+    }
+    if (!loaded && scripts.empty()) {
+        std::fprintf(stderr, "beamctl softioc: nothing to do: give database files (-d FILE.db, FILE.db, "
+                             "-x PREFIX) or a startup script (st.cmd)\n"
+                             "Run 'beamctl softioc --help' for its options.\n");
+        return 2;
+    }
+    std::fflush(stdout);
+    for (const auto& script : scripts) {
+        verbose(SB() << "# Begin " << script);
+        shell.run_file(script);
+        verbose(SB() << "# End " << script);
+    }
+    if (!shell.initialised()) {
+        verbose("iocInit()");
+        shell.ioc_init();
+    }
 
     // Signals: TERM/INT stop cleanly, HUP reloads the access-security file.
-    LoopSignals signals(loop, acf_path.empty() ? std::function<void()>()
-                                               : [&] { server.reload_access_security(acf_path); });
+    const std::string acf_path = shell.acf_file(), acf_subs = shell.acf_substitutions();
+    std::function<void()> reload;
+    if (!acf_path.empty()) {
+        reload = [&, acf_path, acf_subs] {
+            if (acf_subs.empty()) {
+                server->reload_access_security(acf_path);
+                return;
+            }
+            try {
+                server->set_access_security(load_acf(acf_path, acf_subs));
+                LOG_INFO(lg, "access security reloaded from " << acf_path);
+            } catch (const Error& e) {
+                LOG_ERR(lg, "access security reload failed, keeping the previous rules: " << e.what());
+            }
+        };
+    }
+    LoopSignals signals(loop, reload);
     if (!db.records().empty()) loop.call_every(0.01, [&db] { db.scan_periodic(EventLoop::now_s()); });
 
-    std::printf("ready: CA on %s, %zu PVs\n", server.listen_description().c_str(), db.size());
+    std::printf("ready: CA on %s, %zu PVs\n", server->listen_description().c_str(), db.size());
     std::printf("  try: EPICS_CA_ADDR_LIST=127.0.0.1:%u EPICS_CA_AUTO_ADDR_LIST=NO caget <pv>\n",
-                unsigned(server.udp_port()));
+                unsigned(server->udp_port()));
     std::fflush(stdout);
     loop.run();
-    return 0;
+    return exit_status;
 }
 
 volatile bool g_sim_stop = false;
@@ -310,17 +428,38 @@ int main(int argc, char** argv) {
     app.set_version_flag("--version", std::string("beamctl ") + BEAMCTL_VERSION);
     app.require_subcommand(1);
 
-    DbOptions soft;
-    std::string acf;
-    auto* softioc = app.add_subcommand("softioc", "Serve EPICS database files over Channel Access");
-    softioc->add_option("-m,--macros", soft.macros, "Macro definitions, e.g. \"P=DEMO:,R=x\"")
-        ->allow_extra_args(false)
-        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
-    softioc->add_option("-I,--include", soft.include_path, "Search path for include \"file\"")
-        ->allow_extra_args(false)
-        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
-    softioc->add_option("--acf", acf, "EPICS access-security file (reloaded on SIGHUP)");
-    softioc->add_option("files", soft.files, "Database files (.db)")->required();
+    SoftIocOptions soft;
+    auto* softioc = app.add_subcommand(
+        "softioc",
+        "Serve EPICS database files over Channel Access, with EPICS softIoc's command line:\n"
+        "  beamctl softioc [-D dbd] [-S] [-s] [-v] [-a FILE.acf] [-m MACROS] [-d FILE.db]\n"
+        "                  [-x PREFIX] [-I DIR] [st.cmd | FILE.db ...]\n"
+        "Options act in command-line order: -m sets the macros of the -d and -a after it (each -m\n"
+        "replaces the one before). Positional FILE.db / .vdb / .template files are loaded with\n"
+        "every -m; other positional files are startup scripts (st.cmd), run in order after the\n"
+        "options; iocInit follows unless a script ran it.");
+    auto take_each = [](CLI::Option* o) {
+        return o->allow_extra_args(false)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    };
+    auto* soft_m = take_each(softioc->add_option(
+        "-m,--macros", soft.macros,
+        "Macros for the -d/-a after it (and every positional .db), e.g. \"P=DEMO:,R=x\""));
+    auto* soft_d = take_each(softioc->add_option(
+        "-d,--db", soft.dbs, "Load a database file (dbLoadRecords) with the -m macros before it"));
+    auto* soft_x = take_each(softioc->add_option(
+        "-x", soft.exits, "Load PREFIX:exit (a put stops the IOC) and PREFIX:BaseVersion"));
+    auto* soft_a = take_each(softioc->add_option(
+        "-a,--acf", soft.acfs,
+        "EPICS access-security file, with the -m macros before it (reloaded on SIGHUP)"));
+    take_each(softioc->add_option(
+        "-I,--include", soft.include_path,
+        "Search path for include \"file\" (and for the template files of substitution files)"));
+    softioc->add_option("-D", soft.dbd, "softIoc.dbd: accepted and ignored (record types are built in)");
+    softioc->add_flag("-S", soft.no_shell, "No interactive shell: accepted (beamctl never starts one)");
+    softioc->add_flag("-s", soft.old_shell, "Accepted and ignored (as softIoc)");
+    softioc->add_flag("-v", soft.verbose, "Print the steps taken during startup");
+    auto* soft_files = softioc->add_option(
+        "files", soft.files, "Startup scripts (st.cmd) and database files (.db, .vdb, .template)");
 
     DbOptions dbo;
     auto* dbcmd = app.add_subcommand("db", "Print the loaded database as .db text");
@@ -393,7 +532,25 @@ int main(int argc, char** argv) {
     }
     try {
         log::validate(); // BEAMCTL_LOG, against the loggers registered during static initialisation
-        if (*softioc) return run_softioc(soft, acf);
+        if (*softioc) {
+            // The steps in command-line order: parse_order() names one option per value.
+            struct Source {
+                const CLI::Option* opt;
+                SoftIocStep::Kind kind;
+                const std::vector<std::string>& values;
+                std::size_t next = 0;
+            };
+            Source sources[] = {{soft_m, SoftIocStep::Macros, soft.macros},
+                                {soft_d, SoftIocStep::Db, soft.dbs},
+                                {soft_x, SoftIocStep::Exit, soft.exits},
+                                {soft_a, SoftIocStep::Acf, soft.acfs},
+                                {soft_files, SoftIocStep::File, soft.files}};
+            for (const CLI::Option* opt : softioc->parse_order())
+                for (Source& src : sources)
+                    if (src.opt == opt && src.next < src.values.size())
+                        soft.steps.push_back({src.kind, src.values[src.next++]});
+            return run_softioc(soft);
+        }
         if (*plccheck) return run_plc_check(plco);
         if (*rcpcmd) return bridge::rcp::run_rcp_sim(rcp_model, rcpo);
         if (*repcmd)

@@ -60,9 +60,9 @@ def test_mistyped_option_gets_the_closest_one():
 
 
 def test_unknown_option_and_missing_argument_are_both_reported():
-    err = usage_error("softioc", "--bogus")
-    assert "beamctl softioc: unknown option '--bogus'" in err, err
-    assert "beamctl softioc: files is required" in err, err
+    err = usage_error("db", "--bogus")
+    assert "beamctl db: unknown option '--bogus'" in err, err
+    assert "beamctl db: files is required" in err, err
 
 
 def test_unknown_option_before_the_subcommand_belongs_to_beamctl():

@@ -1,0 +1,94 @@
+// Startup scripts (st.cmd) of a soft IOC, run as EPICS iocsh runs them, into a Database: the
+// commands soft IOCs use (epicsEnvSet, dbLoadRecords, dbLoadTemplate, iocInit, dbpf, dbl, `<`
+// includes, cd, ...), with iocsh's line handling. No sockets: serving starts in the init hook.
+// Threading: an IocShell and its Database are used by one thread, the one that runs the IOC loop
+// afterwards (scripts run before the loop does).
+//
+// Lines, as iocsh reads them: leading blanks are skipped; a line starting with '#' is a comment
+// (echoed, unless it starts with "#-"); $(NAME) and ${NAME} are expanded from the environment
+// and the macros of iocshLoad (core/macros.hpp syntax; an undefined name without a default is an
+// error); each line is echoed after expansion. Words are separated by blanks and ( ) , so that
+// `dbLoadRecords("x.db", "P=A:")` and `dbLoadRecords x.db P=A:` are the same; "..." and '...'
+// group (the quotes are removed, nothing is escaped inside them), a backslash outside quotes
+// makes the next character literal. Unquoted `< file` runs another script (also as a line of its
+// own), `> file`, `>> file` and `1>` send the command's output to a file. Extra arguments are
+// ignored, as iocsh does. Relative paths are taken from the current directory, which `cd`
+// changes for the whole process (as iocsh does).
+//
+// Commands: see docs/softioc.md. A command that fails, and an unknown command, is an Error
+// "file:line: what" (errors of loaded files keep their own file:line:col, followed by the line
+// that loaded them); the script stops there, as after iocsh's `on error break`. After
+// `on error continue` errors are printed to the error stream and the script goes on.
+#pragma once
+
+#include <functional>
+#include <iosfwd>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace beamctl::pv {
+
+class Database;
+
+struct IocShellOptions {
+    std::vector<std::string> include_path; // .db `include` search path; also where template
+                                           // files of substitution files are looked for (-I)
+    std::ostream* out = nullptr;           // echo and command output (nullptr: std::cout)
+    std::ostream* err = nullptr;           // notes and continued errors (nullptr: std::cerr)
+    bool echo = true;                      // echo script lines, as iocsh does
+};
+
+struct IocShellHooks {
+    // At iocInit, after the records are initialised: start serving (read the access-security
+    // file, start the CA server). An Error it throws fails iocInit.
+    std::function<void()> init;
+    // A put processed the exit record of load_exit_records(): stop the IOC with this status.
+    std::function<void(int status)> exit;
+};
+
+class IocShell {
+public:
+    IocShell(Database& db, IocShellOptions options = {}, IocShellHooks hooks = {});
+    ~IocShell();
+    IocShell(const IocShell&) = delete;
+    IocShell& operator=(const IocShell&) = delete;
+
+    // Runs a script file, as iocshLoad(path, macros) (`macros` as "A=1,B=2").
+    void run_file(const std::string& path, const std::string& macros = "");
+    // Runs script text; `name` stands for its file in messages.
+    void run_text(std::string_view text, const std::string& name, const std::string& macros = "");
+
+    // The commands behind -d, -x, -a and iocInit, also for the command line (`macros` as
+    // "A=1,B=2"; a bad one is an error naming `macros_origin`, e.g. "-m").
+    void load_records(const std::string& path, const std::string& macros,
+                      const std::string& macros_origin = "macros");
+    void load_template(const std::string& path, const std::string& macros,
+                       const std::string& macros_origin = "macros");
+    // softIoc's -x PREFIX: "PREFIX:exit" (bo; a put of any value makes the IOC exit with status 0
+    // through hooks.exit) and "PREFIX:BaseVersion" (stringin holding `version`).
+    void load_exit_records(const std::string& prefix, const std::string& version);
+    // asSetFilename + asSetSubstitutions: the ACF read at iocInit (by hooks.init).
+    void set_access_security(const std::string& path, const std::string& substitutions);
+    // iocInit: initialises the records loaded so far, then calls hooks.init. Once only.
+    void ioc_init();
+
+    bool initialised() const;
+    std::size_t records_loaded() const; // by dbLoadRecords, dbLoadTemplate and -x
+    // The access-security file ("" for none; as given, or absolute when `cd` moved away from where
+    // it was given) and its substitutions ("A=1,B=2").
+    const std::string& acf_file() const;
+    const std::string& acf_substitutions() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+// Prints a field's value as EPICS dbgf does ("DBF_DOUBLE:         3.5", columns of 10); for
+// dbpf/dbgf and tests. Returns false (printing "PV 'name' not found") if the name resolves to
+// nothing.
+bool print_field(const Database& db, std::string_view channel, std::ostream& os);
+
+} // namespace beamctl::pv
