@@ -37,7 +37,7 @@ enum class Errc : uint8_t {
     Conditional,   // '?' without ':' or ':' without '?'
     Incomplete,    // operand missing, or no statement gives the result
     Underflow,     // a function got fewer arguments than it takes
-    Overflow,      // more than kStackSize values would be on the stack
+    Overflow,      // kStackSize values or more would be on the stack at once
     Syntax,        // unknown operator or operand
     Empty,         // empty text (CALC_ERR_NULL_ARG)
     TooLong = 100, // more characters than the CALC field holds
