@@ -1,6 +1,7 @@
 #include "pv/convert.hpp"
 
 #include "core/error.hpp"
+#include "pv/link.hpp"
 
 #include <cerrno>
 #include <cfloat>
@@ -35,7 +36,7 @@ template <typename T> T saturate_int(int64_t v) {
 template <typename T> void store(void* dest, T v) { std::memcpy(dest, &v, sizeof v); }
 
 bool is_integer_dbf(Dbf t) {
-    return t != Dbf::Float && t != Dbf::Double && t != Dbf::String;
+    return t != Dbf::Float && t != Dbf::Double && t != Dbf::String && !is_link(t);
 }
 
 double read_double(const Elements& e, uint32_t i) {
@@ -57,8 +58,8 @@ double read_double(const Elements& e, uint32_t i) {
         parse_double(p, d);
         return d;
     }
+    default: return 0; // links have no numeric value
     }
-    return 0;
 }
 
 int64_t read_int(const Elements& e, uint32_t i) {
@@ -96,6 +97,7 @@ void write_double(const Elements& e, uint32_t i, double v) {
     case Dbf::Float: *reinterpret_cast<float*>(p) = float(v); break;
     case Dbf::Double: *reinterpret_cast<double*>(p) = v; break;
     case Dbf::String: format_double(v, 15, p, e.stride); break;
+    default: break; // links are written as text only
     }
 }
 
@@ -114,6 +116,7 @@ void write_int(const Elements& e, uint32_t i, int64_t v) {
     case Dbf::Float: *reinterpret_cast<float*>(p) = float(v); break;
     case Dbf::Double: *reinterpret_cast<double*>(p) = double(v); break;
     case Dbf::String: std::snprintf(p, e.stride, "%" PRId64, v); break;
+    default: break;
     }
 }
 
@@ -227,6 +230,8 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
         const char* src = static_cast<const char*>(e.data) + std::size_t(i) * e.stride;
         if (e.type == Dbf::String) {
             copy_string(d, kStringSize, std::string_view(src, strnlen(src, e.stride)));
+        } else if (is_link(e.type)) {
+            copy_string(d, kStringSize, reinterpret_cast<const Link*>(src)->canonical());
         } else if (e.type == Dbf::Enum || e.type == Dbf::Menu) {
             uint16_t v = *reinterpret_cast<const uint16_t*>(src);
             const char* strs[kEnumStates] = {};
@@ -258,6 +263,7 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
 
 bool put_element(Record& r, const FieldDesc& f, const Elements& e, uint32_t i, Prim p,
                  const void* src) {
+    if (is_link(e.type)) return false; // Database::put re-links them (it resolves the target)
     switch (p) {
     case Prim::String: {
         const char* s = static_cast<const char*>(src);
@@ -291,6 +297,16 @@ bool put_element(Record& r, const FieldDesc& f, const Elements& e, uint32_t i, P
 
 bool parse_field(Record& r, const FieldDesc& f, std::string_view text, std::string* err) {
     Elements e = r.elements(f);
+    if (is_link(f.dbf)) {
+        std::string why;
+        Link l;
+        if (!parse_link(text, f.dbf, l, &why)) {
+            if (err) *err = SB() << "field " << f.name << ": " << why;
+            return false;
+        }
+        *static_cast<Link*>(e.data) = std::move(l);
+        return true;
+    }
     if (f.dbf == Dbf::String) {
         if (text.size() >= f.size) {
             if (err) *err = SB() << "string of " << text.size() << " characters is too long for field "
@@ -367,6 +383,9 @@ std::string format_field(Record& r, const FieldDesc& f) {
     if (f.flags & kArray) return {};
     const char* p = static_cast<const char*>(e.data);
     switch (f.dbf) {
+    case Dbf::InLink:
+    case Dbf::OutLink:
+    case Dbf::FwdLink: return reinterpret_cast<const Link*>(p)->canonical();
     case Dbf::String: return std::string(p, strnlen(p, f.size));
     case Dbf::Menu: {
         uint16_t v = *reinterpret_cast<const uint16_t*>(p);

@@ -1,12 +1,46 @@
 #include "pv/database.hpp"
 
 #include "core/error.hpp"
+#include "core/error_list.hpp"
 #include "pv/convert.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 
 namespace beamctl::pv {
+
+// A CP/CPP input link: a monitor on the target field that processes the link's record (through
+// the scanOnce queue, after the processing that posted the change has ended).
+class CpLinkWatch : public Subscription {
+public:
+    CpLinkWatch(Database& db, Record& src, const FieldDesc& src_field, bool cpp)
+        : db_(db), src_(src), src_field_(src_field), cpp_(cpp) {}
+    void on_event(unsigned) override {
+        if (cpp_ && src_.scan != 0) return; // CPP: only a Passive record
+        db_.scan_once(src_);
+    }
+    Record& src() const { return src_; }
+    const FieldDesc& src_field() const { return src_field_; }
+
+private:
+    Database& db_;
+    Record& src_;
+    const FieldDesc& src_field_;
+    bool cpp_;
+};
+
+Database::Depth::~Depth() {
+    if (--db.depth_ > 0 || db.once_.empty()) return;
+    ++db.depth_;
+    // Bounded: a CP loop (A -> B -> A) must not hang the caller; the rest runs at the next call.
+    for (int k = 0; k < 100000 && !db.once_.empty(); ++k) {
+        Record* r = db.once_.front();
+        db.once_.pop_front();
+        db.process_record(*r);
+    }
+    --db.depth_;
+}
 
 bool Address::writable() const {
     if (kind == Kind::RecordType || !field) return false;
@@ -19,11 +53,23 @@ int Address::asl() const { return field && (field->flags & kAsl0) ? 0 : 1; }
 Database::Database() = default;
 
 Database::~Database() {
+    for (auto& w : cp_watches_) unsubscribe(*w);
     for (auto* r : order_) r->db_ = nullptr;
 }
 
 namespace {
 bool is_val(const FieldDesc& f) { return f.name[0] == 'V' && f.name[1] == 'A' && f.name[2] == 'L' && !f.name[3]; }
+bool is_named(const FieldDesc& f, const char* n) { return std::strcmp(f.name, n) == 0; }
+
+// A double seen as a field, for converting link values that are not in a record.
+const FieldDesc kScratchDouble{"", Dbf::Double, 0, 8, nullptr, nullptr};
+
+// The CA type a value travels in between two fields (dbFastLinkConv keeps strings and enums).
+Prim transfer_prim(Dbf to, Dbf from) {
+    if (to == Dbf::String || from == Dbf::String) return Prim::String;
+    if ((to == Dbf::Enum || to == Dbf::Menu) && (from == Dbf::Enum || from == Dbf::Menu)) return Prim::Enum;
+    return Prim::Double;
+}
 
 double scan_period(uint16_t scan) {
     static const double periods[] = {0, 0, 0, 10, 5, 2, 1, 0.5, 0.2, 0.1};
@@ -31,9 +77,40 @@ double scan_period(uint16_t scan) {
 }
 } // namespace
 
+// Record types of EPICS base and the common synApps modules that beamctl does not serve (yet):
+// a database that uses one is told "not supported", not "unknown".
+static bool known_epics_type(std::string_view t) {
+    static const char* known[] = {"aai", "aao", "aSub", "compress", "histogram", "int64in", "int64out",
+                                  "lsi", "lso", "mbbiDirect", "mbboDirect", "permissive", "printf",
+                                  "state", "sub", "subArray", "swait", "sseq", "scalcout", "acalcout",
+                                  "transform", "scaler", "mca", "epid", "busy", "asyn", "timestamp",
+                                  "digitel", "table", "sCalcout", "vs", "pid", "steppermotor"};
+    for (const char* k : known)
+        if (t == k) return true;
+    return false;
+}
+
+// Fields of EPICS base's standard record types that beamctl's records do not implement.
+static bool known_epics_field(std::string_view f) {
+    static const char* known[] = {
+        "ASP", "BKPT", "MLOK", "MLIS", "PPN", "PPNR", "SPVT", "RSET", "DSET", "DPVT", "RDES", "LSET",
+        "UTAG", "TIME", "SIML", "SIOL", "SIMS", "SIMM", "SSCN", "SDLY", "OLDSIMM", "SIMPVT", "LINR",
+        "EGUF", "EGUL", "AOFF", "ASLO", "ESLO", "EOFF", "ROFF", "RVAL", "ORAW", "ORBV", "RBV", "PBRK",
+        "INIT", "LBRK", "OMOD", "SVAL", "SIOL", "IVOA", "IVOV", "OROC",
+        "AFTC", "AFVL", "MPST", "APST", "HASH", "BUSY", "NORD", "BPTR", "RARM", "OLDN", "WAIT", "OUTV",
+        "CLCV", "OCLV", "INAV", "INBV", "INCV", "INDV", "INEV", "INFV", "INGV", "INHV", "INIV",
+        "INJV", "INKV", "INLV", "RPCL", "ORPC", "EPVT", "DLYA", "TPRO", "RPVT"};
+    for (const char* k : known)
+        if (f == k) return true;
+    return false;
+}
+
 void Database::apply_field(Record& rec, const DbField& f, const std::string& file) {
     (void)file;
     const FieldDesc* fd = rec.type().find(f.name);
+    if (!fd && known_epics_field(f.name))
+        throw Error(SB() << f.loc.str() << ": field " << f.name << " of record type " << rec.type().name()
+                         << " is not supported by beamctl (record " << rec.name() << ")");
     if (!fd)
         throw Error(SB() << f.loc.str() << ": record type " << rec.type().name() << " has no field "
                          << f.name << " (record " << rec.name() << ")");
@@ -48,11 +125,13 @@ void Database::apply_field(Record& rec, const DbField& f, const std::string& fil
         throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": " << err);
     if (fd->menu == &kMenuScan) {
         uint16_t s = rec.scan;
-        if (s == 1 || s == 2)
+        if (s == 2)
             throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": SCAN \""
                              << fd->menu->choices[s]
-                             << "\" is not supported for soft records (use Passive or a period)");
+                             << "\" needs device support with interrupts; Soft Channel has none (use "
+                                "Passive with a CP input link, Event or a period)");
     }
+    if (is_link(fd->dbf)) field_ref<Link>(rec, *fd).loc = f.loc;
     if (is_val(*fd)) rec.udf = 0; // a VAL given in the file defines the value
 }
 
@@ -83,7 +162,10 @@ void Database::load(const DbFile& file, const RecordTypes& types) {
         const RecordType* t = types.find(dr.type);
         if (!t) {
             SB sb;
-            sb << dr.loc.str() << ": unknown record type '" << dr.type << "' (supported:";
+            if (known_epics_type(dr.type))
+                sb << dr.loc.str() << ": record type '" << dr.type << "' is not supported by beamctl yet (supported:";
+            else
+                sb << dr.loc.str() << ": unknown record type '" << dr.type << "' (supported:";
             for (auto& n : types.names()) sb << " " << n;
             sb << ")";
             throw Error(sb);
@@ -162,32 +244,174 @@ void Database::remove(std::string_view name) {
     order_.erase(std::remove(order_.begin(), order_.end(), r), order_.end());
     uninitialised_.erase(std::remove(uninitialised_.begin(), uninitialised_.end(), r),
                          uninitialised_.end());
-    for (auto& s : scans_) s.recs.erase(std::remove(s.recs.begin(), s.recs.end(), r), s.recs.end());
+    remove_from_scan(*r);
+    polls_.erase(std::remove_if(polls_.begin(), polls_.end(), [&](const Poll& p) { return p.rec == r; }), polls_.end());
+    delays_.erase(std::remove_if(delays_.begin(), delays_.end(), [&](const Poll& p) { return p.rec == r; }), delays_.end());
+    once_.erase(std::remove(once_.begin(), once_.end(), r), once_.end());
+    // CP watches from or onto r; links of other records onto r become broken (LINK alarm).
+    for (auto w = cp_watches_.begin(); w != cp_watches_.end();) {
+        if (&(*w)->src() == r || (*w)->addr.rec == r) {
+            unsubscribe(**w);
+            w = cp_watches_.erase(w);
+        } else {
+            ++w;
+        }
+    }
+    if (r->pn_ && --r->pn_->pending == 0 && r->pn_->started) finish_notify(r->pn_);
+    for (Record* o : order_) {
+        if (o->pn_ && o->pn_->origin == r) o->pn_->origin = nullptr;
+        for (const FieldDesc& f : o->type().fields())
+            if (is_link(f.dbf)) {
+                Link& l = field_ref<Link>(*o, f);
+                if (l.target == r) l.target = nullptr, l.target_field = nullptr;
+            }
+    }
     records_.erase(it);
 }
 
 void Database::init_records() {
     std::vector<Record*> batch;
     batch.swap(uninitialised_);
+    try {
+        resolve_links(batch);
+    } catch (...) {
+        uninitialised_.swap(batch);
+        throw;
+    }
     for (Record* r : batch) {
         try {
             r->init();
         } catch (const Error& e) {
             throw Error(SB() << "record " << r->name() << ": " << e.what());
         }
-        double period = scan_period(r->scan);
-        if (period > 0) {
-            auto it = std::find_if(scans_.begin(), scans_.end(),
-                                   [&](const ScanList& s) { return s.period_s == period; });
-            if (it == scans_.end()) {
-                scans_.push_back(ScanList{period, 0, {}});
-                it = std::prev(scans_.end());
-            }
-            it->recs.push_back(r);
-        }
+        add_to_scan(*r);
+        if (r->poll_period_s() > 0) polls_.push_back({r, 0});
     }
+    // PINI: YES, then RUN and RUNNING (this IOC runs as soon as it is initialised), each in PHAS
+    // order (stable: load order within a phase), as iocInit's piniProcess.
+    Depth d(*this);
+    for (uint16_t when : {uint16_t(1), uint16_t(2)}) {
+        std::vector<Record*> pini;
+        for (Record* r : batch)
+            if ((when == 1 && r->pini == 1) || (when == 2 && (r->pini == 2 || r->pini == 3))) pini.push_back(r);
+        std::stable_sort(pini.begin(), pini.end(), [](Record* x, Record* y) { return x->phas < y->phas; });
+        for (Record* r : pini) process_record(*r);
+    }
+}
+
+void Database::resolve_links(const std::vector<Record*>& batch) {
+    ErrorList errs;
     for (Record* r : batch)
-        if (r->pini == 1) process(*r);
+        for (const FieldDesc& f : r->type().fields()) {
+            if (!is_link(f.dbf)) continue;
+            Link& l = field_ref<Link>(*r, f);
+            std::string why;
+            if (resolve_link(*r, f, l, &why)) continue;
+            std::string msg = SB() << "record " << r->name() << " field " << f.name << " \"" << l.text << "\": " << why;
+            if (!l.loc.file.empty()) errs.add(l.loc, msg);
+            else errs.add(msg);
+        }
+    errs.throw_if_any();
+}
+
+bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string* why) {
+    auto fail = [&](std::string m) {
+        if (why) *why = std::move(m);
+        return false;
+    };
+    l.target = nullptr;
+    l.target_field = nullptr;
+    l.device = nullptr;
+    switch (l.kind) {
+    case Link::Kind::Empty:
+    case Link::Kind::Constant: return true;
+    case Link::Kind::Hw: {
+        if (!binder_)
+            return fail(SB() << "the hardware address '@" << l.address
+                             << "' needs device support (DTYP), and this database has none");
+        LinkDevice* d = binder_(r, f, l, why);
+        if (!d) return false;
+        l.device = d;
+        return true;
+    }
+    case Link::Kind::Db: break;
+    }
+    Record* t = find(l.record);
+    if (!t) {
+        if (l.proc == Link::kCa || l.proc == Link::kCp || l.proc == Link::kCpp)
+            return fail(SB() << "no record '" << l.record
+                             << "' here; Channel Access links to other servers are not supported yet");
+        return fail(SB() << "no record '" << l.record << "' (a link to another server needs the CA modifier)");
+    }
+    std::string_view fname = l.field.empty() ? std::string_view("VAL") : std::string_view(l.field);
+    const FieldDesc* tf = t->type().find(fname);
+    if (!tf) {
+        if (f.dbf == Dbf::FwdLink) tf = t->type().find("PROC"); // FLNK "rec.X": the record is processed
+        if (!tf) return fail(SB() << "record " << t->name() << " (" << t->type().name() << ") has no field " << fname);
+    }
+    if (f.dbf == Dbf::OutLink) {
+        Address a;
+        a.rec = t;
+        a.field = tf;
+        if (!a.writable())
+            return fail(SB() << "field " << tf->name << " of record " << t->name()
+                             << (t->val_read_only && is_val(*tf) ? " is set by the system (one writer per output)"
+                                                                  : " is read-only"));
+    }
+    l.target = t;
+    l.target_field = tf;
+    if (f.dbf == Dbf::InLink && (l.proc == Link::kCp || l.proc == Link::kCpp)) {
+        auto w = std::make_unique<CpLinkWatch>(*this, r, f, l.proc == Link::kCpp);
+        w->addr.rec = t;
+        w->addr.field = tf;
+        w->mask = kDbeValue | kDbeAlarm;
+        subscribe(*w);
+        cp_watches_.push_back(std::move(w));
+    }
+    return true;
+}
+
+PutStatus Database::relink(Record& r, const FieldDesc& f, std::string_view text) {
+    Link fresh;
+    if (!parse_link(text, f.dbf, fresh, nullptr)) return PutStatus::BadValue;
+    // drop the CP watch of the old link
+    for (auto w = cp_watches_.begin(); w != cp_watches_.end(); ++w)
+        if (&(*w)->src() == &r && &(*w)->src_field() == &f) {
+            unsubscribe(**w);
+            cp_watches_.erase(w);
+            break;
+        }
+    Link& l = field_ref<Link>(r, f);
+    fresh.loc = l.loc;
+    if (!resolve_link(r, f, fresh, nullptr)) {
+        resolve_link(r, f, l, nullptr); // the old link stays, with its watch
+        return PutStatus::BadValue;
+    }
+    l = std::move(fresh);
+    return PutStatus::Ok;
+}
+
+void Database::add_to_scan(Record& r) {
+    auto by_phase = [&](std::vector<Record*>& v) {
+        auto at = std::upper_bound(v.begin(), v.end(), r.phas, [](int16_t p, Record* x) { return p < x->phas; });
+        v.insert(at, &r);
+    };
+    double period = scan_period(r.scan);
+    if (period > 0) {
+        auto it = std::find_if(scans_.begin(), scans_.end(), [&](const ScanList& s) { return s.period_s == period; });
+        if (it == scans_.end()) {
+            scans_.push_back(ScanList{period, 0, {}});
+            it = std::prev(scans_.end());
+        }
+        by_phase(it->recs);
+    } else if (r.scan == 1 && r.evnt[0]) {
+        by_phase(events_[std::string(r.evnt, strnlen(r.evnt, sizeof r.evnt))]);
+    }
+}
+
+void Database::remove_from_scan(Record& r) {
+    for (auto& s : scans_) s.recs.erase(std::remove(s.recs.begin(), s.recs.end(), &r), s.recs.end());
+    for (auto& [name, v] : events_) v.erase(std::remove(v.begin(), v.end(), &r), v.end());
 }
 
 Record* Database::find(std::string_view name) const {
@@ -317,10 +541,11 @@ uint32_t Database::get(const Address& a, Prim t, void* dest, uint32_t n) const {
 
 PutStatus Database::put(const Address& a, Prim t, const void* data, uint32_t n, PutCallback cb) {
     stats_.puts++;
-    if (!a.writable()) {
+    if (!a.writable() || (a.rec->disp && !is_named(*a.field, "DISP"))) {
         stats_.bad_puts++;
         return PutStatus::ReadOnly;
     }
+    Depth depth(*this);
     Record& r = *a.rec;
     if (cb && r.notify_ && (r.notify_->active || !r.notify_->queue.empty())) {
         // Another put-callback is in progress on this record: wait behind it (arrival order).
@@ -332,19 +557,26 @@ PutStatus Database::put(const Address& a, Prim t, const void* data, uint32_t n, 
     return do_put(a, t, data, n, std::move(cb));
 }
 
-PutStatus Database::do_put(const Address& a, Prim t, const void* data, uint32_t n, PutCallback cb) {
+PutStatus Database::store(const Address& a, Prim t, const void* data, uint32_t n) {
     Record& r = *a.rec;
     const FieldDesc& f = *a.field;
     const char* src = static_cast<const char*>(data);
     std::size_t esz = prim_size(t);
-    auto fail = [&](PutStatus st) {
-        stats_.bad_puts++;
-        if (cb) cb(st);
-        return st;
-    };
+    auto fail = [](PutStatus st) { return st; };
     if (n == 0) return fail(PutStatus::BadValue);
 
-    if (a.kind == Address::Kind::LongString) {
+    if (is_link(f.dbf)) { // a new link: parsed and resolved now, or refused (the old one stays)
+        char text[kStringSize];
+        if (t == Prim::String) {
+            copy_string(text, sizeof text, std::string_view(src, strnlen(src, kStringSize)));
+        } else if (t == Prim::Char) {
+            copy_string(text, sizeof text, std::string_view(src, strnlen(src, std::min<std::size_t>(n, sizeof text - 1))));
+        } else {
+            return fail(PutStatus::BadValue);
+        }
+        PutStatus st = relink(r, f, text);
+        if (st != PutStatus::Ok) return fail(st);
+    } else if (a.kind == Address::Kind::LongString) {
         // A char array written to a string field: up to the first NUL, truncated to the field.
         std::string s;
         for (uint32_t k = 0; k < n; ++k) {
@@ -402,20 +634,270 @@ PutStatus Database::do_put(const Address& a, Prim t, const void* data, uint32_t 
 
     bool val = is_val(f);
     if (val) r.udf = 0;
-    if (!val) post(r, &f, kDbeValue | kDbeLog);
+    if (!val || !(f.flags & kProcess)) post(r, &f, kDbeValue | kDbeLog); // VAL: processing posts it
     if (f.flags & kProp) post(r, nullptr, kDbeProperty);
-    if ((f.flags & kProcess) && !r.pact) {
+    if (is_named(f, "SCAN") || is_named(f, "PHAS") || is_named(f, "EVNT")) {
+        remove_from_scan(r);
+        add_to_scan(r);
+    }
+    return PutStatus::Ok;
+}
+
+PutStatus Database::do_put(const Address& a, Prim t, const void* data, uint32_t n, PutCallback cb) {
+    Record& r = *a.rec;
+    const FieldDesc& f = *a.field;
+    PutStatus st = store(a, t, data, n);
+    if (st != PutStatus::Ok) {
+        stats_.bad_puts++;
+        if (cb) cb(st);
+        return st;
+    }
+    // dbPutField: PROC always processes; another pp field only a Passive record. A record
+    // that is busy (asynchronous) is processed again when it completes (RPRO).
+    bool proc = is_named(f, "PROC") || ((f.flags & kProcess) && r.scan == 0);
+    if (proc && r.pact) {
+        r.rpro = 1;
+    } else if (proc) {
+        PutNotify* pn = nullptr;
         if (cb) {
             if (!r.notify_) r.notify_ = std::make_unique<NotifyState>();
             r.notify_->active = std::move(cb);
+            pn = new PutNotify;
+            pn->origin = &r;
         }
-        stats_.processes++;
-        if (r.process() == ProcessResult::Done && r.notify_ && r.notify_->active)
-            notify_complete(r, PutStatus::Ok);
+        PutNotify* outer = notify_;
+        notify_ = pn; // records this processing reaches join the put-callback
+        r.putf = 1;
+        process_record(r);
+        r.putf = 0;
+        notify_ = outer;
+        if (pn) {
+            pn->started = true;
+            if (pn->pending == 0) finish_notify(pn);
+        }
         return PutStatus::Ok;
     }
     if (cb) cb(PutStatus::Ok);
     return PutStatus::Ok;
+}
+
+void Database::finish_notify(PutNotify* pn) {
+    Record* origin = pn->origin;
+    PutStatus st = pn->status;
+    delete pn;
+    if (origin) notify_complete(*origin, st);
+}
+
+void Database::async_complete(Record& r, PutStatus st) {
+    if (r.in_process_) { // completed before process() returned: the processing is synchronous
+        r.done_in_process_ = true;
+        r.done_status_ = st;
+    }
+    if (PutNotify* pn = r.pn_) {
+        r.pn_ = nullptr;
+        if (st != PutStatus::Ok && pn->status == PutStatus::Ok) pn->status = st;
+        if (--pn->pending == 0 && pn->started) finish_notify(pn);
+    }
+}
+
+bool Database::disabled(Record& r) {
+    if (!r.sdis.empty() && !r.sdis.is_constant()) {
+        int16_t v = r.disa;
+        uint32_t got = 0;
+        if (link_get(r, r.sdis, Prim::Short, &v, 1, &got) && got) r.disa = v;
+    }
+    if (r.disa != r.disv) return false;
+    if (r.stat != kStatDisable || r.sevr != r.diss) {
+        r.nsta = 0;
+        r.nsev = 0;
+        r.stat = kStatDisable;
+        r.sevr = r.diss;
+        r.post("STAT", kDbeValue);
+        r.post("SEVR", kDbeValue);
+        if (const FieldDesc* v = r.type().find("VAL")) post(r, v, kDbeValue | kDbeAlarm);
+    }
+    return true;
+}
+
+void Database::process_record(Record& r) {
+    if (r.pact) { // busy (asynchronous, or a loop back to a record being processed): skipped
+        if (r.lcnt < 255) ++r.lcnt;
+        return;
+    }
+    r.lcnt = 0;
+    if (disabled(r)) return;
+    if (r.tpro) std::printf("%s: dbProcess of '%.*s'\n", notify_ ? "putNotify" : "scan", int(r.name().size()),
+                            r.name().data());
+    stats_.processes++;
+    r.in_process_ = true;
+    r.done_in_process_ = false;
+    ProcessResult res = r.process();
+    r.in_process_ = false;
+    if (res == ProcessResult::Async && !r.done_in_process_) {
+        if (notify_ && !r.pn_) { // the put-callback waits for this record too
+            r.pn_ = notify_;
+            ++notify_->pending;
+        }
+        return;
+    }
+    if (r.done_in_process_ && r.done_status_ != PutStatus::Ok && notify_ && notify_->status == PutStatus::Ok)
+        notify_->status = r.done_status_;
+    r.done_in_process_ = false;
+    if (res == ProcessResult::Done) { // recGblFwdLink (asynchronous records call fwd_link themselves)
+        uint8_t was = r.pact;
+        r.pact = 1; // a forward link back to this record does not process it again
+        link_forward(r, r.flnk);
+        r.pact = was;
+    }
+    if (r.rpro) {
+        r.rpro = 0;
+        scan_once(r);
+    }
+}
+
+void Database::scan_once(Record& r) {
+    once_.push_back(&r);
+    if (depth_ == 0) Depth d(*this); // nothing in progress: run it now
+}
+
+void Database::post_event(std::string_view name) {
+    auto it = events_.find(std::string(name));
+    if (it == events_.end()) return;
+    // As an event scan task: the records run after the processing that posted the event.
+    Depth d(*this);
+    for (Record* r : it->second) once_.push_back(r);
+}
+
+void Database::link_forward(Record& r, Link& l) {
+    (void)r;
+    if (l.kind != Link::Kind::Db || !l.target) return;
+    PutNotify* outer = notify_;
+    if (r.pn_) notify_ = r.pn_; // an asynchronous record's forward link belongs to its put-callback
+    if (l.target->scan == 0 || is_named(*l.target_field, "PROC")) process_record(*l.target);
+    notify_ = outer;
+}
+
+bool Database::link_get(Record& r, Link& l, Prim t, void* dest, uint32_t n, uint32_t* got) {
+    *got = 0;
+    switch (l.kind) {
+    case Link::Kind::Empty:
+    case Link::Kind::Constant: return true;
+    case Link::Kind::Hw: {
+        double v = 0;
+        if (!l.device || !l.device->read(v)) break;
+        Elements e{Dbf::Double, &v, 1, 1, 8};
+        get_element(r, kScratchDouble, e, 0, t, dest);
+        *got = 1;
+        return true;
+    }
+    case Link::Kind::Db: {
+        if (!l.target) break;
+        Record& tr = *l.target;
+        if (l.proc == Link::kPp && tr.scan == 0 && &tr != &r) process_record(tr);
+        Address a;
+        a.rec = &tr;
+        a.field = l.target_field;
+        a.native = native_prim(l.target_field->dbf);
+        a.count = (l.target_field->flags & kArray) ? tr.elements(*l.target_field).capacity : 1;
+        uint32_t c = get(a, t, dest, n);
+        *got = std::min(c, n);
+        r.inherit_sevr(l.ms, tr.stat, tr.sevr);
+        return true;
+    }
+    }
+    stats_.link_errors++;
+    r.set_sevr(kStatLink, kInvalid);
+    return false;
+}
+
+bool Database::link_put(Record& r, Link& l, Prim t, const void* src, uint32_t n) {
+    switch (l.kind) {
+    case Link::Kind::Empty:
+    case Link::Kind::Constant: return true;
+    case Link::Kind::Hw: {
+        double v = 0;
+        Elements e{Dbf::Double, &v, 1, 1, 8};
+        if (l.device && put_element(r, kScratchDouble, e, 0, t, src) && l.device->write(v)) return true;
+        break;
+    }
+    case Link::Kind::Db: {
+        if (!l.target) break;
+        Record& tr = *l.target;
+        const FieldDesc& tf = *l.target_field;
+        Address a;
+        a.rec = &tr;
+        a.field = &tf;
+        a.native = native_prim(tf.dbf);
+        a.count = (tf.flags & kArray) ? tr.elements(tf).capacity : 1;
+        if (!a.writable() || is_link(tf.dbf) || store(a, t, src, n) != PutStatus::Ok) break;
+        tr.inherit_sevr(l.ms, r.nsta, r.nsev);
+        if (is_named(tf, "PROC") || (l.proc == Link::kPp && tr.scan == 0)) process_record(tr);
+        return true;
+    }
+    }
+    stats_.link_errors++;
+    r.set_sevr(kStatLink, kInvalid);
+    return false;
+}
+
+bool Database::link_read(Record& r, Link& l, const FieldDesc& f) {
+    Elements e = r.elements(f);
+    uint32_t got = 0;
+    if (f.flags & kArray) {
+        Prim p = native_prim(e.type);
+        std::vector<char> buf(std::size_t(e.capacity) * prim_size(p));
+        if (!link_get(r, l, p, buf.data(), e.capacity, &got)) return false;
+        if (l.kind != Link::Kind::Db && l.kind != Link::Kind::Hw) return true;
+        for (uint32_t k = 0; k < got; ++k) put_element(r, f, e, k, p, buf.data() + std::size_t(k) * prim_size(p));
+        r.set_count(f, got);
+        return true;
+    }
+    Prim p = transfer_prim(f.dbf, l.target_field ? l.target_field->dbf : Dbf::Double);
+    alignas(8) char buf[kStringSize] = {};
+    if (!link_get(r, l, p, buf, 1, &got)) return false;
+    if (!got) return true;
+    if (put_element(r, f, e, 0, p, buf)) return true;
+    stats_.link_errors++;
+    r.set_sevr(kStatLink, kInvalid); // e.g. a string that is not a number
+    return false;
+}
+
+bool Database::link_read(Record& r, Link& l, double& v) {
+    Prim p = l.target_field && l.target_field->dbf == Dbf::String ? Prim::String : Prim::Double;
+    alignas(8) char buf[kStringSize] = {};
+    uint32_t got = 0;
+    if (!link_get(r, l, p, buf, 1, &got)) return false;
+    if (!got) return true;
+    if (p == Prim::Double) {
+        std::memcpy(&v, buf, sizeof v);
+        return true;
+    }
+    if (parse_double(buf, v)) return true;
+    stats_.link_errors++;
+    r.set_sevr(kStatLink, kInvalid);
+    return false;
+}
+
+bool Database::link_write(Record& r, Link& l, const FieldDesc& f) {
+    Elements e = r.elements(f);
+    if (f.flags & kArray) {
+        Prim p = native_prim(e.type);
+        std::vector<char> buf(std::size_t(std::max<uint32_t>(e.count, 1)) * prim_size(p));
+        for (uint32_t k = 0; k < e.count; ++k) get_element(r, f, e, k, p, buf.data() + std::size_t(k) * prim_size(p));
+        return link_put(r, l, p, buf.data(), std::max<uint32_t>(e.count, 1));
+    }
+    Prim p = transfer_prim(l.target_field ? l.target_field->dbf : Dbf::Double, f.dbf);
+    alignas(8) char buf[kStringSize] = {};
+    get_element(r, f, e, 0, p, buf);
+    return link_put(r, l, p, buf, 1);
+}
+
+bool Database::link_write(Record& r, Link& l, double v) {
+    Prim p = l.target_field && l.target_field->dbf == Dbf::String ? Prim::String : Prim::Double;
+    alignas(8) char buf[kStringSize] = {};
+    Elements e{Dbf::Double, &v, 1, 1, 8};
+    get_element(r, kScratchDouble, e, 0, p, buf);
+    return link_put(r, l, p, buf, 1);
 }
 
 void Database::notify_complete(Record& r, PutStatus st) {
@@ -433,9 +915,8 @@ void Database::notify_complete(Record& r, PutStatus st) {
 }
 
 void Database::process(Record& r) {
-    if (r.pact) return;
-    stats_.processes++;
-    r.process();
+    Depth d(*this);
+    process_record(r);
 }
 
 void Database::subscribe(Subscription& s) { s.addr.rec->subs_.push_back(&s); }
@@ -465,13 +946,36 @@ void Database::post(Record& r, const FieldDesc* f, unsigned mask) {
     }
 }
 
+void Database::call_after(Record& r, double seconds) {
+    delays_.push_back({&r, now_s_ + std::max(0.0, seconds)});
+}
+
 void Database::scan_periodic(double now_s) {
+    Depth d(*this);
+    now_s_ = now_s;
+    for (std::size_t i = 0; i < delays_.size();) { // in order of request; a callback may add more
+        if (delays_[i].next_s > now_s) {
+            ++i;
+            continue;
+        }
+        Record* r = delays_[i].rec;
+        delays_.erase(delays_.begin() + std::ptrdiff_t(i));
+        r->on_delay();
+    }
     for (auto& s : scans_) {
         if (s.next_s == 0) s.next_s = now_s;
         if (now_s < s.next_s) continue;
         s.next_s += s.period_s;
         if (s.next_s < now_s) s.next_s = now_s + s.period_s; // fell behind: skip, don't burst
-        for (Record* r : s.recs) process(*r);
+        // by index: processing may move a record to another list (a put to its SCAN)
+        for (std::size_t i = 0; i < s.recs.size(); ++i) process_record(*s.recs[i]);
+    }
+    for (std::size_t i = 0; i < polls_.size(); ++i) {
+        Poll& p = polls_[i];
+        if (now_s < p.next_s) continue;
+        double period = p.rec->poll_period_s();
+        p.next_s = p.next_s == 0 || p.next_s + period < now_s ? now_s + period : p.next_s + period;
+        p.rec->poll_tick();
     }
 }
 

@@ -62,9 +62,23 @@ struct NotifyState {
     std::deque<Queued> queue;
 };
 
+// One put-callback whose completion waits for every asynchronous record its processing reached
+// (through forward links and PP output links), as EPICS dbNotify.
+struct PutNotify {
+    Record* origin = nullptr; // the record the client wrote to; its NotifyState holds the callback
+    int pending = 0;          // asynchronous records still busy
+    bool started = false;     // the synchronous part of the processing has returned
+    PutStatus status = PutStatus::Ok;
+};
+
 struct DatabaseStats {
     uint64_t puts = 0, gets = 0, posts = 0, processes = 0, bad_puts = 0;
+    uint64_t link_errors = 0; // link reads/writes that failed (LINK alarm raised)
 };
+
+// Binds the hardware address of a link ("@ec0.s3.positionActual01") to a device; returns nullptr
+// with *why when it cannot. Called by init_records for every "@..." link.
+using LinkBinder = std::function<LinkDevice*(Record&, const FieldDesc&, Link&, std::string* why)>;
 
 class Database {
 public:
@@ -81,8 +95,11 @@ public:
     void add_alias(std::string_view record, std::string_view alias);
     // Removes a record: channels on it are told (they disconnect their clients).
     void remove(std::string_view name);
-    // Runs init() of records not yet initialised and processes those with PINI=YES.
+    // Resolves the links of records not yet initialised (every error at once, with file:line:col,
+    // as a MultiError), runs their init(), loads constant links, puts them on their scan lists and
+    // processes those with PINI YES/RUN/RUNNING in PHAS order.
     void init_records();
+    void set_link_binder(LinkBinder b) { binder_ = std::move(b); }
 
     Record* find(std::string_view name) const; // names and aliases
     std::size_t size() const { return records_.size(); }
@@ -102,6 +119,22 @@ public:
     uint32_t current_count(const Address& a) const;
     // Processes a record as a scan would (PROC=1).
     void process(Record& r);
+    // Processes the SCAN=Event records whose EVNT is `name`, in PHAS order (post_event).
+    void post_event(std::string_view name);
+    // Processes r once the current processing has ended (scanOnce; CP links use it).
+    void scan_once(Record& r);
+    // Calls r.on_delay() once `seconds` have passed on the clock of scan_periodic, counted from
+    // its last call (the owner calls it every 10 ms: delays have that resolution; tests drive it
+    // in virtual time).
+    void call_after(Record& r, double seconds);
+
+    // --- used by Record's link helpers and async_done() ---
+    bool link_read(Record& r, Link& l, const FieldDesc& f);
+    bool link_read(Record& r, Link& l, double& v);
+    bool link_write(Record& r, Link& l, const FieldDesc& f);
+    bool link_write(Record& r, Link& l, double v);
+    void link_forward(Record& r, Link& l);
+    void async_complete(Record& r, PutStatus st);
 
     void subscribe(Subscription& s);
     void unsubscribe(Subscription& s);
@@ -122,7 +155,26 @@ public:
 
 private:
     PutStatus do_put(const Address& a, Prim t, const void* data, uint32_t n, PutCallback cb);
+    // Stores a value into a field (conversion, special(), put_hook, UDF, monitors); no processing.
+    PutStatus store(const Address& a, Prim t, const void* data, uint32_t n);
     void apply_field(Record& rec, const DbField& f, const std::string& file);
+    // dbProcess: disable check, process(), forward link, put-callback bookkeeping.
+    void process_record(Record& r);
+    bool disabled(Record& r);
+    void resolve_links(const std::vector<Record*>& batch);
+    bool resolve_link(Record& r, const FieldDesc& f, Link& l, std::string* why);
+    PutStatus relink(Record& r, const FieldDesc& f, std::string_view text);
+    void add_to_scan(Record& r);
+    void remove_from_scan(Record& r);
+    void finish_notify(PutNotify* pn);
+    bool link_get(Record& r, Link& l, Prim t, void* dest, uint32_t n, uint32_t* got);
+    bool link_put(Record& r, Link& l, Prim t, const void* src, uint32_t n);
+    // Top-level entry points hold a Depth; the outermost one runs the scanOnce queue at its end.
+    struct Depth {
+        Database& db;
+        explicit Depth(Database& d) : db(d) { ++db.depth_; }
+        ~Depth();
+    };
 
     struct Hash {
         using is_transparent = void;
@@ -138,6 +190,19 @@ private:
         std::vector<Record*> recs;
     };
     std::vector<ScanList> scans_;
+    struct Poll {
+        Record* rec;
+        double next_s;
+    };
+    std::vector<Poll> polls_; // records that poll their device (Record::poll_period_s)
+    std::vector<Poll> delays_; // call_after: (record, when)
+    double now_s_ = 0;         // the last time scan_periodic was given
+    std::unordered_map<std::string, std::vector<Record*>> events_; // SCAN=Event by EVNT, PHAS order
+    std::deque<Record*> once_;                                       // scanOnce queue
+    int depth_ = 0;
+    PutNotify* notify_ = nullptr; // the put-callback the processing in progress belongs to
+    std::vector<std::unique_ptr<class CpLinkWatch>> cp_watches_;
+    LinkBinder binder_;
     DatabaseStats stats_;
 };
 

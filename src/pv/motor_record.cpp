@@ -9,10 +9,10 @@
 //   the record is never "pact" between calls, so STOP and new targets are processed while a
 //   motion is in progress (as the motor record must be: see the comment above process() in
 //   motorRecord.cc), and a put-callback on VAL completes only when the motion is done.
-// - Polling: the motor type's SCAN field is stored in its own member; the Record::scan the
-//   database reads in init_records() is set to ".1 second" by init(), so Database::scan_periodic
-//   processes every motor record every 0.1 s (the fastest period the scan lists have). Processing
-//   with nothing written is a status poll. Clients still read and write the SCAN they configured.
+// - Polling: the motor type's SCAN field is stored in its own member and Record::scan stays
+//   Passive (so puts, PP links and forward links process the record); the database calls
+//   poll_tick() every 0.1 s (poll_period_s), which processes the record as a status poll.
+//   Clients still read and write the SCAN they configured.
 // - Units: the driver speaks dial EGU; RRBV = NINT(dial/MRES) and DRBV = RRBV*MRES as in the
 //   record (or REP*ERES with UEIP=Yes); targets go to the driver in dial EGU, unrounded.
 //
@@ -324,7 +324,8 @@ public:
     int32_t lrvl = 0;
     uint16_t rstm = kRstmNearZero;
     char out_text[64] = {};
-    uint16_t scan_field = 0; // SCAN as clients see it (Record::scan drives the polling)
+    uint16_t scan_field = 0; // SCAN as clients see it (the record is polled by poll_tick)
+    bool processing_ = false; // inside process()
 
     static std::vector<FieldDesc> fields();
 
@@ -369,8 +370,15 @@ public:
     void init() override;
     ProcessResult process() override {
         if (!initialised_) return ProcessResult::Done;
+        processing_ = true;
         run(true);
+        processing_ = false;
         return ProcessResult::Async; // completion reported by run() through async_done()
+    }
+    // Every 0.1 s the database polls the record: status, motion, and what waits for it.
+    double poll_period_s() const override { return 0.1; }
+    void poll_tick() override {
+        if (initialised_ && !pact) run(true);
     }
     PutStatus special(const FieldDesc& f) override;
     int16_t precision(const FieldDesc& f) const override {
@@ -650,7 +658,7 @@ void MotorRecordImpl::init() {
     resync();
     valid_seen_ = s.valid;
     initialised_ = true;
-    scan = 9;  // ".1 second": Database::scan_periodic processes (= polls) this record
+    scan = 0;  // Passive for the database (puts and links process it); polled by poll_tick()
     publish(); // alarms to NO_ALARM; nobody subscribes yet
 }
 
@@ -1171,6 +1179,7 @@ void MotorRecordImpl::publish() {
 }
 
 void MotorRecordImpl::run(bool work) {
+    bool was_done = dmov != 0;
     pact = 1;
     refresh();
     if (st_.valid && !valid_seen_) { // the first real readback: the targets start there
@@ -1180,6 +1189,8 @@ void MotorRecordImpl::run(bool work) {
     track(clock_());
     if (work) do_work();
     publish();
+    // the forward link when a motion ends, or a processing (a put, PROC) ends with nothing to move
+    if (dmov && (!was_done || processing_)) fwd_link(flnk);
     pact = 0;
     // completes a put-callback waiting for the end of the motion, failed if the motion was
     // refused or ended short

@@ -1,6 +1,7 @@
 #include "pv/record.hpp"
 
 #include "core/error.hpp"
+#include "pv/convert.hpp"
 #include "pv/database.hpp"
 #include "pv/motor_record.hpp"
 
@@ -30,6 +31,8 @@ const Menu kMenuOmsl{"menuOmsl", {"supervisory", "closed_loop"}};
 const Menu kMenuIvoa{"menuIvoa",
                      {"Continue normally", "Don't drive outputs", "Set output to IVOV"}};
 const Menu kMenuSoftDtyp{"DTYP", {"Soft Channel"}};
+const Menu kMenuPriority{"menuPriority", {"LOW", "MEDIUM", "HIGH"}};
+const Menu kMenuOif{"aoOIF", {"Full", "Incremental"}};
 
 void copy_string(char* dst, std::size_t size, std::string_view src) {
     std::size_t n = std::min(src.size(), size - 1);
@@ -57,6 +60,7 @@ RecordTypes& RecordTypes::global() {
     static RecordTypes* types = [] {
         auto* t = new RecordTypes;
         register_standard_records(*t);
+        register_logic_records(*t);
         register_motor_record(*t);
         return t;
     }();
@@ -93,9 +97,14 @@ std::vector<FieldDesc> Record::common_fields() {
         BEAMCTL_MENU(R, SCAN, scan, kMenuScan, 0),
         BEAMCTL_MENU(R, PINI, pini, kMenuPini, 0),
         BEAMCTL_FIELD(R, PHAS, phas, Short, 0),
+        BEAMCTL_FIELD(R, EVNT, evnt, String, 0),
+        BEAMCTL_FIELD(R, TSE, tse, Short, 0),
+        BEAMCTL_FIELD(R, TSEL, tsel, InLink, 0),
         BEAMCTL_MENU(R, DTYP, dtyp, kMenuSoftDtyp, kInitOnly),
         BEAMCTL_FIELD(R, DISV, disv, Short, 0),
         BEAMCTL_FIELD(R, DISA, disa, Short, 0),
+        BEAMCTL_FIELD(R, SDIS, sdis, InLink, 0),
+        BEAMCTL_FIELD(R, DISP, disp, UChar, 0),
         BEAMCTL_MENU(R, DISS, diss, kMenuAlarmSevr, 0),
         BEAMCTL_FIELD(R, PROC, proc, UChar, kProcess | kAsl0),
         BEAMCTL_MENU(R, STAT, stat, kMenuAlarmStat, kReadOnly),
@@ -106,8 +115,13 @@ std::vector<FieldDesc> Record::common_fields() {
         BEAMCTL_MENU(R, ACKT, ackt, kMenuYesNo, 0),
         BEAMCTL_FIELD(R, UDF, udf, UChar, kProcess),
         BEAMCTL_MENU(R, UDFS, udfs, kMenuAlarmSevr, 0),
+        BEAMCTL_FIELD(R, LCNT, lcnt, UChar, kReadOnly),
         BEAMCTL_FIELD(R, PACT, pact, UChar, kReadOnly),
+        BEAMCTL_FIELD(R, PUTF, putf, UChar, kReadOnly),
+        BEAMCTL_FIELD(R, RPRO, rpro, UChar, kReadOnly),
+        BEAMCTL_MENU(R, PRIO, prio, kMenuPriority, 0),
         BEAMCTL_FIELD(R, TPRO, tpro, UChar, 0),
+        BEAMCTL_FIELD(R, FLNK, flnk, FwdLink, 0),
     };
 }
 
@@ -194,7 +208,67 @@ void Record::post(const char* field, unsigned mask) {
 
 void Record::async_done(PutStatus st) {
     pact = 0;
-    if (db_) db_->notify_complete(*this, st);
+    if (db_) db_->async_complete(*this, st);
+}
+
+void Record::call_after(double seconds) {
+    if (db_) db_->call_after(*this, seconds);
+}
+
+void Record::stamp_time() {
+    if (tse == -2) return;
+    if (tsel.kind == Link::Kind::Db && tsel.target) {
+        time = tsel.target->time;
+        return;
+    }
+    time = EpicsTime::now();
+}
+
+void Record::inherit_sevr(uint8_t ms, uint16_t new_stat, uint16_t new_sevr) {
+    switch (ms) {
+    case Link::kMsi:
+        if (new_sevr < kInvalid) break;
+        [[fallthrough]];
+    case Link::kMs: set_sevr(kStatLink, new_sevr); break;
+    case Link::kMss: set_sevr(new_stat, new_sevr); break;
+    default: break;
+    }
+}
+
+bool Record::read_link(Link& l, const FieldDesc& f) { return db_ ? db_->link_read(*this, l, f) : l.kind != Link::Kind::Db; }
+bool Record::read_link(Link& l, double& v) { return db_ ? db_->link_read(*this, l, v) : l.kind != Link::Kind::Db; }
+bool Record::write_link(Link& l, const FieldDesc& f) { return db_ ? db_->link_write(*this, l, f) : l.kind != Link::Kind::Db; }
+bool Record::write_link(Link& l, double v) { return db_ ? db_->link_write(*this, l, v) : l.kind != Link::Kind::Db; }
+void Record::fwd_link(Link& l) {
+    if (db_) db_->link_forward(*this, l);
+}
+
+bool Record::load_constant(const Link& l, double& v) {
+    if (l.kind != Link::Kind::Constant) return false;
+    if (!l.numbers.empty()) {
+        v = l.numbers[0];
+        return true;
+    }
+    if (l.is_string_constant) return parse_double(l.string_constant, v);
+    return false;
+}
+
+bool Record::load_constant(const Link& l, const FieldDesc& f) {
+    if (l.kind != Link::Kind::Constant) return false;
+    Elements e = elements(f);
+    if (l.is_string_constant && l.numbers.empty()) {
+        char buf[kStringSize];
+        copy_string(buf, sizeof buf, l.string_constant);
+        return put_element(*this, f, e, 0, Prim::String, buf);
+    }
+    if (l.numbers.empty()) return false;
+    if (f.flags & kArray) {
+        uint32_t n = std::min<uint32_t>(uint32_t(l.numbers.size()), e.capacity);
+        for (uint32_t k = 0; k < n; ++k) put_element(*this, f, e, k, Prim::Double, &l.numbers[k]);
+        set_count(f, n);
+        return true;
+    }
+    return put_element(*this, f, e, 0, Prim::Double, &l.numbers[0]);
 }
 
 } // namespace beamctl::pv

@@ -3,6 +3,7 @@
 // Threading: records are owned by one Database and touched only on its thread (the IOC loop).
 #pragma once
 
+#include "pv/link.hpp"
 #include "pv/types.hpp"
 
 #include <cmath>
@@ -26,7 +27,7 @@ struct Menu {
     std::vector<const char*> choices;
 };
 extern const Menu kMenuScan, kMenuPini, kMenuAlarmSevr, kMenuAlarmStat, kMenuYesNo, kMenuFtype,
-    kMenuPostOnChange, kMenuPostAlways, kMenuOmsl, kMenuIvoa, kMenuSoftDtyp;
+    kMenuPostOnChange, kMenuPostAlways, kMenuOmsl, kMenuIvoa, kMenuSoftDtyp, kMenuPriority, kMenuOif;
 
 enum FieldFlag : uint16_t {
     kReadOnly = 1 << 0, // SPC_NOMOD: never writable (not even from a .db file)
@@ -91,6 +92,7 @@ private:
     std::unordered_map<std::string, std::unique_ptr<RecordType>> types_;
 };
 void register_standard_records(RecordTypes& types); // ai ao bi bo longin ... waveform
+void register_logic_records(RecordTypes& types);    // calc calcout seq fanout dfanout sel event
 
 // A view of a field's elements: scalars have count == capacity == 1.
 struct Elements {
@@ -150,19 +152,54 @@ public:
     virtual void metadata(const FieldDesc& f, Metadata& md) const;
     // Precision used to format a float/double field as a string (PREC).
     virtual int16_t precision(const FieldDesc& f) const;
+    // A record that polls its device (the motor record) returns its period; the database then
+    // calls poll_tick() that often, independent of SCAN.
+    virtual double poll_period_s() const { return 0; }
+    virtual void poll_tick() {}
+    // A delay the record asked for with call_after() has passed (calcout ODLY, seq DLYn).
+    virtual void on_delay() {}
+    // Asks the database to call on_delay() after `seconds` of its clock (scan_periodic's time).
+    void call_after(double seconds);
 
     // --- alarm helpers (recGbl) ---
     // Raises the new alarm if `sevr` is above the pending one (recGblSetSevr).
     bool set_sevr(uint16_t stat, uint16_t sevr);
     // Moves the pending alarm into STAT/SEVR, posts them; returns DBE_ALARM if they changed.
     unsigned reset_alarms();
-    void stamp_time() { time = EpicsTime::now(); }
+    // The record's timestamp: now, or TSEL's record's (a database link), or left to device
+    // support (TSE -2).
+    void stamp_time();
     // Posts a monitor event on field `f` (nullptr: every field, for DBE_PROPERTY).
     void post(const FieldDesc* f, unsigned mask);
     void post(const char* field, unsigned mask);
-    // An Async process() ends: completes put-callbacks waiting on this record.
+    // An Async process() ends: completes put-callbacks waiting on this record (and the
+    // put-callback of a record whose processing led here). Forward links of an asynchronous
+    // record are its own job: call fwd_link(flnk) first, as recGblFwdLink.
     void async_done(PutStatus st = PutStatus::Ok);
     bool busy() const { return pact; }
+
+    // --- links (dbGetLink, dbPutLink, dbScanFwdLink), for process() of record types ---
+    // Reads link l into field f of this record (an array field: as many elements as fit, NORD
+    // set). An empty or constant link reads nothing (constants are loaded at init by
+    // load_constant) and returns true. A database link with PP processes a Passive target first;
+    // MS/MSS/MSI raise this record's pending alarm from the target's. Returns false when no value
+    // could be read (this record's pending alarm is then LINK/INVALID).
+    bool read_link(Link& l, const FieldDesc& f);
+    bool read_link(Link& l, double& v);
+    // Writes field f of this record (or v) through link l: PP processes a Passive target, a link
+    // to PROC always processes it; MS/MSS/MSI give the target this record's pending alarm.
+    // Returns false if refused (this record's pending alarm is then LINK/INVALID).
+    bool write_link(Link& l, const FieldDesc& f);
+    bool write_link(Link& l, double v);
+    // Loads a constant link into field f (or v), at init; true if the link held a value.
+    bool load_constant(const Link& l, const FieldDesc& f);
+    bool load_constant(const Link& l, double& v);
+    // Processes the target of a forward link if it is Passive (FLNK, LNKn of seq/fanout).
+    void fwd_link(Link& l);
+    // recGblInheritSevr: raise the pending alarm from another record's by an MS mode.
+    void inherit_sevr(uint8_t ms, uint16_t stat, uint16_t sevr);
+    // Field descriptor by name (nullptr if the type has none).
+    const FieldDesc* field(std::string_view name) const { return type_.find(name); }
 
     // Set by the code that owns a record's value (a bus, an axis): called after a client's put was
     // stored and accepted by special(), before processing. Returning other than Ok refuses the put
@@ -182,6 +219,14 @@ public:
     uint16_t stat = kStatUdf, sevr = kInvalid, nsta = 0, nsev = 0, acks = 0, ackt = 1;
     uint16_t udfs = kInvalid;
     EpicsTime time;
+    char evnt[40] = {};  // event name for SCAN=Event
+    int16_t tse = 0;     // time stamp event (0: now; -2: set by device support)
+    Link tsel;           // time stamp link
+    Link sdis;           // disable link: read into DISA before processing
+    uint8_t disp = 0;    // 1: puts from clients to fields other than DISP are refused
+    uint8_t putf = 0, rpro = 0, lcnt = 0;
+    uint16_t prio = 0;   // scan priority LOW/MEDIUM/HIGH (one scan thread here: informational)
+    Link flnk;           // forward link: processed after this record
 
     static std::vector<FieldDesc> common_fields(); // dbCommon part of every type's table
 
@@ -194,6 +239,11 @@ private:
     std::unique_ptr<struct NotifyState> notify_;   // put-callback in progress and queued ones
     std::vector<std::pair<std::string, std::string>> info_; // info(name, "value") items
     std::vector<std::string> aliases_;
+    // processing bookkeeping (Database::process_record)
+    struct PutNotify* pn_ = nullptr; // the put-callback this record's async completion belongs to
+    bool in_process_ = false;        // inside process()
+    bool done_in_process_ = false;   // async_done() was called inside process()
+    PutStatus done_status_ = PutStatus::Ok;
 };
 
 // Helpers for record implementations.

@@ -3,6 +3,7 @@
 // record support (checkAlarms, monitor, convert) so clients see what a softIoc would show.
 #include "core/error.hpp"
 #include "pv/record.hpp"
+#include "pv/record_support.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -10,163 +11,31 @@
 
 namespace beamctl::pv {
 namespace {
-
-// recGblCheckDeadband: adds `bit` to mask and updates *last when |new - last| > deadband.
-void check_deadband(double& last, double v, double deadband, unsigned& mask, unsigned bit) {
-    double delta = 0;
-    if (std::isfinite(v) && std::isfinite(last)) {
-        delta = std::fabs(last - v);
-    } else if (std::isnan(v) != std::isnan(last) || std::isinf(v) != std::isinf(last)) {
-        delta = INFINITY;
-    } else if (std::isinf(v) && v != last) {
-        delta = INFINITY;
-    }
-    if (delta > deadband) {
-        mask |= bit;
-        last = v;
-    }
-}
-
-void check_deadband_int(int32_t& last, int32_t v, int32_t deadband, unsigned& mask, unsigned bit) {
-    int64_t delta = int64_t(last) - int64_t(v);
-    if (delta < 0) delta = -delta;
-    if (deadband < 0 || delta > int64_t(deadband)) {
-        mask |= bit;
-        last = v;
-    }
-}
-
-// aiRecord-style limit alarms with hysteresis; T is double or int32.
-template <typename T>
-void limit_alarms(Record& r, T val, T hihi, T high, T low, T lolo, uint16_t hhsv, uint16_t hsv,
-                  uint16_t lsv, uint16_t llsv, T hyst, T& lalm) {
-    if (r.udf) {
-        r.set_sevr(kStatUdf, r.udfs);
-        return;
-    }
-    T alev;
-    uint16_t asev, astat;
-    if ((asev = hhsv) && (val >= (alev = hihi) || (lalm == alev && val >= alev - hyst)))
-        astat = kStatHihi;
-    else if ((asev = llsv) && (val <= (alev = lolo) || (lalm == alev && val <= alev + hyst)))
-        astat = kStatLolo;
-    else if ((asev = hsv) && (val >= (alev = high) || (lalm == alev && val >= alev - hyst)))
-        astat = kStatHigh;
-    else if ((asev = lsv) && (val <= (alev = low) || (lalm == alev && val <= alev + hyst)))
-        astat = kStatLow;
-    else {
-        alev = val;
-        asev = kNoAlarm;
-        astat = kStatNone;
-    }
-    if (asev) {
-        if (r.set_sevr(astat, asev)) lalm = alev;
-    } else {
-        lalm = val;
-    }
-}
-
-// Binary/multi-bit state alarms with change-of-state (biRecord/mbbiRecord checkAlarms).
-void state_alarms(Record& r, uint16_t val, uint16_t nstates, const uint16_t* state_sevr,
-                  uint16_t unsv, uint16_t cosv, uint16_t& lalm) {
-    if (r.udf) {
-        r.set_sevr(kStatUdf, r.udfs);
-        return;
-    }
-    if (val >= nstates)
-        r.set_sevr(kStatState, unsv);
-    else
-        r.set_sevr(kStatState, state_sevr[val]);
-    if (val == lalm) return;
-    r.set_sevr(kStatCos, cosv);
-    lalm = val;
-}
-
-void fill_limits(Metadata& md, double hopr, double lopr, double chi, double clo) {
-    md.disp_hi = hopr;
-    md.disp_lo = lopr;
-    md.ctrl_hi = chi;
-    md.ctrl_lo = clo;
-}
-
-bool is(const FieldDesc& f, const char* n) { return std::strcmp(f.name, n) == 0; }
-
-constexpr uint16_t kVal = kProcess | kAsl0;
-constexpr uint16_t kLim = kProcess | kProp | kEgu | kDisplayHopr; // alarm limits (pp, metadata)
-constexpr uint16_t kMeta = kProp;                                  // metadata, no processing
-
-// ---------------------------------------------------------------- analog (ai, ao)
-template <typename Self> struct AnalogBase : Record {
-    using Record::Record;
-    double val = 0;
-    int16_t prec = 0;
-    char egu[16] = {};
-    double hopr = 0, lopr = 0;
-    double hihi = 0, high = 0, low = 0, lolo = 0;
-    uint16_t hhsv = 0, hsv = 0, lsv = 0, llsv = 0;
-    double hyst = 0, mdel = 0, adel = 0;
-    double lalm = 0, alst = 0, mlst = 0;
-
-    static std::vector<FieldDesc> analog_fields(std::vector<FieldDesc> v) {
-        using R = Self;
-        auto add = {
-            BEAMCTL_FIELD(R, VAL, val, Double, kVal | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, PREC, prec, Short, kMeta),
-            BEAMCTL_FIELD(R, EGU, egu, String, kMeta),
-            BEAMCTL_FIELD(R, HOPR, hopr, Double, kMeta | kEgu),
-            BEAMCTL_FIELD(R, LOPR, lopr, Double, kMeta | kEgu),
-            BEAMCTL_FIELD(R, HIHI, hihi, Double, kLim),
-            BEAMCTL_FIELD(R, HIGH, high, Double, kLim),
-            BEAMCTL_FIELD(R, LOW, low, Double, kLim),
-            BEAMCTL_FIELD(R, LOLO, lolo, Double, kLim),
-            BEAMCTL_MENU(R, HHSV, hhsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_MENU(R, HSV, hsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_MENU(R, LSV, lsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_MENU(R, LLSV, llsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_FIELD(R, HYST, hyst, Double, kEgu),
-            BEAMCTL_FIELD(R, MDEL, mdel, Double, kEgu),
-            BEAMCTL_FIELD(R, ADEL, adel, Double, kEgu),
-            BEAMCTL_FIELD(R, LALM, lalm, Double, kReadOnly | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, ALST, alst, Double, kReadOnly | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, MLST, mlst, Double, kReadOnly | kEgu | kDisplayHopr),
-        };
-        v.insert(v.end(), add.begin(), add.end());
-        return v;
-    }
-
-    void analog_alarms() {
-        limit_alarms<double>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm);
-    }
-    unsigned analog_monitor_mask() {
-        unsigned mask = reset_alarms();
-        check_deadband(mlst, val, mdel, mask, kDbeValue);
-        check_deadband(alst, val, adel, mask, kDbeLog);
-        return mask;
-    }
-    int16_t precision(const FieldDesc& f) const override {
-        if (is(f, "VAL")) return prec;
-        if (f.dbf == Dbf::Float || f.dbf == Dbf::Double) return (prec < 0 || prec > 15) ? 15 : prec;
-        return 0;
-    }
-    void analog_metadata(const FieldDesc& f, Metadata& md, double chi, double clo) const {
-        Record::metadata(f, md);
-        if (f.flags & kEgu) md.units = egu;
-        if (f.flags & kDisplayHopr) fill_limits(md, hopr, lopr, chi, clo);
-        if (is(f, "VAL")) {
-            md.alarm_hihi = hhsv ? hihi : NAN;
-            md.alarm_high = hsv ? high : NAN;
-            md.alarm_low = lsv ? low : NAN;
-            md.alarm_lolo = llsv ? lolo : NAN;
-        }
-    }
-};
+using namespace support;
 
 struct AiRecord : AnalogBase<AiRecord> {
     using AnalogBase::AnalogBase;
+    Link inp;
+    double smoo = 0;
+    bool smoothed = false; // a value was read before (smoothing starts from the second)
     const FieldDesc* val_fd = type().find("VAL");
-    static std::vector<FieldDesc> fields() { return analog_fields(common_fields()); }
+    static std::vector<FieldDesc> fields() {
+        using R = AiRecord;
+        auto v = analog_fields(common_fields());
+        auto add = {BEAMCTL_FIELD(R, INP, inp, InLink, 0), BEAMCTL_FIELD(R, SMOO, smoo, Double, 0)};
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void init() override {
+        if (load_constant(inp, *val_fd)) udf = std::isnan(val);
+    }
     ProcessResult process() override {
         pact = 1;
+        double before = val;
+        if (soft_read(*this, inp, *val_fd)) { // devAiSoft: the value, smoothed by SMOO
+            if (smoo != 0 && smoothed && std::isfinite(before)) val = val * (1 - smoo) + before * smoo;
+            smoothed = true;
+        }
         stamp_time();
         udf = std::isnan(val); // aiRecord: soft channel with a constant input defines VAL
         analog_alarms();
@@ -181,7 +50,9 @@ struct AiRecord : AnalogBase<AiRecord> {
 
 struct AoRecord : AnalogBase<AoRecord> {
     using AnalogBase::AnalogBase;
-    double oval = 0, drvh = 0, drvl = 0, oroc = 0, pval = 0;
+    double oval = 0, drvh = 0, drvl = 0, oroc = 0, pval = 0, ivov = 0;
+    Link dol, out;
+    uint16_t omsl = 0, oif = 0, ivoa = 0;
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* oval_fd = type().find("OVAL");
     static std::vector<FieldDesc> fields() {
@@ -193,12 +64,28 @@ struct AoRecord : AnalogBase<AoRecord> {
             BEAMCTL_FIELD(R, DRVH, drvh, Double, kProcess | kProp | kEgu),
             BEAMCTL_FIELD(R, DRVL, drvl, Double, kProcess | kProp | kEgu),
             BEAMCTL_FIELD(R, OROC, oroc, Double, kEgu),
+            BEAMCTL_FIELD(R, DOL, dol, InLink, 0),
+            BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
+            BEAMCTL_MENU(R, OIF, oif, kMenuOif, 0),
+            BEAMCTL_FIELD(R, OUT, out, OutLink, 0),
+            BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
+            BEAMCTL_FIELD(R, IVOV, ivov, Double, 0),
         };
         v.insert(v.end(), add.begin(), add.end());
         return v;
     }
+    void init() override {
+        if (load_constant(dol, *val_fd)) udf = std::isnan(val);
+    }
     ProcessResult process() override {
         pact = 1;
+        if (omsl == 1 && (dol.is_db() || dol.kind == Link::Kind::Hw)) { // closed_loop: VAL from DOL
+            double v = 0;
+            if (read_link(dol, v)) {
+                val = oif == 1 ? val + v : v; // Incremental adds to VAL
+                udf = std::isnan(val);
+            }
+        }
         double value = val;
         if (drvh > drvl) value = std::clamp(value, drvl, drvh);
         val = value;
@@ -210,8 +97,9 @@ struct AoRecord : AnalogBase<AoRecord> {
             else if (diff > oroc) value = prev + oroc;
         }
         oval = value;
-        stamp_time();
         analog_alarms();
+        soft_write(*this, out, *oval_fd, ivoa, [this] { oval = ivov; });
+        stamp_time();
         if (unsigned m = analog_monitor_mask()) post(val_fd, m);
         if (oval != prev) post(oval_fd, kDbeValue | kDbeLog);
         pact = 0;
@@ -232,6 +120,9 @@ template <typename Self> struct LongBase : Record {
     uint16_t hhsv = 0, hsv = 0, lsv = 0, llsv = 0;
     int32_t hyst = 0, mdel = 0, adel = 0;
     int32_t lalm = 0, alst = 0, mlst = 0;
+    Link inp, dol, out; // Soft Channel: longin INP; longout DOL (OMSL closed_loop) and OUT
+    uint16_t omsl = 0, ivoa = 0;
+    int32_t ivov = 0;
     const FieldDesc* val_fd = type().find("VAL");
 
     static std::vector<FieldDesc> long_fields(std::vector<FieldDesc> v) {
@@ -259,9 +150,14 @@ template <typename Self> struct LongBase : Record {
         v.insert(v.end(), add.begin(), add.end());
         return v;
     }
-    void long_process() {
-        stamp_time();
+    void init() override {
+        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
+    }
+    void long_process(bool output) {
+        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
         limit_alarms<int32_t>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm);
+        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { val = ivov; });
+        stamp_time();
         unsigned mask = reset_alarms();
         check_deadband_int(mlst, val, mdel, mask, kDbeValue);
         check_deadband_int(alst, val, adel, mask, kDbeLog);
@@ -282,10 +178,15 @@ template <typename Self> struct LongBase : Record {
 
 struct LonginRecord : LongBase<LonginRecord> {
     using LongBase::LongBase;
-    static std::vector<FieldDesc> fields() { return long_fields(common_fields()); }
+    static std::vector<FieldDesc> fields() {
+        using R = LonginRecord;
+        auto v = long_fields(common_fields());
+        v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        return v;
+    }
     ProcessResult process() override {
         pact = 1;
-        long_process();
+        long_process(false);
         pact = 0;
         return ProcessResult::Done;
     }
@@ -303,14 +204,20 @@ struct LongoutRecord : LongBase<LongoutRecord> {
         auto add = {
             BEAMCTL_FIELD(R, DRVH, drvh, Long, kProcess | kProp | kEgu),
             BEAMCTL_FIELD(R, DRVL, drvl, Long, kProcess | kProp | kEgu),
+            BEAMCTL_FIELD(R, DOL, dol, InLink, 0),
+            BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
+            BEAMCTL_FIELD(R, OUT, out, OutLink, 0),
+            BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
+            BEAMCTL_FIELD(R, IVOV, ivov, Long, 0),
         };
         v.insert(v.end(), add.begin(), add.end());
         return v;
     }
     ProcessResult process() override {
         pact = 1;
+        if (omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
         if (drvh > drvl) val = std::clamp(val, drvl, drvh);
-        long_process();
+        long_process(true);
         pact = 0;
         return ProcessResult::Done;
     }
@@ -327,6 +234,8 @@ template <typename Self> struct BinaryBase : Record {
     uint16_t zsv = 0, osv = 0, cosv = 0;
     uint32_t rval = 0, mask = 0;
     uint16_t lalm = 0, mlst = 0;
+    Link inp, dol, out; // Soft Channel: bi INP; bo DOL (OMSL closed_loop) and OUT
+    uint16_t omsl = 0, ivoa = 0, ivov = 0;
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* rval_fd = type().find("RVAL");
 
@@ -357,13 +266,22 @@ template <typename Self> struct BinaryBase : Record {
         out[1] = onam;
         return 2;
     }
+    void init() override {
+        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
+    }
     void binary_process(bool output) {
-        stamp_time();
         uint32_t old_rval = rval;
+        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
+        if (output && omsl == 1 && soft_read(*this, dol, *val_fd)) {
+            if (val > 1) val = 1; // boRecord: any non-zero DOL value is 1
+            udf = 0;
+        }
         if (output) rval = mask ? (val ? mask : 0) : val;
         else if (rval != old_rval) val = rval ? 1 : 0;
         const uint16_t sevr_of[2] = {zsv, osv};
         state_alarms(*this, val, 2, sevr_of, kNoAlarm, cosv, lalm);
+        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { val = ivov ? 1 : 0; });
+        stamp_time();
         unsigned m = reset_alarms();
         if (mlst != val) {
             m |= kDbeValue | kDbeLog;
@@ -376,7 +294,12 @@ template <typename Self> struct BinaryBase : Record {
 
 struct BiRecord : BinaryBase<BiRecord> {
     using BinaryBase::BinaryBase;
-    static std::vector<FieldDesc> fields() { return binary_fields(common_fields()); }
+    static std::vector<FieldDesc> fields() {
+        using R = BiRecord;
+        auto v = binary_fields(common_fields());
+        v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        return v;
+    }
     ProcessResult process() override {
         pact = 1;
         binary_process(false);
@@ -387,7 +310,17 @@ struct BiRecord : BinaryBase<BiRecord> {
 
 struct BoRecord : BinaryBase<BoRecord> {
     using BinaryBase::BinaryBase;
-    static std::vector<FieldDesc> fields() { return binary_fields(common_fields()); }
+    static std::vector<FieldDesc> fields() {
+        using R = BoRecord;
+        auto v = binary_fields(common_fields());
+        auto add = {
+            BEAMCTL_FIELD(R, DOL, dol, InLink, 0), BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
+            BEAMCTL_FIELD(R, OUT, out, OutLink, 0), BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
+            BEAMCTL_FIELD(R, IVOV, ivov, UShort, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
     ProcessResult process() override {
         pact = 1;
         binary_process(true);
@@ -413,6 +346,8 @@ template <typename Self> struct MbbBase : Record {
     int16_t nobt = 0, shft = 0;
     uint16_t lalm = 0, mlst = 0;
     uint8_t sdef = 0;
+    Link inp, dol, out; // Soft Channel: mbbi INP; mbbo DOL (OMSL closed_loop) and OUT
+    uint16_t omsl = 0, ivoa = 0, ivov = 0;
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* rval_fd = type().find("RVAL");
 
@@ -441,7 +376,10 @@ template <typename Self> struct MbbBase : Record {
         v.insert(v.end(), add.begin(), add.end());
         return v;
     }
-    void init() override { update_sdef(); }
+    void init() override {
+        update_sdef();
+        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
+    }
     void update_sdef() {
         sdef = 0;
         for (int i = 0; i < 16; ++i)
@@ -462,10 +400,13 @@ template <typename Self> struct MbbBase : Record {
         return n;
     }
     void mbb_process(bool output) {
-        stamp_time();
         uint32_t old_rval = rval;
+        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
+        if (output && omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
         if (output) rval = sdef ? (val < 16 ? vals[val] : 0) : val;
         state_alarms(*this, val, 16, sevs, unsv, cosv, lalm);
+        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { val = ivov; });
+        stamp_time();
         unsigned m = reset_alarms();
         if (mlst != val) {
             m |= kDbeValue | kDbeLog;
@@ -478,7 +419,12 @@ template <typename Self> struct MbbBase : Record {
 
 struct MbbiRecord : MbbBase<MbbiRecord> {
     using MbbBase::MbbBase;
-    static std::vector<FieldDesc> fields() { return mbb_fields(common_fields()); }
+    static std::vector<FieldDesc> fields() {
+        using R = MbbiRecord;
+        auto v = mbb_fields(common_fields());
+        v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        return v;
+    }
     ProcessResult process() override {
         pact = 1;
         mbb_process(false);
@@ -489,7 +435,17 @@ struct MbbiRecord : MbbBase<MbbiRecord> {
 
 struct MbboRecord : MbbBase<MbboRecord> {
     using MbbBase::MbbBase;
-    static std::vector<FieldDesc> fields() { return mbb_fields(common_fields()); }
+    static std::vector<FieldDesc> fields() {
+        using R = MbboRecord;
+        auto v = mbb_fields(common_fields());
+        auto add = {
+            BEAMCTL_FIELD(R, DOL, dol, InLink, 0), BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
+            BEAMCTL_FIELD(R, OUT, out, OutLink, 0), BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
+            BEAMCTL_FIELD(R, IVOV, ivov, UShort, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
     ProcessResult process() override {
         pact = 1;
         mbb_process(true);
@@ -501,8 +457,11 @@ struct MbboRecord : MbbBase<MbboRecord> {
 // ---------------------------------------------------------------- strings (stringin, stringout)
 template <typename Self> struct StringBase : Record {
     using Record::Record;
-    char val[40] = {}, oval[40] = {};
+    char val[40] = {}, oval[40] = {}, ivov[40] = {};
     uint16_t mpst = 0, apst = 0; // On Change by default
+    Link inp, dol, out; // Soft Channel: stringin INP; stringout DOL (OMSL closed_loop) and OUT
+    uint16_t omsl = 0, ivoa = 0;
+    bool output = false;
     const FieldDesc* val_fd = type().find("VAL");
     static std::vector<FieldDesc> string_fields(std::vector<FieldDesc> v) {
         using R = Self;
@@ -515,10 +474,16 @@ template <typename Self> struct StringBase : Record {
         v.insert(v.end(), add.begin(), add.end());
         return v;
     }
+    void init() override {
+        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
+    }
     ProcessResult process() override {
         pact = 1;
-        stamp_time();
+        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
+        if (output && omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
         if (udf) set_sevr(kStatUdf, udfs);
+        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { std::memcpy(val, ivov, sizeof val); });
+        stamp_time();
         unsigned m = reset_alarms();
         bool changed = std::strncmp(oval, val, sizeof val) != 0;
         if (mpst == 1 || changed) m |= kDbeValue;
@@ -531,11 +496,26 @@ template <typename Self> struct StringBase : Record {
 };
 struct StringinRecord : StringBase<StringinRecord> {
     using StringBase::StringBase;
-    static std::vector<FieldDesc> fields() { return string_fields(common_fields()); }
+    static std::vector<FieldDesc> fields() {
+        using R = StringinRecord;
+        auto v = string_fields(common_fields());
+        v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        return v;
+    }
 };
 struct StringoutRecord : StringBase<StringoutRecord> {
-    using StringBase::StringBase;
-    static std::vector<FieldDesc> fields() { return string_fields(common_fields()); }
+    explicit StringoutRecord(const RecordType& t) : StringBase(t) { output = true; }
+    static std::vector<FieldDesc> fields() {
+        using R = StringoutRecord;
+        auto v = string_fields(common_fields());
+        auto add = {
+            BEAMCTL_FIELD(R, DOL, dol, InLink, 0), BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
+            BEAMCTL_FIELD(R, OUT, out, OutLink, 0), BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
+            BEAMCTL_FIELD(R, IVOV, ivov, String, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
 };
 
 // ---------------------------------------------------------------- waveform
@@ -549,6 +529,7 @@ struct WaveformRecord : Record {
     uint16_t mpst = 0, apst = 0; // Always by default
     std::vector<char> storage;   // NELM elements of FTVL
     char val_placeholder = 0;
+    Link inp;
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* nord_fd = type().find("NORD");
 
@@ -566,6 +547,7 @@ struct WaveformRecord : Record {
             BEAMCTL_FIELD(R, LOPR, lopr, Double, kMeta | kEgu),
             BEAMCTL_MENU(R, MPST, mpst, kMenuPostAlways, 0),
             BEAMCTL_MENU(R, APST, apst, kMenuPostAlways, 0),
+            BEAMCTL_FIELD(R, INP, inp, InLink, 0),
         };
         v.insert(v.end(), add.begin(), add.end());
         return v;
@@ -594,6 +576,7 @@ struct WaveformRecord : Record {
         if (nelm > 64u * 1024 * 1024)
             throw Error(SB() << "NELM " << nelm << " is too large (at most 67108864)");
         storage.assign(std::size_t(nelm) * size, 0);
+        if (load_constant(inp, *val_fd)) udf = 0;
     }
     Elements elements(const FieldDesc& f) override {
         if (&f != val_fd) return Record::elements(f);
@@ -625,6 +608,7 @@ struct WaveformRecord : Record {
     uint32_t last_nord = 0;
     ProcessResult process() override {
         pact = 1;
+        if (soft_read(*this, inp, *val_fd)) udf = 0; // devWfSoft: up to NELM elements, NORD set
         stamp_time();
         if (udf) set_sevr(kStatUdf, udfs);
         unsigned m = reset_alarms();
@@ -639,12 +623,6 @@ struct WaveformRecord : Record {
         return ProcessResult::Done;
     }
 };
-
-template <typename R> void add_type(RecordTypes& types, const char* name) {
-    types.add(std::make_unique<RecordType>(name, R::fields(), [](const RecordType& t) {
-        return std::unique_ptr<Record>(new R(t));
-    }));
-}
 
 } // namespace
 

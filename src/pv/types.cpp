@@ -31,6 +31,9 @@ Prim native_prim(Dbf f) {
     case Dbf::Double: return Prim::Double;
     case Dbf::Enum:
     case Dbf::Menu: return Prim::Enum;
+    case Dbf::InLink:
+    case Dbf::OutLink:
+    case Dbf::FwdLink: return Prim::String;
     }
     return Prim::Double;
 }
@@ -38,7 +41,8 @@ Prim native_prim(Dbf f) {
 const char* dbf_name(Dbf f) {
     static const char* names[] = {"DBF_STRING", "DBF_CHAR",   "DBF_UCHAR", "DBF_SHORT",
                                   "DBF_USHORT", "DBF_LONG",   "DBF_ULONG", "DBF_INT64",
-                                  "DBF_FLOAT",  "DBF_DOUBLE", "DBF_ENUM",  "DBF_MENU"};
+                                  "DBF_FLOAT",  "DBF_DOUBLE", "DBF_ENUM",  "DBF_MENU",
+                                  "DBF_INLINK", "DBF_OUTLINK", "DBF_FWDLINK"};
     return names[int(f)];
 }
 

@@ -21,7 +21,12 @@ enum class Dbf : uint8_t {
     Double,
     Enum, // record-defined state strings (bi/bo/mbbi/mbbo VAL)
     Menu, // fixed menu choices (SCAN, SEVR, ...)
+    // Links (pv/link.hpp): stored as a Link; read over CA as their text (DBR_STRING).
+    InLink,  // INP, DOL, INPA, SDIS, ...: a value is read through it
+    OutLink, // OUT, OUTA, ...: a value is written through it
+    FwdLink, // FLNK, LNK1, ...: the target record is processed
 };
+constexpr bool is_link(Dbf f) { return f >= Dbf::InLink; }
 
 // The seven value types of Channel Access (DBR_STRING..DBR_DOUBLE); numeric value = DBR code.
 enum class Prim : uint8_t { String = 0, Short = 1, Float = 2, Enum = 3, Char = 4, Long = 5, Double = 6 };

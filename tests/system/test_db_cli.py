@@ -101,7 +101,7 @@ def test_db_several_files(tmp_path):
 
 
 BAD = [  # (name, text, line, allowed columns: statement start or offending token; None = any)
-    ("unknown_record_type", 'record(ai, "ok") { }\n\nrecord(calcout, "c") { }\n', 3, (1, 8)),
+    ("unknown_record_type", 'record(ai, "ok") { }\n\nrecord(bogusrec, "c") { }\n', 3, (1, 8)),
     ("unknown_field", 'record(ai, "a") {\n    field(EGU, "x")\n    field(FOO, "1")\n}\n', 3,
      (5, 11)),
     ("field_of_other_type", 'record(ai, "a") {\n    field(ZNAM, "x")\n}\n', 2, (5, 11)),

@@ -1,0 +1,75 @@
+// Record links (EPICS dbLink): the INP/OUT/DOL/FLNK/... fields of records. A link is parsed from
+// its text when a .db file sets it, resolved to its target once all records are loaded
+// (Database::resolve_links, at init), and used by record processing through Record::read_link,
+// Record::write_link and the database's forward-link processing.
+//
+// Text forms (as EPICS base 7 dbParseLink):
+//   ""                         empty: nothing is read or written
+//   "1.5", "0x10", "-3"        constant: loaded into the record once at init (Record::load_constant)
+//   {const: 1.5} {const:"s"}   JSON constant; {const: [1, 2]} an array constant
+//   "rec", "rec.FIELD"         database link to a field of a record in this database (VAL if none),
+//                              followed by modifiers: NPP PP CA CP CPP (process) and NMS MS MSS MSI
+//                              (alarm propagation), blank- or comma-separated
+//   "@text"                    hardware address for the record's device support (DTYP)
+// Threading: links belong to their record and are used on the database thread only.
+#pragma once
+
+#include "core/error.hpp"
+#include "pv/types.hpp"
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace beamctl::pv {
+
+class Record;
+struct FieldDesc;
+
+// Device support of a hardware ("@...") link: bound by whoever owns the address (an IOC binds
+// "@ec0.s3.positionActual01" to its signal). Methods run on the database thread.
+class LinkDevice {
+public:
+    virtual ~LinkDevice() = default;
+    virtual bool read(double& v) = 0;        // false: no value (the record raises LINK/INVALID)
+    virtual bool write(double v) = 0;        // false: refused (the record raises LINK/INVALID)
+    virtual std::string describe() const = 0; // for dbpr/introspection
+};
+
+struct Link {
+    enum class Kind : uint8_t { Empty, Constant, Db, Hw };
+    enum Proc : uint8_t { kNpp, kPp, kCa, kCp, kCpp };
+    enum Ms : uint8_t { kNms, kMs, kMss, kMsi };
+
+    std::string text; // as written (what clients read)
+    SourceLoc loc;    // where the .db file set it (for load errors)
+    Kind kind = Kind::Empty;
+    uint8_t proc = kNpp;
+    uint8_t ms = kNms;
+
+    // Constant
+    std::vector<double> numbers;   // numeric constant(s)
+    std::string string_constant;   // {const: "text"}
+    bool is_string_constant = false;
+    // Db: "rec.FIELD" as written, then the resolved target
+    std::string record, field;
+    Record* target = nullptr;
+    const FieldDesc* target_field = nullptr;
+    // Hw: the address after '@', and the device bound to it
+    std::string address;
+    LinkDevice* device = nullptr;
+
+    bool empty() const { return kind == Kind::Empty; }
+    bool is_constant() const { return kind == Kind::Constant; }
+    bool is_db() const { return kind == Kind::Db; }
+    // Link text with its modifiers as EPICS prints them ("rec.VAL PP MS").
+    std::string canonical() const;
+};
+
+// Parses link text into `out` (not resolved). On a syntax error returns false with *why.
+bool parse_link(std::string_view text, Dbf kind, Link& out, std::string* why);
+
+const char* link_proc_name(uint8_t proc);
+const char* link_ms_name(uint8_t ms);
+
+} // namespace beamctl::pv

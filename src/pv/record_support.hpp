@@ -1,0 +1,197 @@
+// Record support shared by the record types (EPICS recGbl and the common parts of the analog
+// records): deadbands, limit and state alarms, metadata helpers, the analog base, registration.
+// Internal to src/pv's record implementations. Threading: the database thread, as records.
+#pragma once
+
+#include "core/error.hpp"
+#include "pv/record.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <memory>
+
+namespace beamctl::pv::support {
+
+
+// recGblCheckDeadband: adds `bit` to mask and updates *last when |new - last| > deadband.
+inline void check_deadband(double& last, double v, double deadband, unsigned& mask, unsigned bit) {
+    double delta = 0;
+    if (std::isfinite(v) && std::isfinite(last)) {
+        delta = std::fabs(last - v);
+    } else if (std::isnan(v) != std::isnan(last) || std::isinf(v) != std::isinf(last)) {
+        delta = INFINITY;
+    } else if (std::isinf(v) && v != last) {
+        delta = INFINITY;
+    }
+    if (delta > deadband) {
+        mask |= bit;
+        last = v;
+    }
+}
+
+inline void check_deadband_int(int32_t& last, int32_t v, int32_t deadband, unsigned& mask, unsigned bit) {
+    int64_t delta = int64_t(last) - int64_t(v);
+    if (delta < 0) delta = -delta;
+    if (deadband < 0 || delta > int64_t(deadband)) {
+        mask |= bit;
+        last = v;
+    }
+}
+
+// aiRecord-style limit alarms with hysteresis; T is double or int32.
+template <typename T>
+void limit_alarms(Record& r, T val, T hihi, T high, T low, T lolo, uint16_t hhsv, uint16_t hsv,
+                  uint16_t lsv, uint16_t llsv, T hyst, T& lalm) {
+    if (r.udf) {
+        r.set_sevr(kStatUdf, r.udfs);
+        return;
+    }
+    T alev;
+    uint16_t asev, astat;
+    if ((asev = hhsv) && (val >= (alev = hihi) || (lalm == alev && val >= alev - hyst)))
+        astat = kStatHihi;
+    else if ((asev = llsv) && (val <= (alev = lolo) || (lalm == alev && val <= alev + hyst)))
+        astat = kStatLolo;
+    else if ((asev = hsv) && (val >= (alev = high) || (lalm == alev && val >= alev - hyst)))
+        astat = kStatHigh;
+    else if ((asev = lsv) && (val <= (alev = low) || (lalm == alev && val <= alev + hyst)))
+        astat = kStatLow;
+    else {
+        alev = val;
+        asev = kNoAlarm;
+        astat = kStatNone;
+    }
+    if (asev) {
+        if (r.set_sevr(astat, asev)) lalm = alev;
+    } else {
+        lalm = val;
+    }
+}
+
+// Binary/multi-bit state alarms with change-of-state (biRecord/mbbiRecord checkAlarms).
+inline void state_alarms(Record& r, uint16_t val, uint16_t nstates, const uint16_t* state_sevr,
+                  uint16_t unsv, uint16_t cosv, uint16_t& lalm) {
+    if (r.udf) {
+        r.set_sevr(kStatUdf, r.udfs);
+        return;
+    }
+    if (val >= nstates)
+        r.set_sevr(kStatState, unsv);
+    else
+        r.set_sevr(kStatState, state_sevr[val]);
+    if (val == lalm) return;
+    r.set_sevr(kStatCos, cosv);
+    lalm = val;
+}
+
+inline void fill_limits(Metadata& md, double hopr, double lopr, double chi, double clo) {
+    md.disp_hi = hopr;
+    md.disp_lo = lopr;
+    md.ctrl_hi = chi;
+    md.ctrl_lo = clo;
+}
+
+inline bool is(const FieldDesc& f, const char* n) { return std::strcmp(f.name, n) == 0; }
+
+constexpr uint16_t kVal = kProcess | kAsl0;
+constexpr uint16_t kLim = kProcess | kProp | kEgu | kDisplayHopr; // alarm limits (pp, metadata)
+constexpr uint16_t kMeta = kProp;                                  // metadata, no processing
+
+// ---------------------------------------------------------------- analog (ai, ao)
+template <typename Self> struct AnalogBase : Record {
+    using Record::Record;
+    double val = 0;
+    int16_t prec = 0;
+    char egu[16] = {};
+    double hopr = 0, lopr = 0;
+    double hihi = 0, high = 0, low = 0, lolo = 0;
+    uint16_t hhsv = 0, hsv = 0, lsv = 0, llsv = 0;
+    double hyst = 0, mdel = 0, adel = 0;
+    double lalm = 0, alst = 0, mlst = 0;
+
+    static std::vector<FieldDesc> analog_fields(std::vector<FieldDesc> v) {
+        using R = Self;
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val, Double, kVal | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, PREC, prec, Short, kMeta),
+            BEAMCTL_FIELD(R, EGU, egu, String, kMeta),
+            BEAMCTL_FIELD(R, HOPR, hopr, Double, kMeta | kEgu),
+            BEAMCTL_FIELD(R, LOPR, lopr, Double, kMeta | kEgu),
+            BEAMCTL_FIELD(R, HIHI, hihi, Double, kLim),
+            BEAMCTL_FIELD(R, HIGH, high, Double, kLim),
+            BEAMCTL_FIELD(R, LOW, low, Double, kLim),
+            BEAMCTL_FIELD(R, LOLO, lolo, Double, kLim),
+            BEAMCTL_MENU(R, HHSV, hhsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, HSV, hsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LSV, lsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LLSV, llsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_FIELD(R, HYST, hyst, Double, kEgu),
+            BEAMCTL_FIELD(R, MDEL, mdel, Double, kEgu),
+            BEAMCTL_FIELD(R, ADEL, adel, Double, kEgu),
+            BEAMCTL_FIELD(R, LALM, lalm, Double, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, ALST, alst, Double, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, MLST, mlst, Double, kReadOnly | kEgu | kDisplayHopr),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+
+    void analog_alarms() {
+        limit_alarms<double>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm);
+    }
+    unsigned analog_monitor_mask() {
+        unsigned mask = reset_alarms();
+        check_deadband(mlst, val, mdel, mask, kDbeValue);
+        check_deadband(alst, val, adel, mask, kDbeLog);
+        return mask;
+    }
+    int16_t precision(const FieldDesc& f) const override {
+        if (is(f, "VAL")) return prec;
+        if (f.dbf == Dbf::Float || f.dbf == Dbf::Double) return (prec < 0 || prec > 15) ? 15 : prec;
+        return 0;
+    }
+    void analog_metadata(const FieldDesc& f, Metadata& md, double chi, double clo) const {
+        Record::metadata(f, md);
+        if (f.flags & kEgu) md.units = egu;
+        if (f.flags & kDisplayHopr) fill_limits(md, hopr, lopr, chi, clo);
+        if (is(f, "VAL")) {
+            md.alarm_hihi = hhsv ? hihi : NAN;
+            md.alarm_high = hsv ? high : NAN;
+            md.alarm_low = lsv ? low : NAN;
+            md.alarm_lolo = llsv ? lolo : NAN;
+        }
+    }
+};
+
+
+template <typename R> void add_type(RecordTypes& types, const char* name) {
+    types.add(std::make_unique<RecordType>(name, R::fields(), [](const RecordType& t) {
+        return std::unique_ptr<Record>(new R(t));
+    }));
+}
+
+
+} // namespace beamctl::pv::support
+
+namespace beamctl::pv::support {
+
+// Soft Channel device support (devAiSoft, devBoSoft, ...). An input's INP, an output's DOL: read
+// into field f when the link reaches something (a constant was loaded at init instead). Returns
+// true when a value was read.
+inline bool soft_read(Record& r, Link& l, const FieldDesc& f) {
+    if (l.kind != Link::Kind::Db && l.kind != Link::Kind::Hw) return false;
+    return r.read_link(l, f);
+}
+
+// An output record's write after its alarms were checked (the pending ones): IVOA decides what an
+// INVALID record does. `set_ivov` puts IVOV into the output value for "Set output to IVOV".
+template <typename F> inline void soft_write(Record& r, Link& out, const FieldDesc& f, uint16_t ivoa, F&& set_ivov) {
+    if (r.nsev >= kInvalid) {
+        if (ivoa == 1) return; // Don't drive outputs
+        if (ivoa == 2) set_ivov();
+    }
+    r.write_link(out, f);
+}
+
+} // namespace beamctl::pv::support
