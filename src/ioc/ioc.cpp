@@ -299,14 +299,7 @@ void Ioc::make_entry_pvs(BusRt& b) {
         EntryPv e{rec, &sig, sig.output};
         auto owner = owners.find(sig.name);
         if (sig.output && owner != owners.end()) {
-            // One writer per output: the axis writes it every cycle, so CA may only read it; the
-            // PV shows what is sent on the bus, and DESC names the owner.
-            e.owned = true;
-            rec->val_read_only = true;
-            std::string desc = ("set by " + owner->second).substr(0, 39);
-            const pv::FieldDesc* fd = rec->type().find("DESC");
-            pv::Elements el = rec->elements(*fd);
-            pv::put_element(*rec, *fd, el, 0, pv::Prim::String, desc.c_str());
+            own_output(e, owner->second); // the axis writes it every cycle
         } else if (sig.output) {
             ethercat::Bus* busp = &bus;
             const ethercat::SignalInfo* sg = &sig;
@@ -324,6 +317,18 @@ void Ioc::make_entry_pvs(BusRt& b) {
         }
         b.entries.push_back(e);
     }
+}
+
+// One writer per output: CA may only read it, the PV shows what is sent on the bus, and DESC
+// names the owner.
+void Ioc::own_output(EntryPv& e, const std::string& owner) {
+    e.owned = true;
+    e.rec->val_read_only = true;
+    e.rec->put_hook = nullptr;
+    std::string desc = ("set by " + owner).substr(0, 39);
+    const pv::FieldDesc* fd = e.rec->type().find("DESC");
+    pv::Elements el = e.rec->elements(*fd);
+    pv::put_element(*e.rec, *fd, el, 0, pv::Prim::String, desc.c_str());
 }
 
 void Ioc::bring_up() {
@@ -365,6 +370,13 @@ void Ioc::bring_up() {
             return std::nullopt;
         },
         std::move(bus_ok));
+    // Outputs a PLC's code assigns belong to that PLC, as those of the axes to their axis.
+    if (plc::PlcRuntime* rt = plcs_->runtime())
+        for (std::size_t i = 0; i < rt->size(); ++i)
+            for (const std::string& name : rt->written_entries(i))
+                for (auto& b : buses_)
+                    for (auto& e : b.entries)
+                        if (e.output && !e.owned && e.sig->name == name) own_output(e, rt->prefix(i));
     db_.init_records();
     brought_up_ = true;
 }

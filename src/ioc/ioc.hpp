@@ -62,8 +62,9 @@ private:
         const ethercat::SignalInfo* sig;
         bool output;
         double last = NAN;
-        bool owned = false; // an output an axis writes every cycle: read-only, shows the image
+        bool owned = false; // an output an axis or PLC writes: read-only, shows the image
     };
+    void own_output(EntryPv& e, const std::string& owner);
     struct BusRt {
         std::unique_ptr<ethercat::sim::Segment> segment;
         std::shared_ptr<ethercat::sim::Plant> plant; // runs in the segment's on_frame

@@ -548,6 +548,7 @@ private:
         if (n.kind == NK::var || n.kind == NK::vec || n.kind == NK::elem) {
             const Variable& v = unit_.vars[n.ref];
             if (!v.writable) error(n.pos, SB() << "'" << v.name << "' is read-only");
+            else if (v.host) host_.assigned(v.name);
             return;
         }
         if (n.kind == NK::num && n.str.size())

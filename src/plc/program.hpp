@@ -49,6 +49,8 @@ public:
     // Why `name` is unknown ("no axis 7; the IOC has axes 1-4"), added to the compile error;
     // "" for a plain "unknown name". Called only while compiling, after resolve() failed.
     virtual std::string why_unknown(std::string_view /*name*/) { return {}; }
+    // The code assigns to host storage `name` (compile time: who writes what).
+    virtual void assigned(std::string_view /*name*/) {}
     // Host functions (ECMC's mc_*, ec_*, ds_*, plugins): looked up by name while compiling;
     // called in RT with the evaluated arguments.
     using Function = double (*)(void* ctx, const double* args, int nargs) noexcept;

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <set>
 
 namespace beamctl::plc {
 namespace {
@@ -62,6 +63,18 @@ struct PlcRuntime::Plc : Host {
     };
     std::deque<EcCell> ec;
     std::map<std::string, EcCell*> ec_names;
+    std::set<std::string> written; // ec entries the code assigns (bit suffix removed)
+    void assigned(std::string_view name) override {
+        if (name.rfind("ec", 0) != 0 || !ec_names.count(std::string(name))) return;
+        std::string n(name);
+        // "ec0.s3.out.2": a bit of the entry "ec0.s3.out"
+        std::size_t last = n.rfind('.');
+        if (last != std::string::npos && last + 1 < n.size() &&
+            std::all_of(n.begin() + std::ptrdiff_t(last) + 1, n.end(), [](char c) { return c >= '0' && c <= '9'; }) &&
+            std::count(n.begin(), n.end(), '.') == 3)
+            n.resize(last);
+        written.insert(n);
+    }
     std::optional<Program> program;
     int divider = 1, counter = 0;
     bool first_done = false;
@@ -538,6 +551,11 @@ void PlcRuntime::add(const PlcSource& source) {
     p->st_enabled = source.enable;
     if (axis_index >= 0) axis_plcs_[std::size_t(axis_index)] = p.get();
     plcs_.push_back(std::move(p));
+}
+
+std::vector<std::string> PlcRuntime::written_entries(std::size_t i) const {
+    const auto& w = plcs_.at(i)->written;
+    return {w.begin(), w.end()};
 }
 
 bool PlcRuntime::buses_ok() noexcept {

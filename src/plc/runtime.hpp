@@ -118,6 +118,10 @@ public:
     bool pop_output(std::string& text);
     std::uint64_t output_dropped() const noexcept { return dropped_.load(std::memory_order_relaxed); }
 
+    // The process-data entries ("ec0.s3.binaryOutput01", without a bit) that PLC i's code
+    // assigns: the PLC is their writer.
+    std::vector<std::string> written_entries(std::size_t i) const;
+
     // The cells a name is bound to (tests and diagnostics; nullptr if no PLC uses it).
     const double* global(const std::string& name) const;
     const double* static_variable(std::size_t plc, const std::string& name) const;

@@ -107,6 +107,13 @@ def test_plc_pvs_output_and_a_latched_fault(tmp_path, prefix):
             seen.add(ca.get(bo))
             time.sleep(0.02)
         assert seen == {0, 1}
+        # one writer per output: the PLC owns BO02, so CA may only read it; BO01 stays writable
+        out = epics.PV(prefix + "m0s002-BO02")
+        assert out.wait_for_connection(5)
+        assert not out.write_access
+        assert epics.caget(prefix + "m0s002-BO02.DESC") == "set by plc3"
+        free = epics.PV(prefix + "m0s002-BO01")
+        assert free.wait_for_connection(5) and free.write_access
         # scan 5 indexes v[5]: the fault latches in -Err (MAJOR) and is logged with its place
         err = connect(prefix + "PLC03-Err")
         assert wait_for(lambda: ca.get(err) == 1, timeout=5)
