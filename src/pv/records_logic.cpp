@@ -255,27 +255,20 @@ struct CalcoutRecord : CalcBase<CalcoutRecord> {
     }
 };
 
-// ---------------------------------------------------------------- seq
-// Sixteen groups 0..F of (DLYn, DOLn -> DOn, LNKn); SELM chooses which run, in order.
+// ---------------------------------------------------------------- seq, fanout
 constexpr int kGroups = 16;
-struct SeqRecord : Record {
+
+// SELM/SELN/SELL/OFFS/SHFT of seq and fanout: which of their 16 groups or links run.
+template <typename Self> struct Selecting : Record {
     using Record::Record;
     int32_t val = 0;
-    uint16_t selm = 0, seln = 0, oldn = 0;
-    int16_t offs = 0, shft = -1, prec = 0;
+    uint16_t selm = 0, seln = 0;
+    int16_t offs = 0, shft = -1;
     Link sell;
-    double dly[kGroups] = {};
-    Link dol[kGroups];
-    double dov[kGroups] = {};
-    Link lnk[kGroups];
-    uint32_t pending_mask = 0; // groups still to run in this processing
-    int next = 0;
-    bool delayed = false;
     const FieldDesc* val_fd = type().find("VAL");
-    const FieldDesc* do_fd[kGroups] = {};
 
-    static std::vector<FieldDesc> fields() {
-        using R = SeqRecord;
+    static std::vector<FieldDesc> selection_fields() {
+        using R = Self;
         auto v = common_fields();
         auto add = {
             BEAMCTL_FIELD(R, VAL, val, Long, kVal),
@@ -284,6 +277,52 @@ struct SeqRecord : Record {
             BEAMCTL_FIELD(R, SELL, sell, InLink, 0),
             BEAMCTL_FIELD(R, OFFS, offs, Short, 0),
             BEAMCTL_FIELD(R, SHFT, shft, Short, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void selection_init() {
+        double v;
+        if (load_constant(sell, v)) seln = uint16_t(v);
+        udf = 0; // never UDF
+    }
+    // SELN (through SELL), then the groups: All; Specified SELN+OFFS; Mask SELN shifted right by
+    // SHFT (left if negative). Out of range: SOFT/INVALID and none.
+    uint32_t selected() {
+        if (sell.kind == Link::Kind::Db || sell.kind == Link::Kind::Hw) {
+            double v = seln;
+            if (read_link(sell, v)) seln = uint16_t(v);
+        }
+        if (selm == 0) return (1u << kGroups) - 1;
+        if (selm == 1) {
+            int i = int(seln) + offs;
+            if (i >= 0 && i < kGroups) return 1u << i;
+        } else if (shft >= -15 && shft <= 15) {
+            return (shft >= 0 ? uint32_t(seln) >> shft : uint32_t(seln) << -shft) & 0xFFFF;
+        }
+        set_sevr(kStatSoft, kInvalid);
+        return 0;
+    }
+};
+
+// Sixteen groups 0..F of (DLYn, DOLn -> DOn, LNKn); SELM chooses which run, in order.
+struct SeqRecord : Selecting<SeqRecord> {
+    using Selecting::Selecting;
+    uint16_t oldn = 0;
+    int16_t prec = 0;
+    double dly[kGroups] = {};
+    Link dol[kGroups];
+    double dov[kGroups] = {};
+    Link lnk[kGroups];
+    uint32_t pending_mask = 0; // groups still to run in this processing
+    int next = 0;
+    bool delayed = false;
+    const FieldDesc* do_fd[kGroups] = {};
+
+    static std::vector<FieldDesc> fields() {
+        using R = SeqRecord;
+        auto v = selection_fields();
+        auto add = {
             BEAMCTL_FIELD(R, OLDN, oldn, UShort, kReadOnly),
             BEAMCTL_FIELD(R, PREC, prec, Short, kMeta),
         };
@@ -320,9 +359,7 @@ struct SeqRecord : Record {
             do_fd[i] = type().find(do_n[i]);
             load_constant(dol[i], dov[i]);
         }
-        double v;
-        if (load_constant(sell, v)) seln = uint16_t(v);
-        udf = 0; // seqRecord: never UDF
+        selection_init();
     }
     int16_t precision(const FieldDesc& f) const override {
         if (f.dbf == Dbf::Double) return prec;
@@ -358,22 +395,7 @@ struct SeqRecord : Record {
     }
     ProcessResult process() override {
         pact = 1;
-        if (sell.kind == Link::Kind::Db || sell.kind == Link::Kind::Hw) {
-            double v = seln;
-            if (read_link(sell, v)) seln = uint16_t(v);
-        }
-        pending_mask = 0;
-        if (selm == 0) {
-            pending_mask = (1u << kGroups) - 1;
-        } else if (selm == 1) {
-            int i = int(seln) + offs;
-            if (i < 0 || i >= kGroups) set_sevr(kStatSoft, kInvalid);
-            else pending_mask = 1u << i;
-        } else {
-            int s = shft;
-            if (s < -15 || s > 15) set_sevr(kStatSoft, kInvalid);
-            else pending_mask = (s >= 0 ? uint32_t(seln) >> s : uint32_t(seln) << -s) & 0xFFFF;
-        }
+        pending_mask = selected();
         next = 0;
         delayed = false;
         if (!run_groups()) return ProcessResult::Async;
@@ -391,28 +413,13 @@ struct SeqRecord : Record {
     }
 };
 
-// ---------------------------------------------------------------- fanout
-struct FanoutRecord : Record {
-    using Record::Record;
-    int32_t val = 0;
-    uint16_t selm = 0, seln = 0;
-    int16_t offs = 0, shft = -1;
-    Link sell;
+// Processes the forward links LNK0..LNKF that SELM selects.
+struct FanoutRecord : Selecting<FanoutRecord> {
+    using Selecting::Selecting;
     Link lnk[kGroups];
-    const FieldDesc* val_fd = type().find("VAL");
 
     static std::vector<FieldDesc> fields() {
-        using R = FanoutRecord;
-        auto v = common_fields();
-        auto add = {
-            BEAMCTL_FIELD(R, VAL, val, Long, kVal),
-            BEAMCTL_MENU(R, SELM, selm, kMenuSelm, 0),
-            BEAMCTL_FIELD(R, SELN, seln, UShort, 0),
-            BEAMCTL_FIELD(R, SELL, sell, InLink, 0),
-            BEAMCTL_FIELD(R, OFFS, offs, Short, 0),
-            BEAMCTL_FIELD(R, SHFT, shft, Short, 0),
-        };
-        v.insert(v.end(), add.begin(), add.end());
+        auto v = selection_fields();
         add_links(v, std::make_index_sequence<kGroups>{});
         return v;
     }
@@ -423,29 +430,10 @@ struct FanoutRecord : Record {
                                [](Record& r) -> void* { return &static_cast<FanoutRecord&>(r).lnk[I]; }}),
          ...);
     }
-    void init() override {
-        double v;
-        if (load_constant(sell, v)) seln = uint16_t(v);
-        udf = 0;
-    }
+    void init() override { selection_init(); }
     ProcessResult process() override {
         pact = 1;
-        if (sell.kind == Link::Kind::Db || sell.kind == Link::Kind::Hw) {
-            double v = seln;
-            if (read_link(sell, v)) seln = uint16_t(v);
-        }
-        uint32_t mask = 0;
-        if (selm == 0) {
-            mask = 0xFFFF;
-        } else if (selm == 1) {
-            int i = int(seln) + offs;
-            if (i < 0 || i >= kGroups) set_sevr(kStatSoft, kInvalid);
-            else mask = 1u << i;
-        } else {
-            int s = shft;
-            if (s < -15 || s > 15) set_sevr(kStatSoft, kInvalid);
-            else mask = (s >= 0 ? uint32_t(seln) >> s : uint32_t(seln) << -s) & 0xFFFF;
-        }
+        uint32_t mask = selected();
         for (int i = 0; i < kGroups; ++i)
             if (mask & (1u << i)) fwd_link(lnk[i]);
         stamp_time();

@@ -4,6 +4,7 @@
 // for the asynchronous records their processing reaches, and the calc, calcout, seq, fanout,
 // dfanout, sel and event records. Time is virtual: scan_periodic(t) is the clock.
 #include "pv/database.hpp"
+#include "db_fixture.hpp"
 
 #include <gtest/gtest.h>
 
@@ -17,36 +18,11 @@ using namespace beamctl::pv;
 
 namespace {
 
-struct Links : ::testing::Test {
-    Database db;
+struct Links : DbTest {
     double now = 100.0;
     void load(const char* text, const char* file = "links.db") {
-        db.load(parse_db(text, file, {}));
-        db.init_records();
+        DbTest::load(text, file);
         db.scan_periodic(now); // the clock starts (delays count from the last scan time)
-    }
-    Address addr(const char* n) {
-        Address a;
-        EXPECT_TRUE(db.resolve(n, a)) << n;
-        return a;
-    }
-    PutStatus put(const char* n, double v, PutCallback cb = {}) {
-        return db.put(addr(n), Prim::Double, &v, 1, std::move(cb));
-    }
-    PutStatus put_str(const char* n, const char* s) {
-        char buf[40] = {};
-        std::strncpy(buf, s, 39);
-        return db.put(addr(n), Prim::String, buf, 1);
-    }
-    double getd(const char* n) {
-        double d = 0;
-        db.get(addr(n), Prim::Double, &d, 1);
-        return d;
-    }
-    std::string gets(const char* n) {
-        char s[40];
-        db.get(addr(n), Prim::String, s, 1);
-        return s;
     }
     void advance(double seconds) { // virtual time, in the 10 ms steps an IOC calls it with
         for (double end = now + seconds; now < end - 1e-9;) db.scan_periodic(now += 0.01);
@@ -63,11 +39,6 @@ struct Links : ::testing::Test {
     }
 };
 
-// Counts how often a record was processed, through a monitor on its timestamp-bearing VAL.
-struct Counter : Subscription {
-    int n = 0;
-    void on_event(unsigned) override { ++n; }
-};
 
 } // namespace
 

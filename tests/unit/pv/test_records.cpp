@@ -1,6 +1,7 @@
 // Record semantics: alarms with hysteresis, deadbands, clamping, enum rules, UDF, property
 // posts, put-callback ordering, .db load errors and export.
 #include "pv/database.hpp"
+#include "db_fixture.hpp"
 
 #include <gtest/gtest.h>
 
@@ -18,36 +19,7 @@ struct Recorder : Subscription {
     void on_event(unsigned m) override { masks.push_back(m); }
 };
 
-struct Fixture : ::testing::Test {
-    Database db;
-    void load(const char* text) {
-        db.load(parse_db(text, "test.db", {}));
-        db.init_records();
-    }
-    Address addr(const char* n) {
-        Address a;
-        EXPECT_TRUE(db.resolve(n, a)) << n;
-        return a;
-    }
-    PutStatus put(const char* n, double v, PutCallback cb = {}) {
-        return db.put(addr(n), Prim::Double, &v, 1, std::move(cb));
-    }
-    PutStatus put_str(const char* n, const char* s) {
-        char buf[40] = {};
-        std::strncpy(buf, s, 39);
-        return db.put(addr(n), Prim::String, buf, 1);
-    }
-    double getd(const char* n) {
-        double d = 0;
-        db.get(addr(n), Prim::Double, &d, 1);
-        return d;
-    }
-    std::string gets(const char* n) {
-        char s[40];
-        db.get(addr(n), Prim::String, s, 1);
-        return s;
-    }
-};
+struct Fixture : DbTest {};
 
 } // namespace
 
