@@ -61,6 +61,7 @@ RecordTypes& RecordTypes::global() {
         auto* t = new RecordTypes;
         register_standard_records(*t);
         register_logic_records(*t);
+        register_more_records(*t);
         register_motor_record(*t);
         return t;
     }();

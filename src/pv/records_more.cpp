@@ -1,0 +1,361 @@
+// The remaining soft record types of EPICS base 7: mbbiDirect, mbboDirect, int64in, int64out,
+// with "Soft Channel" device support. Semantics follow base's record support (mbbiDirectRecord.c,
+// mbboDirectRecord.c, int64inRecord.c, int64outRecord.c and the devXxxSoft.c device support):
+// inputs are read, alarms checked, outputs written (IVOA), monitors posted. The code is ours.
+// Threading: the database thread, as every record.
+#include "pv/record_support.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <utility>
+
+namespace beamctl::pv {
+namespace {
+using namespace support;
+
+bool linked(const Link& l) { return l.kind == Link::Kind::Db || l.kind == Link::Kind::Hw; }
+
+// ---------------------------------------------------------------- mbbiDirect, mbboDirect
+// VAL is a 32-bit word whose bits are also the fields B0..B1F (one UCHAR each, 0 or 1).
+constexpr int kBits = 32;
+const char* const kBitNames[kBits] = {
+    "B0",  "B1",  "B2",  "B3",  "B4",  "B5",  "B6",  "B7",  "B8",  "B9",  "BA",
+    "BB",  "BC",  "BD",  "BE",  "BF",  "B10", "B11", "B12", "B13", "B14", "B15",
+    "B16", "B17", "B18", "B19", "B1A", "B1B", "B1C", "B1D", "B1E", "B1F"};
+
+template <typename Self> struct MbbDirectBase : Record {
+    using Record::Record;
+    int32_t val = 0;
+    int16_t nobt = 0;
+    uint16_t shft = 0;
+    uint32_t rval = 0, oraw = 0, mask = 0;
+    int32_t mlst = 0;
+    uint8_t bits[kBits] = {};
+    const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* rval_fd = type().find("RVAL");
+    const FieldDesc* bit_fd[kBits] = {};
+
+    static std::vector<FieldDesc> direct_fields(std::vector<FieldDesc> v, uint16_t bit_flags) {
+        using R = Self;
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val, Long, kVal),
+            BEAMCTL_FIELD(R, NOBT, nobt, Short, kInitOnly),
+            BEAMCTL_FIELD(R, SHFT, shft, UShort, 0),
+            BEAMCTL_FIELD(R, MASK, mask, ULong, kInitOnly),
+            BEAMCTL_FIELD(R, ORAW, oraw, ULong, kReadOnly),
+            BEAMCTL_FIELD(R, MLST, mlst, Long, kReadOnly),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        add_bits(v, bit_flags, std::make_index_sequence<kBits>{});
+        return v;
+    }
+    template <std::size_t... I>
+    static void add_bits(std::vector<FieldDesc>& v, uint16_t flags, std::index_sequence<I...>) {
+        (v.push_back(FieldDesc{kBitNames[I], Dbf::UChar, flags, 1, nullptr,
+                               [](Record& r) -> void* { return &static_cast<Self&>(r).bits[I]; }}),
+         ...);
+    }
+    void direct_init() {
+        for (int i = 0; i < kBits; ++i) bit_fd[i] = type().find(kBitNames[i]);
+        if (mask == 0 && nobt >= 0 && nobt <= 32) mask = uint32_t((uint64_t(1) << nobt) - 1);
+    }
+    void bits_from_val() {
+        for (int i = 0; i < kBits; ++i) bits[i] = (uint32_t(val) >> i) & 1u;
+    }
+    int bit_index(const FieldDesc& f) const {
+        for (int i = 0; i < kBits; ++i)
+            if (&f == bit_fd[i]) return i;
+        return -1;
+    }
+    int16_t precision(const FieldDesc& f) const override {
+        if (&f == val_fd) return nobt; // get_precision: NOBT digits
+        return Record::precision(f);
+    }
+};
+
+struct MbbiDirectRecord : MbbDirectBase<MbbiDirectRecord> {
+    using MbbDirectBase::MbbDirectBase;
+    Link inp;
+    static std::vector<FieldDesc> fields() {
+        using R = MbbiDirectRecord;
+        auto v = direct_fields(common_fields(), kProcess);
+        auto add = {BEAMCTL_FIELD(R, INP, inp, InLink, 0), BEAMCTL_FIELD(R, RVAL, rval, ULong, kProcess)};
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void init() override {
+        direct_init();
+        if (load_constant(inp, *val_fd)) udf = 0;
+        bits_from_val();
+        mlst = val;
+        oraw = rval;
+    }
+    ProcessResult process() override {
+        pact = 1;
+        // devMbbiDirectSoft reads VAL itself (status 2: RVAL is not converted).
+        if (soft_read(*this, inp, *val_fd)) udf = 0;
+        stamp_time();
+        if (udf) set_sevr(kStatUdf, kInvalid);
+        unsigned events = reset_alarms();
+        unsigned vl = events | kDbeValue | kDbeLog;
+        for (int i = 0; i < kBits; ++i) {
+            uint8_t old = bits[i];
+            bits[i] = (uint32_t(val) >> i) & 1u;
+            if (old != bits[i]) post(bit_fd[i], vl);
+            else if (events) post(bit_fd[i], events);
+        }
+        if (mlst != val) {
+            events = vl;
+            mlst = val;
+        }
+        if (events) post(val_fd, events);
+        if (oraw != rval) {
+            post(rval_fd, vl);
+            oraw = rval;
+        }
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+
+struct MbboDirectRecord : MbbDirectBase<MbboDirectRecord> {
+    using MbbDirectBase::MbbDirectBase;
+    Link dol, out;
+    uint16_t omsl = 0, ivoa = 0;
+    int32_t ivov = 0, obit = 0;
+    uint32_t rbv = 0, orbv = 0;
+    static std::vector<FieldDesc> fields() {
+        using R = MbboDirectRecord;
+        auto v = direct_fields(common_fields(), kProcess);
+        auto add = {
+            BEAMCTL_FIELD(R, RVAL, rval, ULong, kReadOnly),
+            BEAMCTL_FIELD(R, RBV, rbv, ULong, kReadOnly),
+            BEAMCTL_FIELD(R, ORBV, orbv, ULong, kReadOnly),
+            BEAMCTL_FIELD(R, OBIT, obit, Long, kReadOnly),
+            BEAMCTL_FIELD(R, DOL, dol, InLink, 0),
+            BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, kProcess),
+            BEAMCTL_FIELD(R, OUT, out, OutLink, 0),
+            BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
+            BEAMCTL_FIELD(R, IVOV, ivov, Long, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void convert() { rval = shft > 0 && shft < 32 ? uint32_t(val) << shft : uint32_t(val); }
+    void init() override {
+        direct_init();
+        if (load_constant(dol, *val_fd)) udf = 0;
+        if (!udf) {
+            bits_from_val();
+        } else { // B0..B1F given in the file define VAL
+            uint32_t v = 0;
+            for (int i = 0; i < kBits; ++i)
+                if (bits[i]) v |= 1u << i;
+            if (v) {
+                val = int32_t(v);
+                udf = 0;
+            }
+        }
+        mlst = val;
+        obit = val;
+        oraw = rval;
+        orbv = rbv;
+    }
+    PutStatus special(const FieldDesc& f) override {
+        int i = bit_index(f);
+        if (i < 0) return PutStatus::Ok;
+        if (omsl == 1) return PutStatus::Failed; // closed_loop: the bits belong to DOL
+        uint32_t bit = 1u << i;
+        if (bits[i]) {
+            bits[i] = 1;
+            val = int32_t(uint32_t(val) | bit);
+            obit = int32_t(uint32_t(obit) | bit);
+        } else {
+            val = int32_t(uint32_t(val) & ~bit);
+            obit = int32_t(uint32_t(obit) & ~bit);
+        }
+        udf = 0;
+        convert();
+        return PutStatus::Ok;
+    }
+    ProcessResult process() override {
+        pact = 1;
+        bool ok = true;
+        if (omsl == 1 && linked(dol)) {
+            double v = 0;
+            if (read_link(dol, v)) val = int32_t(uint32_t(int64_t(v)));
+            else ok = false; // read_link raised LINK/INVALID
+        } else if (udf) {
+            set_sevr(kStatUdf, udfs);
+            ok = false;
+        }
+        if (ok) {
+            udf = 0;
+            bits_from_val();
+            convert();
+        }
+        stamp_time();
+        soft_write(*this, out, *val_fd, ivoa, [this] {
+            val = ivov;
+            convert();
+        });
+        bits_from_val();
+        unsigned events = reset_alarms();
+        if (mlst != val) {
+            events |= kDbeValue | kDbeLog;
+            mlst = val;
+        }
+        if (events) post(val_fd, events);
+        uint32_t changed = uint32_t(obit) ^ uint32_t(val);
+        for (int i = 0; i < kBits; ++i)
+            if ((events & ~unsigned(kDbeValue | kDbeLog)) || (changed & (1u << i)))
+                post(bit_fd[i], events | kDbeValue | kDbeLog);
+        obit = val;
+        if (oraw != rval) {
+            post(rval_fd, events | kDbeValue | kDbeLog);
+            oraw = rval;
+        }
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+
+// ---------------------------------------------------------------- int64in, int64out
+// |a - b| without overflow, as base's DELTA.
+inline uint64_t delta64(int64_t a, int64_t b) {
+    return a > b ? uint64_t(a) - uint64_t(b) : uint64_t(b) - uint64_t(a);
+}
+
+template <typename Self> struct Int64Base : Record {
+    using Record::Record;
+    int64_t val = 0;
+    char egu[16] = {};
+    int64_t hopr = 0, lopr = 0;
+    int64_t hihi = 0, high = 0, low = 0, lolo = 0;
+    uint16_t hhsv = 0, hsv = 0, lsv = 0, llsv = 0;
+    int64_t hyst = 0, mdel = 0, adel = 0;
+    int64_t lalm = 0, alst = 0, mlst = 0;
+    Link inp, dol, out; // Soft Channel: int64in INP; int64out DOL (OMSL closed_loop) and OUT
+    uint16_t omsl = 0, ivoa = 0;
+    int64_t ivov = 0;
+    const FieldDesc* val_fd = type().find("VAL");
+
+    static std::vector<FieldDesc> int64_fields(std::vector<FieldDesc> v) {
+        using R = Self;
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val, Int64, kVal | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, EGU, egu, String, kMeta),
+            BEAMCTL_FIELD(R, HOPR, hopr, Int64, kMeta | kEgu),
+            BEAMCTL_FIELD(R, LOPR, lopr, Int64, kMeta | kEgu),
+            BEAMCTL_FIELD(R, HIHI, hihi, Int64, kLim),
+            BEAMCTL_FIELD(R, HIGH, high, Int64, kLim),
+            BEAMCTL_FIELD(R, LOW, low, Int64, kLim),
+            BEAMCTL_FIELD(R, LOLO, lolo, Int64, kLim),
+            BEAMCTL_MENU(R, HHSV, hhsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, HSV, hsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LSV, lsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LLSV, llsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_FIELD(R, HYST, hyst, Int64, kEgu),
+            BEAMCTL_FIELD(R, MDEL, mdel, Int64, kEgu),
+            BEAMCTL_FIELD(R, ADEL, adel, Int64, kEgu),
+            BEAMCTL_FIELD(R, LALM, lalm, Int64, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, ALST, alst, Int64, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, MLST, mlst, Int64, kReadOnly | kEgu | kDisplayHopr),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void init() override {
+        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
+        mlst = alst = lalm = val;
+    }
+    void int64_process(bool output) {
+        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
+        limit_alarms<int64_t>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm);
+        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { val = ivov; });
+        stamp_time();
+        unsigned mask = reset_alarms();
+        if (mdel < 0 || delta64(mlst, val) > uint64_t(mdel)) {
+            mask |= kDbeValue;
+            mlst = val;
+        }
+        if (adel < 0 || delta64(alst, val) > uint64_t(adel)) {
+            mask |= kDbeLog;
+            alst = val;
+        }
+        if (mask) post(val_fd, mask);
+    }
+    void int64_metadata(const FieldDesc& f, Metadata& md, double chi, double clo) const {
+        Record::metadata(f, md);
+        if (f.flags & kEgu) md.units = egu;
+        if (f.flags & kDisplayHopr) fill_limits(md, double(hopr), double(lopr), chi, clo);
+        if (is(f, "VAL")) {
+            md.alarm_hihi = hhsv ? double(hihi) : NAN;
+            md.alarm_high = hsv ? double(high) : NAN;
+            md.alarm_low = lsv ? double(low) : NAN;
+            md.alarm_lolo = llsv ? double(lolo) : NAN;
+        }
+    }
+};
+
+struct Int64inRecord : Int64Base<Int64inRecord> {
+    using Int64Base::Int64Base;
+    static std::vector<FieldDesc> fields() {
+        using R = Int64inRecord;
+        auto v = int64_fields(common_fields());
+        v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        return v;
+    }
+    ProcessResult process() override {
+        pact = 1;
+        int64_process(false);
+        pact = 0;
+        return ProcessResult::Done;
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        int64_metadata(f, md, double(hopr), double(lopr));
+    }
+};
+
+struct Int64outRecord : Int64Base<Int64outRecord> {
+    using Int64Base::Int64Base;
+    int64_t drvh = 0, drvl = 0;
+    static std::vector<FieldDesc> fields() {
+        using R = Int64outRecord;
+        auto v = int64_fields(common_fields());
+        auto add = {
+            BEAMCTL_FIELD(R, DRVH, drvh, Int64, kProcess | kProp | kEgu),
+            BEAMCTL_FIELD(R, DRVL, drvl, Int64, kProcess | kProp | kEgu),
+            BEAMCTL_FIELD(R, DOL, dol, InLink, 0),
+            BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
+            BEAMCTL_FIELD(R, OUT, out, OutLink, 0),
+            BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
+            BEAMCTL_FIELD(R, IVOV, ivov, Int64, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    ProcessResult process() override {
+        pact = 1;
+        if (omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
+        if (drvh > drvl) val = std::clamp(val, drvl, drvh); // convert(): the drive limits
+        int64_process(true);
+        pact = 0;
+        return ProcessResult::Done;
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        int64_metadata(f, md, double(drvh), double(drvl));
+    }
+};
+
+} // namespace
+
+void register_more_records(RecordTypes& types) {
+    add_type<MbbiDirectRecord>(types, "mbbiDirect");
+    add_type<MbboDirectRecord>(types, "mbboDirect");
+    add_type<Int64inRecord>(types, "int64in");
+    add_type<Int64outRecord>(types, "int64out");
+}
+
+} // namespace beamctl::pv
