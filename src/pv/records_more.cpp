@@ -1,14 +1,18 @@
-// The remaining soft record types of EPICS base 7: mbbiDirect, mbboDirect, int64in, int64out,
-// with "Soft Channel" device support. Semantics follow base's record support (mbbiDirectRecord.c,
-// mbboDirectRecord.c, int64inRecord.c, int64outRecord.c and the devXxxSoft.c device support):
-// inputs are read, alarms checked, outputs written (IVOA), monitors posted. The code is ours.
+// The remaining soft record types of EPICS base 7: mbbiDirect, mbboDirect, int64in, int64out, lsi,
+// lso, with "Soft Channel" device support. Semantics follow base's record support
+// (mbbiDirectRecord.c, mbboDirectRecord.c, int64inRecord.c, int64outRecord.c, lsiRecord.c,
+// lsoRecord.c and the devXxxSoft.c device support): inputs are read, alarms checked, outputs
+// written (IVOA), monitors posted. The code is ours.
 // Threading: the database thread, as every record.
 #include "pv/record_support.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <string_view>
 #include <utility>
+#include <vector>
 
 namespace beamctl::pv {
 namespace {
@@ -349,6 +353,169 @@ struct Int64outRecord : Int64Base<Int64outRecord> {
     }
 };
 
+
+// ---------------------------------------------------------------- lsi, lso
+// Long strings: VAL is a char array of SIZV (16..32767) characters, NUL-terminated, read and
+// written whole as `caget -S` / `caput -S` do; LEN is strlen(VAL) + 1. Links to a char array
+// carry the whole string; links to a scalar field carry its first 39 characters as DBR_STRING
+// (dbGetLinkLS, dbPutLinkLS).
+template <typename Self> struct LongStringBase : Record {
+    explicit LongStringBase(const RecordType& t) : Record(t) { allocate(); }
+    uint16_t sizv = 41;
+    uint32_t len = 0, olen = 0;
+    std::vector<char> val_buf, oval_buf;
+    char val_placeholder = 0, oval_placeholder = 0;
+    char scratch[kStringSize] = {}; // the scalar string of a link to a DBF_STRING (or numeric) field
+    uint16_t mpst = 0, apst = 0;    // menuPost: On Change, Always
+    Link inp, dol, out;
+    uint16_t omsl = 0, ivoa = 0;
+    char ivov[kStringSize] = {};
+    const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* oval_fd = type().find("OVAL");
+    const FieldDesc* len_fd = type().find("LEN");
+    inline static const FieldDesc kScratch{"", Dbf::String, 0, kStringSize, nullptr,
+                                           [](Record& r) -> void* { return static_cast<Self&>(r).scratch; }};
+
+    static std::vector<FieldDesc> long_string_fields(std::vector<FieldDesc> v) {
+        using R = Self;
+        auto add = {
+            BEAMCTL_FIELD(R, VAL, val_placeholder, Char, kVal | kArray),
+            BEAMCTL_FIELD(R, OVAL, oval_placeholder, Char, kReadOnly | kArray),
+            BEAMCTL_FIELD(R, SIZV, sizv, UShort, kInitOnly),
+            BEAMCTL_FIELD(R, LEN, len, ULong, kReadOnly),
+            BEAMCTL_FIELD(R, OLEN, olen, ULong, kReadOnly),
+            BEAMCTL_MENU(R, MPST, mpst, kMenuPostOnChange, 0),
+            BEAMCTL_MENU(R, APST, apst, kMenuPostOnChange, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void allocate() {
+        sizv = std::clamp<uint16_t>(sizv, 16, 0x7fff);
+        val_buf.assign(sizv, 0);
+        oval_buf.assign(sizv, 0);
+        len = olen = 0;
+    }
+    Elements elements(const FieldDesc& f) override {
+        if (&f == val_fd) return Elements{Dbf::Char, val_buf.data(), len, sizv, 1};
+        if (&f == oval_fd) return Elements{Dbf::Char, oval_buf.data(), olen, sizv, 1};
+        return Record::elements(f);
+    }
+    void set_count(const FieldDesc& f, uint32_t n) override { // put_array_info: terminated
+        if (&f != val_fd) return;
+        val_buf[std::min<uint32_t>(n, sizv - 1u)] = 0;
+        val_buf[sizv - 1u] = 0;
+        len = uint32_t(std::strlen(val_buf.data()) + 1);
+    }
+    PutStatus special(const FieldDesc& f) override {
+        if (&f == val_fd) post(len_fd, kDbeValue | kDbeLog);
+        return PutStatus::Ok;
+    }
+    void set_value(std::string_view s) {
+        copy_string(val_buf.data(), sizv, s);
+        len = uint32_t(std::strlen(val_buf.data()) + 1);
+    }
+    // dbLoadLinkLS: a constant link's string (or number) into VAL at init.
+    bool load_string_constant(const Link& l) {
+        if (l.kind != Link::Kind::Constant) return false;
+        if (l.is_string_constant) {
+            set_value(l.string_constant);
+        } else if (!l.numbers.empty()) {
+            char buf[kStringSize];
+            std::snprintf(buf, sizeof buf, "%.15g", l.numbers[0]);
+            set_value(buf);
+        } else {
+            return false;
+        }
+        return len > 1;
+    }
+    bool read_string(Link& l) {
+        if (l.target_field && (l.target_field->flags & kArray)) return read_link(l, *val_fd);
+        if (!read_link(l, kScratch)) return false;
+        set_value(std::string_view(scratch, strnlen(scratch, sizeof scratch)));
+        return true;
+    }
+    bool write_string(Link& l) {
+        if (l.target_field && (l.target_field->flags & kArray)) return write_link(l, *val_fd);
+        copy_string(scratch, sizeof scratch, std::string_view(val_buf.data(), strnlen(val_buf.data(), sizv)));
+        return write_link(l, kScratch);
+    }
+    void long_string_monitor() {
+        unsigned ev = reset_alarms();
+        if (len != olen || std::memcmp(oval_buf.data(), val_buf.data(), len) != 0) {
+            ev |= kDbeValue | kDbeLog;
+            std::memcpy(oval_buf.data(), val_buf.data(), len);
+        }
+        if (len != olen) {
+            olen = len;
+            post(len_fd, kDbeValue | kDbeLog);
+        }
+        if (mpst == 1) ev |= kDbeValue;
+        if (apst == 1) ev |= kDbeLog;
+        if (ev) post(val_fd, ev);
+    }
+};
+
+struct LsiRecord : LongStringBase<LsiRecord> {
+    using LongStringBase::LongStringBase;
+    static std::vector<FieldDesc> fields() {
+        using R = LsiRecord;
+        auto v = long_string_fields(common_fields());
+        v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        return v;
+    }
+    void init() override {
+        allocate();
+        if (load_string_constant(inp)) udf = 0;
+    }
+    ProcessResult process() override {
+        pact = 1;
+        if (linked(inp) && read_string(inp)) udf = 0; // devLsiSoft (lsi raises no UDF alarm)
+        stamp_time();
+        long_string_monitor();
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+
+struct LsoRecord : LongStringBase<LsoRecord> {
+    using LongStringBase::LongStringBase;
+    static std::vector<FieldDesc> fields() {
+        using R = LsoRecord;
+        auto v = long_string_fields(common_fields());
+        auto add = {
+            BEAMCTL_FIELD(R, DOL, dol, InLink, 0), BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
+            BEAMCTL_FIELD(R, OUT, out, OutLink, 0), BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
+            BEAMCTL_FIELD(R, IVOV, ivov, String, 0),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void init() override {
+        allocate();
+        if (load_string_constant(dol)) {
+            std::memcpy(oval_buf.data(), val_buf.data(), len);
+            olen = len;
+            udf = 0;
+        }
+    }
+    ProcessResult process() override {
+        pact = 1;
+        if (omsl == 1 && linked(dol) && read_string(dol)) udf = 0;
+        if (udf) set_sevr(kStatUdf, kInvalid);
+        if (nsev < kInvalid || ivoa == 0) {
+            write_string(out);
+        } else if (ivoa == 2) {
+            set_value(std::string_view(ivov, strnlen(ivov, sizeof ivov)));
+            write_string(out);
+        }
+        stamp_time();
+        long_string_monitor();
+        pact = 0;
+        return ProcessResult::Done;
+    }
+};
+
 } // namespace
 
 void register_more_records(RecordTypes& types) {
@@ -356,6 +523,8 @@ void register_more_records(RecordTypes& types) {
     add_type<MbboDirectRecord>(types, "mbboDirect");
     add_type<Int64inRecord>(types, "int64in");
     add_type<Int64outRecord>(types, "int64out");
+    add_type<LsiRecord>(types, "lsi");
+    add_type<LsoRecord>(types, "lso");
 }
 
 } // namespace beamctl::pv

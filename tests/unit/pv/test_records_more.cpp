@@ -212,3 +212,72 @@ record(int64in, "dst3") {}
     EXPECT_EQ(gets("iv.SEVR"), "INVALID");
     EXPECT_EQ(getd("dst3"), 3); // not driven
 }
+
+// ---------------------------------------------------------------- lsi, lso
+
+TEST_F(RecordsMore, LsoHoldsLongStringsAndWritesThemThroughOut) {
+    load(R"(
+record(lso, "o") { field(SIZV, "100") field(OUT, "i PP") }
+record(lsi, "i") { field(SIZV, "100") }
+record(lso, "s") { field(OUT, "so PP") }
+record(stringout, "so") {}
+record(lso, "c") { field(DOL, {const: "from the start"}) }
+record(lsi, "small") { field(SIZV, "3") }
+)");
+    EXPECT_EQ(addr("o").count, 100u);
+    EXPECT_EQ(addr("small").count, 16u); // SIZV is at least 16
+    EXPECT_EQ(get_chars("c"), "from the start");
+    EXPECT_EQ(getd("c.LEN"), 15);
+    const char* text = "a string much longer than the forty characters of DBR_STRING, 72 chars";
+    ASSERT_EQ(put_chars("o", text), PutStatus::Ok);
+    EXPECT_EQ(get_chars("o"), text);
+    EXPECT_EQ(getd("o.LEN"), double(std::strlen(text) + 1));
+    EXPECT_EQ(get_chars("i"), text); // char array to char array: all of it
+    EXPECT_EQ(getd("i.LEN"), double(std::strlen(text) + 1));
+    EXPECT_EQ(gets("i.SEVR"), "NO_ALARM");
+    put_chars("s", text);
+    EXPECT_EQ(gets("so"), std::string(text).substr(0, 39)); // to a DBF_STRING: its 39 characters
+    // Longer than SIZV: truncated, still terminated.
+    std::string longer(150, 'x');
+    put_chars("o", longer.c_str());
+    EXPECT_EQ(get_chars("o"), std::string(99, 'x'));
+    EXPECT_EQ(getd("o.LEN"), 100);
+}
+
+TEST_F(RecordsMore, LsiReadsStringsAndLsoPostsOnChangeOrAlways) {
+    load(R"(
+record(stringout, "src") { field(VAL, "short") }
+record(lsi, "i") { field(INP, "src") }
+record(lso, "o") {}
+record(lso, "a") { field(MPST, "Always") }
+record(lso, "cl") { field(OMSL, "closed_loop") field(DOL, "i") field(OUT, "src2 PP") }
+record(stringin, "src2") {}
+record(lso, "u") { field(OUT, "udst PP") field(IVOA, "Set output to IVOV") field(IVOV, "fallback") }
+record(stringin, "udst") {}
+)");
+    put("i.PROC", 1);
+    EXPECT_EQ(get_chars("i"), "short");
+    EXPECT_EQ(getd("i.LEN"), 6);
+    put("cl.PROC", 1);
+    EXPECT_EQ(get_chars("cl"), "short"); // DOL from a char array
+    EXPECT_EQ(gets("src2"), "short");
+    Recorder on_change, always;
+    on_change.addr = addr("o");
+    always.addr = addr("a");
+    for (Recorder* r : {&on_change, &always}) {
+        r->mask = kDbeValue;
+        db.subscribe(*r);
+    }
+    for (int k = 0; k < 2; ++k) {
+        put_chars("o", "same");
+        put_chars("a", "same");
+    }
+    for (Recorder* r : {&on_change, &always}) db.unsubscribe(*r);
+    EXPECT_EQ(on_change.masks.size(), 1u);
+    EXPECT_EQ(always.masks.size(), 2u);
+    // Never given a value: UDF/INVALID; IVOA writes IVOV.
+    put("u.PROC", 1);
+    EXPECT_EQ(gets("u.SEVR"), "INVALID");
+    EXPECT_EQ(gets("udst"), "fallback");
+    EXPECT_EQ(get_chars("u"), "fallback");
+}
