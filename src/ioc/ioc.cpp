@@ -43,6 +43,53 @@ double to_double(uint64_t raw, uint8_t bits, bool sign) {
     return double(raw);
 }
 
+// Device support "beamctl": a record's "@ec0.s3.positionActual01" (or "...Input01.2", a bit) link
+// reads the entry from the bus snapshot of the IOC loop and writes an output through the bus's
+// write queue, as the entry's own PV does. IOC loop thread only.
+class EcLinkDevice : public pv::LinkDevice {
+public:
+    EcLinkDevice(ethercat::Bus& bus, const ethercat::SignalInfo& sig, int bit) : bus_(bus), sig_(sig), bit_(bit) {}
+    bool read(double& v) override {
+        const ethercat::BusSnapshot& s = bus_.snapshot();
+        if (!s.link_up || !s.wkc_ok) return false; // no fresh data: LINK/INVALID
+        v = value(s);
+        last_ = v;
+        return true;
+    }
+    bool write(double v) override {
+        if (!sig_.output || !std::isfinite(v)) return false;
+        if (bit_ >= 0) { // one bit of a wider output: the others as last sent
+            uint64_t raw = ethercat::Bus::get(bus_.snapshot().image, sig_);
+            raw = v != 0 ? raw | (uint64_t(1) << bit_) : raw & ~(uint64_t(1) << bit_);
+            return bus_.write(sig_, raw);
+        }
+        uint64_t raw = v < 0 ? uint64_t(int64_t(v)) : uint64_t(v);
+        if (sig_.bits < 64) raw &= (uint64_t(1) << sig_.bits) - 1;
+        return bus_.write(sig_, raw);
+    }
+    std::string describe() const override {
+        return bit_ >= 0 ? std::string(SB() << sig_.name << "." << bit_) : sig_.name;
+    }
+    bool changed() override {
+        const ethercat::BusSnapshot& s = bus_.snapshot();
+        double v = value(s);
+        bool c = !(v == last_);
+        last_ = v;
+        return c;
+    }
+
+private:
+    double value(const ethercat::BusSnapshot& s) const {
+        uint64_t raw = ethercat::Bus::get(s.image, sig_);
+        if (bit_ >= 0) return double(raw >> bit_ & 1);
+        return to_double(raw, sig_.bits, is_signed(sig_.datatype));
+    }
+    ethercat::Bus& bus_;
+    const ethercat::SignalInfo& sig_;
+    int bit_;
+    double last_ = NAN;
+};
+
 // A counter as a 32-bit LONG PV value: saturates instead of wrapping.
 double clamp_long(uint64_t v) { return double(std::min<uint64_t>(v, 0x7FFFFFFF)); }
 
@@ -331,6 +378,45 @@ void Ioc::own_output(EntryPv& e, const std::string& owner) {
     pv::put_element(*e.rec, *fd, el, 0, pv::Prim::String, desc.c_str());
 }
 
+pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) {
+    auto fail = [&](std::string m) -> pv::LinkDevice* {
+        if (why) *why = std::move(m);
+        return nullptr;
+    };
+    std::string name = l.address;
+    int bit = -1;
+    // "ec0.s3.binaryInput01.2": a bit
+    std::size_t last = name.rfind('.');
+    if (last != std::string::npos && std::count(name.begin(), name.end(), '.') == 3 &&
+        std::all_of(name.begin() + std::ptrdiff_t(last) + 1, name.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+        bit = std::atoi(name.c_str() + last + 1);
+        name.resize(last);
+    }
+    for (auto& b : buses_) {
+        std::string pre = SB() << "ec" << b.bus->id() << ".";
+        if (name.rfind(pre, 0) != 0) continue;
+        for (const auto& sig : b.bus->master().signals()) {
+            if (sig.name != name) continue;
+            if (bit >= int(sig.bits)) return fail(SB() << "'" << name << "' has " << int(sig.bits) << " bits, no bit " << bit);
+            if (f.dbf == pv::Dbf::OutLink) {
+                if (!sig.output) return fail(SB() << "'" << name << "' is an input; an output link cannot write it");
+                for (auto& e : b.entries)
+                    if (e.sig == &sig) {
+                        if (e.owned) {
+                            std::string desc(e.rec->desc, strnlen(e.rec->desc, sizeof e.rec->desc));
+                            return fail(SB() << "'" << name << "' already has its writer (" << desc << ")");
+                        }
+                        own_output(e, SB() << "record " << r.name());
+                    }
+            }
+            devices_.push_back(std::make_unique<EcLinkDevice>(*b.bus, sig, bit));
+            return devices_.back().get();
+        }
+        return fail(SB() << "no signal '" << name << "' on bus " << b.bus->id());
+    }
+    return fail(SB() << "'" << l.address << "' names no signal of this IOC (ec<bus>.s<slave>.<entry>[.<bit>])");
+}
+
 void Ioc::bring_up() {
     for (auto& b : buses_) {
         b.bus->bring_up();
@@ -370,6 +456,10 @@ void Ioc::bring_up() {
             return std::nullopt;
         },
         std::move(bus_ok));
+    // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
+    db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
+        return bind_device(r, f, l, why);
+    });
     // Outputs a PLC's code assigns belong to that PLC, as those of the axes to their axis.
     if (plc::PlcRuntime* rt = plcs_->runtime())
         for (std::size_t i = 0; i < rt->size(); ++i)
@@ -469,7 +559,10 @@ int Ioc::run() {
     for (auto& b : buses_) b.bus->start_health();
     std::string acf = cfg_.acf;
     LoopSignals signals(loop, acf.empty() ? std::function<void()>() : [&] { server.reload_access_security(acf); });
-    loop.call_every(0.01, [this] { publish(); });
+    loop.call_every(0.01, [this] {
+        publish();
+        db_.scan_io_intr(); // records on engine signals that changed since the last snapshot
+    });
     loop.call_every(0.01, [this] { db_.scan_periodic(EventLoop::now_s()); });
     std::string rcp_text = rcp ? std::string(SB() << ", RCP bridge on udp " << cfg_.rcp->listen << ":" << rcp->port()) : std::string();
     std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)%s\n", server.listen_description().c_str(),

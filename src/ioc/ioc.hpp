@@ -65,6 +65,8 @@ private:
         bool owned = false; // an output an axis or PLC writes: read-only, shows the image
     };
     void own_output(EntryPv& e, const std::string& owner);
+    pv::LinkDevice* bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why);
+    std::vector<std::unique_ptr<pv::LinkDevice>> devices_; // device support of "@..." links
     struct BusRt {
         std::unique_ptr<ethercat::sim::Segment> segment;
         std::shared_ptr<ethercat::sim::Plant> plant; // runs in the segment's on_frame

@@ -80,8 +80,8 @@ double scan_period(uint16_t scan) {
 // Record types of EPICS base and the common synApps modules that beamctl does not serve (yet):
 // a database that uses one is told "not supported", not "unknown".
 static bool known_epics_type(std::string_view t) {
-    static const char* known[] = {"aai", "aao", "aSub", "compress", "histogram", "int64in", "int64out",
-                                  "lsi", "lso", "mbbiDirect", "mbboDirect", "permissive", "printf",
+    static const char* known[] = {"aai", "aao", "aSub", "compress", "histogram",
+                                  "permissive", "printf",
                                   "state", "sub", "subArray", "swait", "sseq", "scalcout", "acalcout",
                                   "transform", "scaler", "mca", "epid", "busy", "asyn", "timestamp",
                                   "digitel", "table", "sCalcout", "vs", "pid", "steppermotor"};
@@ -123,14 +123,6 @@ void Database::apply_field(Record& rec, const DbField& f, const std::string& fil
     std::string err;
     if (!parse_field(rec, *fd, f.value, &err))
         throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": " << err);
-    if (fd->menu == &kMenuScan) {
-        uint16_t s = rec.scan;
-        if (s == 2)
-            throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": SCAN \""
-                             << fd->menu->choices[s]
-                             << "\" needs device support with interrupts; Soft Channel has none (use "
-                                "Passive with a CP input link, Event or a period)");
-    }
     if (is_link(fd->dbf)) field_ref<Link>(rec, *fd).loc = f.loc;
     if (is_val(*fd)) rec.udf = 0; // a VAL given in the file defines the value
 }
@@ -297,20 +289,36 @@ void Database::init_records() {
         std::stable_sort(pini.begin(), pini.end(), [](Record* x, Record* y) { return x->phas < y->phas; });
         for (Record* r : pini) process_record(*r);
     }
+    // A CP link processes its record once at start, as the first monitor update of EPICS's CA
+    // link does (after the PINI records).
+    for (auto& w : cp_watches_)
+        if (std::find(batch.begin(), batch.end(), &w->src()) != batch.end()) w->on_event(kDbeValue);
 }
 
 void Database::resolve_links(const std::vector<Record*>& batch) {
     ErrorList errs;
+    std::vector<Record*> bad;
     for (Record* r : batch)
         for (const FieldDesc& f : r->type().fields()) {
             if (!is_link(f.dbf)) continue;
             Link& l = field_ref<Link>(*r, f);
             std::string why;
             if (resolve_link(*r, f, l, &why)) continue;
+            bad.push_back(r);
             std::string msg = SB() << "record " << r->name() << " field " << f.name << " \"" << l.text << "\": " << why;
             if (!l.loc.file.empty()) errs.add(l.loc, msg);
             else errs.add(msg);
         }
+    for (Record* r : batch) {
+        if (r->scan != 2 || std::find(bad.begin(), bad.end(), r) != bad.end()) continue;
+        bool device = false;
+        for (const FieldDesc& f : r->type().fields())
+            if (is_link(f.dbf) && field_ref<Link>(*r, f).device) device = true;
+        if (!device)
+            errs.add(SB() << "record " << r->name() << ": SCAN \"I/O Intr\" needs device support with "
+                             "interrupts (DTYP \"beamctl\" and an \"@signal\" link); Soft Channel has none "
+                             "(use Passive with a CP input link, Event or a period)");
+    }
     errs.throw_if_any();
 }
 
@@ -326,6 +334,8 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
     case Link::Kind::Empty:
     case Link::Kind::Constant: return true;
     case Link::Kind::Hw: {
+        if (r.dtyp != 1 && r.type().find("DTYP") && r.type().find("DTYP")->menu == &kMenuSoftDtyp)
+            return fail(SB() << "the hardware address '@" << l.address << "' needs DTYP \"beamctl\"");
         if (!binder_)
             return fail(SB() << "the hardware address '@" << l.address
                              << "' needs device support (DTYP), and this database has none");
@@ -397,6 +407,7 @@ void Database::add_to_scan(Record& r) {
         v.insert(at, &r);
     };
     double period = scan_period(r.scan);
+    if (r.scan == 2) io_intr_.push_back(&r);
     if (period > 0) {
         auto it = std::find_if(scans_.begin(), scans_.end(), [&](const ScanList& s) { return s.period_s == period; });
         if (it == scans_.end()) {
@@ -409,7 +420,20 @@ void Database::add_to_scan(Record& r) {
     }
 }
 
+void Database::scan_io_intr() {
+    Depth d(*this);
+    for (std::size_t i = 0; i < io_intr_.size(); ++i) {
+        Record* r = io_intr_[i];
+        bool changed = false;
+        for (const FieldDesc& f : r->type().fields())
+            if (is_link(f.dbf))
+                if (LinkDevice* dev = field_ref<Link>(*r, f).device) changed = dev->changed() || changed;
+        if (changed) process_record(*r);
+    }
+}
+
 void Database::remove_from_scan(Record& r) {
+    io_intr_.erase(std::remove(io_intr_.begin(), io_intr_.end(), &r), io_intr_.end());
     for (auto& s : scans_) s.recs.erase(std::remove(s.recs.begin(), s.recs.end(), &r), s.recs.end());
     for (auto& [name, v] : events_) v.erase(std::remove(v.begin(), v.end(), &r), v.end());
 }

@@ -119,6 +119,9 @@ public:
     uint32_t current_count(const Address& a) const;
     // Processes a record as a scan would (PROC=1).
     void process(Record& r);
+    // Processes the SCAN="I/O Intr" records whose device says its value changed (the owner of
+    // the devices calls it when new values arrived: an IOC after each bus snapshot).
+    void scan_io_intr();
     // Processes the SCAN=Event records whose EVNT is `name`, in PHAS order (post_event).
     void post_event(std::string_view name);
     // Processes r once the current processing has ended (scanOnce; CP links use it).
@@ -196,6 +199,7 @@ private:
     };
     std::vector<Poll> polls_; // records that poll their device (Record::poll_period_s)
     std::vector<Poll> delays_; // call_after: (record, when)
+    std::vector<Record*> io_intr_; // SCAN "I/O Intr" records (all have a bound device link)
     double now_s_ = 0;         // the last time scan_periodic was given
     std::unordered_map<std::string, std::vector<Record*>> events_; // SCAN=Event by EVNT, PHAS order
     std::deque<Record*> once_;                                       // scanOnce queue

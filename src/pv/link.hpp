@@ -34,6 +34,8 @@ public:
     virtual bool read(double& v) = 0;        // false: no value (the record raises LINK/INVALID)
     virtual bool write(double v) = 0;        // false: refused (the record raises LINK/INVALID)
     virtual std::string describe() const = 0; // for dbpr/introspection
+    // SCAN "I/O Intr": true when the value differs from the one the record last read.
+    virtual bool changed() { return false; }
 };
 
 struct Link {

@@ -30,7 +30,8 @@ const Menu kMenuPostAlways{"waveformPOST", {"Always", "On Change"}};
 const Menu kMenuOmsl{"menuOmsl", {"supervisory", "closed_loop"}};
 const Menu kMenuIvoa{"menuIvoa",
                      {"Continue normally", "Don't drive outputs", "Set output to IVOV"}};
-const Menu kMenuSoftDtyp{"DTYP", {"Soft Channel"}};
+// "beamctl": links with "@address" reach the engine's signals (an IOC's device support).
+const Menu kMenuSoftDtyp{"DTYP", {"Soft Channel", "beamctl"}};
 const Menu kMenuPriority{"menuPriority", {"LOW", "MEDIUM", "HIGH"}};
 const Menu kMenuOif{"aoOIF", {"Full", "Incremental"}};
 

@@ -228,12 +228,10 @@ struct CalcoutRecord : CalcBase<CalcoutRecord> {
         analog_alarms();
         bool output = wants_output();
         pval = val;
-        if (output && odly > 0) { // the output (and the forward link) after ODLY seconds
+        if (output && odly > 0) { // the output, monitors and forward link after ODLY seconds
             dlya = 1;
             post("DLYA", kDbeValue);
             delayed = true;
-            stamp_time();
-            calc_monitor();
             call_after(odly);
             return ProcessResult::Async;
         }
@@ -245,9 +243,9 @@ struct CalcoutRecord : CalcBase<CalcoutRecord> {
     void on_delay() override {
         if (!delayed) return;
         delayed = false;
-        exec_output();
         dlya = 0;
         post("DLYA", kDbeValue);
+        exec_output();
         finish();
         fwd_link(flnk);
         pact = 0;

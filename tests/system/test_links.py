@@ -103,12 +103,8 @@ record(calc, "$(P)follow") { field(INPA, "$(P)src CP") field(CALC, "A*10") }
     assert caget(p + "follow.INPA") == p + "src CP NMS"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "EPICS base 7 makes every CP/CPP input link a CA link (dbLink.c dbInitLink: "
-    "pvlOptCA|pvlOptCP|pvlOptCPP -> dbCaAddLink); the link's first monitor event after iocInit "
-    "already processes the record (dbCa.c eventCallback -> scanLinkOnce), so a CP-linked calc "
-    "shows its source's value and NO_ALARM right after start. beamctl processes it only on the "
-    "first change of the source, leaving it UDF/INVALID until then"))
+# EPICS base 7 makes every CP/CPP input link a CA link whose first monitor event after iocInit
+# processes the record (dbCa.c), so a CP-linked calc shows its source's value right after start.
 def test_cp_link_processes_the_record_once_at_start_as_epics(ioc, prefix):
     ioc.start("""
 record(ao, "$(P)src") { field(VAL, "4") }
@@ -170,11 +166,8 @@ record(ao, "$(P)t") { field(VAL, "-1") }
     assert ca.get(dlya) == 0
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "EPICS calcoutRecord.c process(): with ODLY > 0 the first pass only posts DLYA and schedules "
-    "the output; monitor() (which posts VAL, A..U and OVAL) runs once, after the delayed "
-    "output. beamctl's CalcoutRecord::process posts VAL (calc_monitor) already when the delay "
-    "starts, so a VAL monitor fires ODLY seconds early"))
+# EPICS calcoutRecord.c: with ODLY > 0 the first pass only posts DLYA; VAL, A..U and OVAL are
+# posted once, after the delayed output.
 def test_calcout_val_monitor_fires_only_after_the_delay_as_epics(ioc, prefix):
     ioc.start("""
 record(calcout, "$(P)co") { field(CALC, "A") field(OUT, "$(P)t PP") field(ODLY, "1.0") }
