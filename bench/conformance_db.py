@@ -1,0 +1,315 @@
+#!/usr/bin/python3
+"""Conformance of `beamctl softioc` against EPICS softIoc, seen from a Channel Access client.
+
+Both servers load the same database (bench/db/conformance.db), one after the other, each on its own
+free port; a separate client process (pyepics on its own libca) applies the same sequence of puts
+and records what it sees: value, alarm status/severity and the DBR_CTRL metadata (units,
+precision, display/alarm/control limits, enum strings), the record's STAT/SEVR/UDF fields, and the
+completion status of numeric gets of string records. The two observation sets are then compared
+item by item.
+
+  /usr/bin/python3 bench/conformance_db.py [--softioc PATH] [--beamctl PATH] [--md OUT.md]
+
+Without --softioc (or $SOFTIOC) only beamctl is observed and the observations are printed. Nothing
+here is needed by the build or the tests.
+"""
+import argparse, ctypes, json, math, os, socket, subprocess, sys, tempfile, time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+DB = os.path.join(HERE, "db", "conformance.db")
+
+PVS = """cf:in cf:c1 cf:c2 cf:c3 cf:co cf:coout cf:co2 cf:co2out cf:co3 cf:co3cnt cf:seq cf:seq1
+cf:seq2 cf:seq3 cf:cp cf:cp2 cf:src cf:ms cf:nms cf:mss cf:msout cf:ao_init cf:ai_init cf:li_init
+cf:lo_init cf:calc_init cf:ao_noval cf:so_init cf:bi cf:bo cf:bofollow cf:mbbi cf:mbbo
+cf:mbbi_nostates cf:si cf:si_num""".split()
+ENUMS = ["cf:bi", "cf:bo", "cf:mbbi", "cf:mbbo", "cf:mbbi_nostates"]
+
+# ---------------------------------------------------------------------------------------------
+# client side (runs in its own process: pyepics reads EPICS_CA_* once, at context creation)
+
+
+def client(out_path):
+    import epics
+    from epics import ca, dbr
+
+    chids = {}
+
+    def chan(name):
+        if name not in chids:
+            c = ca.create_channel(name, connect=False, auto_cb=False)
+            if not ca.connect_channel(c, timeout=3.0):
+                chids[name] = None
+            else:
+                chids[name] = c
+        return chids[name]
+
+    obs = {}
+
+    def put(name, value, wait=True):
+        if isinstance(value, str):  # by name (pyepics maps enum names through the PV's ctrl data)
+            st = epics.caput(name, value, wait=wait, timeout=3.0)
+        else:
+            st = ca.put(chan(name), value, wait=wait, timeout=3.0)
+        ca.poll(0.3)  # let CP links (scanOnce) and delayed work settle
+        time.sleep(0.3)
+        return st
+
+    meta_keys = ["value", "status", "severity", "units", "precision", "upper_disp_limit",
+                 "lower_disp_limit", "upper_alarm_limit", "upper_warning_limit",
+                 "lower_warning_limit", "lower_alarm_limit", "upper_ctrl_limit",
+                 "lower_ctrl_limit", "enum_strs"]
+
+    def norm(v):
+        if isinstance(v, bytes):
+            return v.decode(errors="replace")
+        if isinstance(v, (list, tuple)):
+            return [norm(x) for x in v]
+        if hasattr(v, "tolist"):
+            return norm(v.tolist())
+        if isinstance(v, float) and (math.isnan(v) or math.isinf(v)):
+            return repr(v)
+        return v
+
+    def md(c, ftype):
+        try:
+            d = ca.get_with_metadata(c, ftype=ftype, as_numpy=False, timeout=3.0)
+        except Exception as e:  # noqa
+            return {"error": repr(e)}
+        if d is None:
+            return {"error": "no answer"}
+        return {k: norm(d[k]) for k in meta_keys if k in d}
+
+    def snap(step, names):
+        for n in names:
+            c = chan(n)
+            if c is None:
+                obs[f"{step}|{n}|connect"] = "NOT CONNECTED"
+                continue
+            ft = ca.field_type(c)
+            native = dbr.Name(ft) if hasattr(dbr, "Name") else str(ft)
+            obs[f"{step}|{n}|native type"] = native
+            ctrl = ca.promote_type(c, use_ctrl=True)
+            for k, v in md(c, ctrl).items():
+                obs[f"{step}|{n}|CTRL.{k}"] = v
+            t = ca.get_with_metadata(c, ftype=ca.promote_type(c, use_time=True), as_numpy=False,
+                                     timeout=3.0) or {}
+            ts = t.get("timestamp")
+            obs[f"{step}|{n}|TIME.timestamp is EPICS epoch 0"] = (ts is not None and ts <= 631152000.0 + 1e-6)
+            for f in ("STAT", "SEVR", "UDF"):
+                fc = chan(f"{n}.{f}")
+                obs[f"{step}|{n}|.{f}"] = None if fc is None else norm(ca.get(fc, ftype=dbr.STRING, timeout=3.0))
+            if n in ENUMS:
+                for ftn, ftc in (("CTRL_LONG", dbr.CTRL_LONG), ("CTRL_DOUBLE", dbr.CTRL_DOUBLE)):
+                    for k, v in md(c, ftc).items():
+                        if k in ("value", "units", "precision", "upper_disp_limit", "lower_disp_limit",
+                                 "upper_ctrl_limit", "lower_ctrl_limit", "upper_alarm_limit",
+                                 "lower_alarm_limit", "upper_warning_limit", "lower_warning_limit"):
+                            obs[f"{step}|{n}|{ftn}.{k}"] = v
+
+    # raw get-with-callback with our own callback, to see the completion status the server sends
+    class Args(ctypes.Structure):
+        _fields_ = [("usr", ctypes.c_void_p), ("chid", ctypes.c_void_p), ("type", ctypes.c_long),
+                    ("count", ctypes.c_long), ("dbr", ctypes.c_void_p), ("status", ctypes.c_int)]
+
+    CB = ctypes.CFUNCTYPE(None, Args)
+    got = {}
+
+    def on_get(a):
+        val = None
+        if a.status == 1 and a.dbr:
+            ct = {dbr.SHORT: ctypes.c_short, dbr.LONG: ctypes.c_int, dbr.FLOAT: ctypes.c_float,
+                  dbr.DOUBLE: ctypes.c_double, dbr.ENUM: ctypes.c_ushort, dbr.CHAR: ctypes.c_ubyte}[a.type]
+            val = ctypes.cast(a.dbr, ctypes.POINTER(ct))[0]
+        got["r"] = (a.status, val)
+
+    cb = CB(on_get)
+    chan("cf:in")
+    libca = ca.libca
+    get_cb = libca["ca_array_get_callback"]  # a private function object: pyepics keeps its own argtypes
+    get_cb.argtypes = [ctypes.c_long, ctypes.c_ulong, ctypes.c_void_p, CB, ctypes.c_void_p]
+    ca_message = libca["ca_message"]
+    ca_message.restype = ctypes.c_char_p
+
+    def raw_get(name, ftype, tname):
+        c = chan(name)
+        got.clear()
+        st = get_cb(ftype, 1, c.value if hasattr(c, "value") else c, cb, None)
+        libca.ca_flush_io()
+        t0 = time.time()
+        while "r" not in got and time.time() - t0 < 3:
+            ca.poll(0.01)
+        if "r" not in got:
+            return f"request status {st}, no callback"
+        s, v = got["r"]
+        return f"status {s} ({ca_message(s).decode()}), value {v!r}"
+
+    def numeric_gets(step, name):
+        for tname, ft in (("DBR_SHORT", dbr.SHORT), ("DBR_LONG", dbr.LONG), ("DBR_FLOAT", dbr.FLOAT),
+                          ("DBR_DOUBLE", dbr.DOUBLE), ("DBR_ENUM", dbr.ENUM), ("DBR_CHAR", dbr.CHAR)):
+            obs[f"{step}|{name}|get {tname} (callback status, value)"] = raw_get(name, ft, tname)
+        # what pyepics' own ca.get returns (it drops non-normal callbacks and times out)
+        c = chan(name)
+        try:
+            v = ca.get(c, ftype=dbr.SHORT, as_numpy=False, timeout=1.0)
+        except Exception as e:  # noqa
+            v = repr(e)
+        obs[f"{step}|{name}|pyepics ca.get(ftype=DBR_SHORT)"] = norm(v)
+
+    def field(step, name):
+        c = chan(name)
+        obs[f"{step}|{name}|value"] = None if c is None else norm(ca.get(c, ftype=dbr.STRING, timeout=3.0))
+
+    # ---- the sequence
+    snap("0 init", PVS)
+    numeric_gets("0 init", "cf:si")
+    numeric_gets("0 init", "cf:si_num")
+
+    chain = ["cf:in", "cf:c1", "cf:c2", "cf:c3", "cf:cp", "cf:cp2"]
+    put("cf:in", 3.0)
+    snap("1 put cf:in=3", chain)
+    put("cf:in", 60.0)
+    snap("2 put cf:in=60 (DRVH 50)", chain)
+    put("cf:in", 4.0)
+    snap("3 put cf:in=4", chain)
+
+    put("cf:seq.PROC", 1)
+    snap("4 put cf:seq.PROC=1", ["cf:seq", "cf:seq1", "cf:seq2", "cf:seq3"])
+
+    put("cf:co.A", 0)
+    snap("5 put cf:co.A=0", ["cf:co", "cf:coout"])
+    field("5 put cf:co.A=0", "cf:co.OVAL")
+    put("cf:co.A", 2)
+    snap("6 put cf:co.A=2", ["cf:co", "cf:coout"])
+    field("6 put cf:co.A=2", "cf:co.OVAL")
+    put("cf:co2.A", 0)
+    snap("7 put cf:co2.A=0", ["cf:co2", "cf:co2out"])
+    put("cf:co2.A", -1)
+    snap("8 put cf:co2.A=-1", ["cf:co2", "cf:co2out"])
+    put("cf:co3.A", 1)
+    put("cf:co3.A", 1)
+    put("cf:co3.A", 2)
+    snap("9 put cf:co3.A=1,1,2", ["cf:co3", "cf:co3cnt"])
+
+    ms = ["cf:src", "cf:ms", "cf:nms", "cf:mss", "cf:msout"]
+    put("cf:src", 20.0)
+    snap("10 put cf:src=20 (HIHI)", ms)
+    put("cf:src", 6.0)
+    snap("11 put cf:src=6 (HIGH)", ms)
+    put("cf:src", 1.0)
+    snap("12 put cf:src=1", ms)
+
+    put("cf:bo", 1)
+    snap("13 put cf:bo=1", ["cf:bo", "cf:bofollow"])
+    put("cf:mbbo", "Fast")
+    snap("14 put cf:mbbo=Fast", ["cf:mbbo"])
+    put("cf:mbbo", 1)
+    snap("15 put cf:mbbo=1", ["cf:mbbo"])
+    put("cf:mbbo", 7)
+    snap("16 put cf:mbbo=7 (no such state)", ["cf:mbbo"])
+    put("cf:bi.PROC", 1)
+    snap("17 put cf:bi.PROC=1", ["cf:bi"])
+
+    put("cf:si.PROC", 1)
+    snap("18 put cf:si.PROC=1", ["cf:si"])
+    numeric_gets("18 put cf:si.PROC=1", "cf:si")
+
+    with open(out_path, "w") as f:
+        json.dump(obs, f, indent=0)
+
+
+# ---------------------------------------------------------------------------------------------
+# driver side
+
+
+def free_port():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    p = s.getsockname()[1]
+    s.close()
+    return p
+
+
+def observe(label, cmd):
+    port = free_port()
+    env = dict(os.environ, EPICS_CAS_SERVER_PORT=str(port), EPICS_CA_SERVER_PORT=str(port),
+               EPICS_CAS_INTF_ADDR_LIST="127.0.0.1", EPICS_CAS_AUTO_BEACON_ADDR_LIST="NO",
+               EPICS_CAS_BEACON_ADDR_LIST="127.0.0.1:9")
+    log = tempfile.NamedTemporaryFile("w+", suffix=f"-{label}.log", delete=False)
+    srv = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    try:
+        for _ in range(100):
+            with open(log.name) as f:
+                t = f.read()
+            if "ready:" in t or "iocRun: All initialization complete" in t:
+                break
+            if srv.poll() is not None:
+                raise SystemExit(f"{label} exited: {t}")
+            time.sleep(0.1)
+        out = tempfile.NamedTemporaryFile(suffix=f"-{label}.json", delete=False).name
+        cenv = dict(os.environ, EPICS_CA_ADDR_LIST=f"127.0.0.1:{port}", EPICS_CA_AUTO_ADDR_LIST="NO")
+        subprocess.run([sys.executable, os.path.abspath(__file__), "--client", out], env=cenv, check=True)
+        with open(out) as f:
+            return json.load(f)
+    finally:
+        srv.terminate()
+        try:
+            srv.wait(5)
+        except subprocess.TimeoutExpired:
+            srv.kill()
+
+
+def same(a, b):
+    if isinstance(a, float) and isinstance(b, (int, float)) or isinstance(b, float) and isinstance(a, (int, float)):
+        return a == b or abs(a - b) <= 1e-9 * max(1.0, abs(a), abs(b))
+    return a == b
+
+
+def fmt(v):
+    if isinstance(v, list):
+        return "[" + ", ".join(fmt(x) for x in v) + "]"
+    if isinstance(v, str):
+        return repr(v)
+    return str(v)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--client")
+    ap.add_argument("--beamctl", default=os.path.join(ROOT, "build/release/beamctl"))
+    ap.add_argument("--softioc", default=os.environ.get("SOFTIOC"))
+    ap.add_argument("--md", help="write the comparison as a markdown table")
+    ap.add_argument("--json", help="write both observation sets")
+    a = ap.parse_args()
+    if a.client:
+        return client(a.client)
+    bc = observe("beamctl", [a.beamctl, "softioc", "-S", "-d", DB])
+    if not a.softioc:
+        for k, v in bc.items():
+            print(k, "=", fmt(v))
+        return
+    si = observe("softIoc", [a.softioc, "-S", "-d", DB])
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump({"beamctl": bc, "softIoc": si}, f, indent=0)
+    keys = list(si) + [k for k in bc if k not in si]
+    diff, match = [], 0
+    for k in keys:
+        x, y = bc.get(k, "(absent)"), si.get(k, "(absent)")
+        if same(x, y):
+            match += 1
+        else:
+            diff.append((k, x, y))
+    print(f"{len(keys)} items compared: {match} match, {len(diff)} differ")
+    lines = ["| step | PV | item | beamctl | softIoc |", "|---|---|---|---|---|"]
+    for k, x, y in diff:
+        step, pv, item = k.split("|")
+        lines.append(f"| {step} | `{pv}` | {item} | `{fmt(x)}` | `{fmt(y)}` |")
+    print("\n".join(lines))
+    if a.md:
+        with open(a.md, "w") as f:
+            f.write(f"{len(keys)} items compared: {match} match, {len(diff)} differ\n\n" + "\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
