@@ -383,7 +383,7 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         if (why) *why = std::move(m);
         return nullptr;
     };
-    std::string name = l.address;
+    std::string name = l.s().address;
     int bit = -1;
     // "ec0.s3.binaryInput01.2": a bit
     std::size_t last = name.rfind('.');
@@ -414,7 +414,7 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         }
         return fail(SB() << "no signal '" << name << "' on bus " << b.bus->id());
     }
-    return fail(SB() << "'" << l.address << "' names no signal of this IOC (ec<bus>.s<slave>.<entry>[.<bit>])");
+    return fail(SB() << "'" << l.s().address << "' names no signal of this IOC (ec<bus>.s<slave>.<entry>[.<bit>])");
 }
 
 void Ioc::bring_up() {

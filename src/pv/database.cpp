@@ -123,7 +123,8 @@ void Database::apply_field(Record& rec, const DbField& f, const std::string& fil
     std::string err;
     if (!parse_field(rec, *fd, f.value, &err))
         throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": " << err);
-    if (is_link(fd->dbf)) field_ref<Link>(rec, *fd).loc = f.loc;
+    if (is_link(fd->dbf))
+        if (auto& spec = field_ref<Link>(rec, *fd).spec) spec->loc = f.loc;
     if (is_val(*fd)) rec.udf = 0; // a VAL given in the file defines the value
 }
 
@@ -305,8 +306,8 @@ void Database::resolve_links(const std::vector<Record*>& batch) {
             std::string why;
             if (resolve_link(*r, f, l, &why)) continue;
             bad.push_back(r);
-            std::string msg = SB() << "record " << r->name() << " field " << f.name << " \"" << l.text << "\": " << why;
-            if (!l.loc.file.empty()) errs.add(l.loc, msg);
+            std::string msg = SB() << "record " << r->name() << " field " << f.name << " \"" << l.s().text << "\": " << why;
+            if (!l.s().loc.file.empty()) errs.add(l.s().loc, msg);
             else errs.add(msg);
         }
     for (Record* r : batch) {
@@ -335,9 +336,9 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
     case Link::Kind::Constant: return true;
     case Link::Kind::Hw: {
         if (r.dtyp != 1 && r.type().find("DTYP") && r.type().find("DTYP")->menu == &kMenuSoftDtyp)
-            return fail(SB() << "the hardware address '@" << l.address << "' needs DTYP \"beamctl\"");
+            return fail(SB() << "the hardware address '@" << l.s().address << "' needs DTYP \"beamctl\"");
         if (!binder_)
-            return fail(SB() << "the hardware address '@" << l.address
+            return fail(SB() << "the hardware address '@" << l.s().address
                              << "' needs device support (DTYP), and this database has none");
         LinkDevice* d = binder_(r, f, l, why);
         if (!d) return false;
@@ -346,14 +347,15 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
     }
     case Link::Kind::Db: break;
     }
-    Record* t = find(l.record);
+    const LinkSpec& spec = l.s();
+    Record* t = find(spec.record);
     if (!t) {
         if (l.proc == Link::kCa || l.proc == Link::kCp || l.proc == Link::kCpp)
-            return fail(SB() << "no record '" << l.record
+            return fail(SB() << "no record '" << spec.record
                              << "' here; Channel Access links to other servers are not supported yet");
-        return fail(SB() << "no record '" << l.record << "' (a link to another server needs the CA modifier)");
+        return fail(SB() << "no record '" << spec.record << "' (a link to another server needs the CA modifier)");
     }
-    std::string_view fname = l.field.empty() ? std::string_view("VAL") : std::string_view(l.field);
+    std::string_view fname = spec.field.empty() ? std::string_view("VAL") : std::string_view(spec.field);
     const FieldDesc* tf = t->type().find(fname);
     if (!tf) {
         if (f.dbf == Dbf::FwdLink) tf = t->type().find("PROC"); // FLNK "rec.X": the record is processed
@@ -392,7 +394,7 @@ PutStatus Database::relink(Record& r, const FieldDesc& f, std::string_view text)
             break;
         }
     Link& l = field_ref<Link>(r, f);
-    fresh.loc = l.loc;
+    if (fresh.spec) fresh.spec->loc = l.s().loc;
     if (!resolve_link(r, f, fresh, nullptr)) {
         resolve_link(r, f, l, nullptr); // the old link stays, with its watch
         return PutStatus::BadValue;

@@ -74,10 +74,10 @@ bool json_constant(Json& j, Link& out, std::string* why) {
             double v;
             std::string str;
             if (j.string(str)) {
-                if (!out.is_string_constant) out.string_constant = str;
-                out.is_string_constant = true;
+                if (!out.spec->is_string_constant) out.spec->string_constant = str;
+                out.spec->is_string_constant = true;
             } else if (j.number(v)) {
-                out.numbers.push_back(v);
+                out.spec->numbers.push_back(v);
             } else {
                 return fail(why, "bad array element in a JSON constant");
             }
@@ -87,13 +87,13 @@ bool json_constant(Json& j, Link& out, std::string* why) {
     }
     std::string str;
     if (j.string(str)) {
-        out.string_constant = str;
-        out.is_string_constant = true;
+        out.spec->string_constant = str;
+        out.spec->is_string_constant = true;
         return true;
     }
     double v;
     if (j.number(v)) {
-        out.numbers.push_back(v);
+        out.spec->numbers.push_back(v);
         return true;
     }
     return fail(why, "expected a number, a string or an array in a JSON constant");
@@ -137,31 +137,34 @@ const char* link_ms_name(uint8_t ms) {
 }
 
 std::string Link::canonical() const {
+    const LinkSpec& sp = s();
     switch (kind) {
     case Kind::Empty: return {};
-    case Kind::Constant: return text;
-    case Kind::Hw: return "@" + address;
+    case Kind::Constant: return sp.text;
+    case Kind::Hw: return "@" + sp.address;
     case Kind::Db: {
-        std::string s = record;
-        if (!field.empty()) s += "." + field;
-        return s + " " + link_proc_name(proc) + " " + link_ms_name(ms);
+        std::string r = sp.record;
+        if (!sp.field.empty()) r += "." + sp.field;
+        return r + " " + link_proc_name(proc) + " " + link_ms_name(ms);
     }
     }
-    return text;
+    return sp.text;
 }
 
 bool parse_link(std::string_view text, Dbf type, Link& out, std::string* why) {
     Link l;
-    l.text = std::string(trim(text));
-    std::string_view t = l.text;
+    std::string_view t = trim(text);
     if (t.empty()) {
         out = std::move(l);
         return true;
     }
+    l.spec = std::make_unique<LinkSpec>();
+    l.spec->text = std::string(t);
+    t = l.spec->text;
     if (t[0] == '@') {
         if (type == Dbf::FwdLink) return fail(why, "a forward link cannot be a hardware address (@...)");
         l.kind = Link::Kind::Hw;
-        l.address = std::string(trim(t.substr(1)));
+        l.spec->address = std::string(trim(t.substr(1)));
         out = std::move(l);
         return true;
     }
@@ -180,9 +183,10 @@ bool parse_link(std::string_view text, Dbf type, Link& out, std::string* why) {
         }
         if (type == Dbf::FwdLink) { // EPICS treats a numeric FLNK as no link
             l.kind = Link::Kind::Empty;
+            l.spec.reset();
         } else {
             l.kind = Link::Kind::Constant;
-            l.numbers.push_back(v);
+            l.spec->numbers.push_back(v);
         }
         out = std::move(l);
         return true;
@@ -192,15 +196,15 @@ bool parse_link(std::string_view text, Dbf type, Link& out, std::string* why) {
     while (end < t.size() && !std::isspace(static_cast<unsigned char>(t[end])) && t[end] != ',') ++end;
     std::string_view name = t.substr(0, end);
     std::size_t dot = name.find('.');
-    l.record = std::string(name.substr(0, dot));
-    if (dot != std::string_view::npos) l.field = std::string(name.substr(dot + 1));
-    if (l.record.empty()) return fail(why, "link '" + std::string(t) + "' names no record");
-    for (char c : l.record)
+    l.spec->record = std::string(name.substr(0, dot));
+    if (dot != std::string_view::npos) l.spec->field = std::string(name.substr(dot + 1));
+    if (l.spec->record.empty()) return fail(why, "link '" + std::string(t) + "' names no record");
+    for (char c : l.spec->record)
         if (!valid_record_char(c))
             return fail(why, std::string("record name in link '") + std::string(t) + "' contains '" + c + "'");
-    for (char c : l.field)
+    for (char c : l.spec->field)
         if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_')
-            return fail(why, "field '" + l.field + "' in link '" + std::string(t) +
+            return fail(why, "field '" + l.spec->field + "' in link '" + std::string(t) +
                                  "': field modifiers, array ranges and filters are not supported");
     bool have_proc = false, have_ms = false;
     std::string_view rest = t.substr(end);

@@ -17,6 +17,7 @@
 #include "core/error.hpp"
 #include "pv/types.hpp"
 
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -38,29 +39,40 @@ public:
     virtual bool changed() { return false; }
 };
 
+// What a link was written as: kept apart from Link so that the many unset link fields of a
+// record (a calc has 24) cost little memory.
+struct LinkSpec {
+    std::string text; // as written (what clients read)
+    SourceLoc loc;    // where the .db file set it (for load errors)
+    // Constant
+    std::vector<double> numbers; // numeric constant(s)
+    std::string string_constant; // {const: "text"}
+    bool is_string_constant = false;
+    // Db: "rec.FIELD" as written
+    std::string record, field;
+    // Hw: the address after '@'
+    std::string address;
+};
+
 struct Link {
     enum class Kind : uint8_t { Empty, Constant, Db, Hw };
     enum Proc : uint8_t { kNpp, kPp, kCa, kCp, kCpp };
     enum Ms : uint8_t { kNms, kMs, kMss, kMsi };
 
-    std::string text; // as written (what clients read)
-    SourceLoc loc;    // where the .db file set it (for load errors)
     Kind kind = Kind::Empty;
     uint8_t proc = kNpp;
     uint8_t ms = kNms;
-
-    // Constant
-    std::vector<double> numbers;   // numeric constant(s)
-    std::string string_constant;   // {const: "text"}
-    bool is_string_constant = false;
-    // Db: "rec.FIELD" as written, then the resolved target
-    std::string record, field;
+    // resolved at init: the target of a Db link, the device of a Hw link
     Record* target = nullptr;
     const FieldDesc* target_field = nullptr;
-    // Hw: the address after '@', and the device bound to it
-    std::string address;
     LinkDevice* device = nullptr;
+    std::unique_ptr<LinkSpec> spec; // null while the link is empty
 
+    // The link as written (an empty spec for an empty link).
+    const LinkSpec& s() const {
+        static const LinkSpec empty_spec;
+        return spec ? *spec : empty_spec;
+    }
     bool empty() const { return kind == Kind::Empty; }
     bool is_constant() const { return kind == Kind::Constant; }
     bool is_db() const { return kind == Kind::Db; }

@@ -245,8 +245,9 @@ void Record::fwd_link(Link& l) {
     if (db_) db_->link_forward(*this, l);
 }
 
-bool Record::load_constant(const Link& l, double& v) {
-    if (l.kind != Link::Kind::Constant) return false;
+bool Record::load_constant(const Link& link, double& v) {
+    if (link.kind != Link::Kind::Constant) return false;
+    const LinkSpec& l = link.s();
     if (!l.numbers.empty()) {
         v = l.numbers[0];
         return true;
@@ -255,8 +256,9 @@ bool Record::load_constant(const Link& l, double& v) {
     return false;
 }
 
-bool Record::load_constant(const Link& l, const FieldDesc& f) {
-    if (l.kind != Link::Kind::Constant) return false;
+bool Record::load_constant(const Link& link, const FieldDesc& f) {
+    if (link.kind != Link::Kind::Constant) return false;
+    const LinkSpec& l = link.s();
     Elements e = elements(f);
     if (l.is_string_constant && l.numbers.empty()) {
         char buf[kStringSize];

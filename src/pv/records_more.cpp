@@ -416,8 +416,9 @@ template <typename Self> struct LongStringBase : Record {
         len = uint32_t(std::strlen(val_buf.data()) + 1);
     }
     // dbLoadLinkLS: a constant link's string (or number) into VAL at init.
-    bool load_string_constant(const Link& l) {
-        if (l.kind != Link::Kind::Constant) return false;
+    bool load_string_constant(const Link& link) {
+        if (link.kind != Link::Kind::Constant) return false;
+        const LinkSpec& l = link.s();
         if (l.is_string_constant) {
             set_value(l.string_constant);
         } else if (!l.numbers.empty()) {

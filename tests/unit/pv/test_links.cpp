@@ -491,9 +491,9 @@ struct FakeDevice : LinkDevice {
 TEST_F(Links, DeviceSupportReadsWritesAndScansOnChange) {
     FakeDevice in, out;
     db.set_link_binder([&](Record&, const FieldDesc& f, Link& l, std::string* why) -> LinkDevice* {
-        if (l.address == "in" && f.dbf == Dbf::InLink) return &in;
-        if (l.address == "out" && f.dbf == Dbf::OutLink) return &out;
-        *why = "no signal '" + l.address + "'";
+        if (l.s().address == "in" && f.dbf == Dbf::InLink) return &in;
+        if (l.s().address == "out" && f.dbf == Dbf::OutLink) return &out;
+        *why = "no signal '" + l.s().address + "'";
         return nullptr;
     });
     load(R"(
