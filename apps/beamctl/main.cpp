@@ -162,6 +162,7 @@ ca::AccessSecurity load_acf(const std::string& path, const std::string& substitu
 
 int run_softioc(const SoftIocOptions& o) {
     pv::Database db;
+    db.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     EventLoop loop;
     std::unique_ptr<ca::Server> server;
     int exit_status = 0;

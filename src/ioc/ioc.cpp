@@ -456,6 +456,7 @@ void Ioc::bring_up() {
             return std::nullopt;
         },
         std::move(bus_ok));
+    db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
         return bind_device(r, f, l, why);

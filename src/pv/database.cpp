@@ -279,6 +279,9 @@ void Database::init_records() {
         }
         add_to_scan(*r);
         if (r->poll_period_s() > 0) polls_.push_back({r, 0});
+        // iocInit: a record still undefined starts with severity UDFS; one whose value the file
+        // (or a constant link) gave starts without alarm, its status still UDF until processed.
+        if (r->stat == kStatUdf && r->nsev == 0) r->sevr = r->udf ? r->udfs : uint16_t(kNoAlarm);
     }
     // PINI: YES, then RUN and RUNNING (this IOC runs as soon as it is initialised), each in PHAS
     // order (stable: load order within a phase), as iocInit's piniProcess.
@@ -973,7 +976,7 @@ void Database::post(Record& r, const FieldDesc* f, unsigned mask) {
 }
 
 void Database::call_after(Record& r, double seconds) {
-    delays_.push_back({&r, now_s_ + std::max(0.0, seconds)});
+    delays_.push_back({&r, (clock_ ? clock_() : now_s_) + std::max(0.0, seconds)});
 }
 
 void Database::scan_periodic(double now_s) {

@@ -126,10 +126,13 @@ public:
     void post_event(std::string_view name);
     // Processes r once the current processing has ended (scanOnce; CP links use it).
     void scan_once(Record& r);
-    // Calls r.on_delay() once `seconds` have passed on the clock of scan_periodic, counted from
-    // its last call (the owner calls it every 10 ms: delays have that resolution; tests drive it
-    // in virtual time).
+    // Calls r.on_delay() once `seconds` have passed on the clock of scan_periodic (the owner
+    // calls it every 10 ms: delays have that resolution; tests drive it in virtual time), counted
+    // from now on the clock set by set_clock, or else from scan_periodic's last time.
     void call_after(Record& r, double seconds);
+    // The clock scan_periodic is given (an IOC: EventLoop::now_s), so that a delay asked for
+    // before the first scan counts from the right time.
+    void set_clock(std::function<double()> now) { clock_ = std::move(now); }
 
     // --- used by Record's link helpers and async_done() ---
     bool link_read(Record& r, Link& l, const FieldDesc& f);
@@ -201,6 +204,7 @@ private:
     std::vector<Poll> delays_; // call_after: (record, when)
     std::vector<Record*> io_intr_; // SCAN "I/O Intr" records (all have a bound device link)
     double now_s_ = 0;         // the last time scan_periodic was given
+    std::function<double()> clock_;
     std::unordered_map<std::string, std::vector<Record*>> events_; // SCAN=Event by EVNT, PHAS order
     std::deque<Record*> once_;                                       // scanOnce queue
     int depth_ = 0;

@@ -145,9 +145,9 @@ void type_range(Dbf t, double& hi, double& lo) {
     case Dbf::Char: hi = 127; lo = -128; break;
     case Dbf::UChar: hi = 255; lo = 0; break;
     case Dbf::Short: hi = 32767; lo = -32768; break;
-    case Dbf::UShort:
-    case Dbf::Enum:
-    case Dbf::Menu: hi = 65535; lo = 0; break;
+    case Dbf::UShort: hi = 65535; lo = 0; break;
+    // enum and menu fields: no limits (EPICS base serves 0..0 for them; bo's VAL has control
+    // limits, set by its record type)
     case Dbf::Long: hi = 2147483647.0; lo = -2147483648.0; break;
     case Dbf::ULong: hi = 4294967295.0; lo = 0; break;
     case Dbf::Int64: hi = 9223372036854775807.0; lo = -9223372036854775808.0; break;

@@ -282,11 +282,11 @@ template <typename Self> struct Selecting : Record {
     void selection_init() {
         double v;
         if (load_constant(sell, v)) seln = uint16_t(v);
-        udf = 0; // never UDF
     }
     // SELN (through SELL), then the groups: All; Specified SELN+OFFS; Mask SELN shifted right by
     // SHFT (left if negative). Out of range: SOFT/INVALID and none.
     uint32_t selected() {
+        udf = 0; // processed: defined (as base's seq and fanout)
         if (sell.kind == Link::Kind::Db || sell.kind == Link::Kind::Hw) {
             double v = seln;
             if (read_link(sell, v)) seln = uint16_t(v);

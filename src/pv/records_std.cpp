@@ -310,6 +310,10 @@ struct BiRecord : BinaryBase<BiRecord> {
 
 struct BoRecord : BinaryBase<BoRecord> {
     using BinaryBase::BinaryBase;
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        Record::metadata(f, md);
+        if (&f == val_fd) md.ctrl_hi = 65535; // boRecord's get_control_double (as softIoc serves)
+    }
     static std::vector<FieldDesc> fields() {
         using R = BoRecord;
         auto v = binary_fields(common_fields());
