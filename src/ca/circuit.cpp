@@ -317,12 +317,14 @@ void Circuit::on_read_notify(const Header& h, bool old_read) {
     std::size_t padded = pad8(size);
     std::size_t at = out_.size();
     uint8_t hdr[24];
+    // a string that holds no number read as a number: the read fails (as EPICS's dbGet)
+    bool converts = ctx_.db.readable_as(ch->addr, dbr_info(t).prim);
+    uint32_t status = !readable ? kEcaNoRdAccess : converts ? kEcaNormal : kEcaGetFail;
     std::size_t hs = encode_header(hdr, old_read ? kRead : kReadNotify, uint32_t(padded), t, n,
-                                   old_read ? ch->cid : (readable ? kEcaNormal : kEcaNoRdAccess),
-                                   h.p2);
+                                   old_read ? ch->cid : status, h.p2);
     out_.append(reinterpret_cast<char*>(hdr), hs);
     out_.append(padded, '\0');
-    if (readable) encode_dbr(ctx_.db, ch->addr, t, n, reinterpret_cast<uint8_t*>(&out_[at + hs]));
+    if (readable && converts) encode_dbr(ctx_.db, ch->addr, t, n, reinterpret_cast<uint8_t*>(&out_[at + hs]));
 }
 
 void Circuit::on_write(const Header& h, const uint8_t* payload, bool notify) {
@@ -460,13 +462,14 @@ void Circuit::encode_event(Monitor& m, std::string& out) {
     uint32_t n = m.count ? m.count : ctx_.db.current_count(ch.addr);
     std::size_t padded = pad8(dbr_payload_size(m.dtype, n));
     bool readable = ch.rights & kAccessRead;
+    bool converts = ctx_.db.readable_as(ch.addr, dbr_info(m.dtype).prim);
     std::size_t at = out.size();
     uint8_t hdr[24];
     std::size_t hs = encode_header(hdr, kEventAdd, uint32_t(padded), m.dtype, n,
-                                   readable ? kEcaNormal : kEcaNoRdAccess, m.subid);
+                                   !readable ? kEcaNoRdAccess : converts ? kEcaNormal : kEcaGetFail, m.subid);
     out.append(reinterpret_cast<char*>(hdr), hs);
     out.append(padded, '\0');
-    if (readable) encode_dbr(ctx_.db, ch.addr, m.dtype, n, reinterpret_cast<uint8_t*>(&out[at + hs]));
+    if (readable && converts) encode_dbr(ctx_.db, ch.addr, m.dtype, n, reinterpret_cast<uint8_t*>(&out[at + hs]));
     ctx_.stats.events_sent++;
 }
 

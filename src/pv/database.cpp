@@ -522,6 +522,16 @@ bool Database::resolve(std::string_view channel, Address& out, std::string* why)
     return true;
 }
 
+bool Database::readable_as(const Address& a, Prim t) const {
+    if (t == Prim::String || a.kind != Address::Kind::Field || a.field->dbf != Dbf::String ||
+        (a.field->flags & kArray))
+        return true;
+    if (t == Prim::Enum) return false;
+    const char* s = static_cast<const char*>(a.field->addr(*a.rec));
+    double v;
+    return parse_double(std::string_view(s, strnlen(s, a.field->size)), v);
+}
+
 uint32_t Database::current_count(const Address& a) const {
     if (a.kind == Address::Kind::RecordType) return 1;
     if (a.kind == Address::Kind::LongString) {

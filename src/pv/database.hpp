@@ -115,6 +115,9 @@ public:
     PutStatus put(const Address& a, Prim t, const void* data, uint32_t n, PutCallback cb = {});
     // Reads up to n elements as type t into dest; returns the number of valid elements.
     uint32_t get(const Address& a, Prim t, void* dest, uint32_t n) const;
+    // Whether the field's value can be read as type t: a string that holds no number cannot be
+    // read as a number, nor any string as an enum (EPICS's read fails: ECA_GETFAIL).
+    bool readable_as(const Address& a, Prim t) const;
     // Current number of valid elements (NORD for arrays).
     uint32_t current_count(const Address& a) const;
     // Processes a record as a scan would (PROC=1).

@@ -470,3 +470,22 @@ record(sel, "$(P)s") { field(INPA, "1") field(INPB, "5") field(INPC, "3") field(
     assert caput(p + "s.PROC", 1, wait=True) == 1
     assert caget(p + "s") == 3
     assert caget(p + "s.SELM", as_string=True) == "Median Signal"
+
+
+# ---------------------------------------------------------------------------------------------
+# A string read as a number (as EPICS softIoc: the read fails with ECA_GETFAIL)
+# ---------------------------------------------------------------------------------------------
+def test_numeric_read_of_a_string_that_holds_no_number_fails(ioc, prefix):
+    ioc.start("""
+record(stringin, "$(P)word") { field(VAL, "abc") }
+record(stringin, "$(P)num") { field(VAL, "123") }
+""")
+    word, num = connect(prefix + "word"), connect(prefix + "num")
+    for ftype in (dbr.SHORT, dbr.LONG, dbr.FLOAT, dbr.DOUBLE, dbr.ENUM, dbr.CHAR):
+        with pytest.raises(ca.ChannelAccessGetFailure):
+            ca.get(word, ftype=ftype)
+    assert ca.get(word, ftype=dbr.STRING) == "abc"
+    assert ca.get(num, ftype=dbr.DOUBLE) == 123
+    assert ca.get(num, ftype=dbr.LONG) == 123
+    with pytest.raises(ca.ChannelAccessGetFailure):  # no string is an enum index
+        ca.get(num, ftype=dbr.ENUM)
