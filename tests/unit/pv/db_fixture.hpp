@@ -39,6 +39,17 @@ struct DbTest : ::testing::Test {
         db.get(addr(n), Prim::String, s, 1);
         return s;
     }
+    // The error that loading and initialising `text` gives, in a database of its own.
+    static std::string load_error(const char* text) {
+        Database fresh;
+        try {
+            fresh.load(parse_db(text, "bad.db", {}));
+            fresh.init_records();
+        } catch (const Error& e) {
+            return e.what();
+        }
+        return "(no error)";
+    }
 };
 
 } // namespace beamctl::pv

@@ -27,16 +27,6 @@ struct Links : DbTest {
     void advance(double seconds) { // virtual time, in the 10 ms steps an IOC calls it with
         for (double end = now + seconds; now < end - 1e-9;) db.scan_periodic(now += 0.01);
     }
-    static std::string load_error(const char* text) { // in a database of its own
-        Database fresh;
-        try {
-            fresh.load(parse_db(text, "bad.db", {}));
-            fresh.init_records();
-        } catch (const Error& e) {
-            return e.what();
-        }
-        return "(no error)";
-    }
 };
 
 

@@ -41,16 +41,6 @@ struct RecordsMore : DbTest {
     PutStatus put_array(const char* n, std::vector<double> v) {
         return db.put(addr(n), Prim::Double, v.data(), uint32_t(v.size()));
     }
-    static std::string load_error(const char* text) {
-        Database fresh;
-        try {
-            fresh.load(parse_db(text, "bad.db", {}));
-            fresh.init_records();
-        } catch (const Error& e) {
-            return e.what();
-        }
-        return "(no error)";
-    }
 };
 
 } // namespace
