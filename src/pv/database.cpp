@@ -283,6 +283,7 @@ void Database::init_records() {
         // (or a constant link) gave starts without alarm, its status still UDF until processed.
         if (r->stat == kStatUdf && r->nsev == 0) r->sevr = r->udf ? r->udfs : uint16_t(kNoAlarm);
     }
+    if (restore_hook_ && !batch.empty()) restore_hook_(); // autosave: after init, before PINI
     // PINI: YES, then RUN and RUNNING (this IOC runs as soon as it is initialised), each in PHAS
     // order (stable: load order within a phase), as iocInit's piniProcess.
     Depth d(*this);

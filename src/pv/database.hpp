@@ -100,6 +100,9 @@ public:
     // processes those with PINI YES/RUN/RUNNING in PHAS order.
     void init_records();
     void set_link_binder(LinkBinder b) { binder_ = std::move(b); }
+    // Called by init_records after the records' init() and constant links, before PINI
+    // processing (autosave restores its values there, as synApps' pass 1).
+    void set_restore_hook(std::function<void()> h) { restore_hook_ = std::move(h); }
 
     Record* find(std::string_view name) const; // names and aliases
     std::size_t size() const { return records_.size(); }
@@ -113,6 +116,11 @@ public:
     // when processing ends (immediately for synchronous records); a put-callback that arrives
     // while another is active on the same record waits behind it. Returns Ok when accepted.
     PutStatus put(const Address& a, Prim t, const void* data, uint32_t n, PutCallback cb = {});
+    // dbPut: stores n elements of type t (conversion, special(), put_hook, UDF, monitors)
+    // without processing the record and without the client rules of put() (autosave restore).
+    PutStatus store_value(const Address& a, Prim t, const void* data, uint32_t n) {
+        return store(a, t, data, n);
+    }
     // Reads up to n elements as type t into dest; returns the number of valid elements.
     uint32_t get(const Address& a, Prim t, void* dest, uint32_t n) const;
     // Whether the field's value can be read as type t: a string that holds no number cannot be
@@ -214,6 +222,7 @@ private:
     PutNotify* notify_ = nullptr; // the put-callback the processing in progress belongs to
     std::vector<std::unique_ptr<class CpLinkWatch>> cp_watches_;
     LinkBinder binder_;
+    std::function<void()> restore_hook_; // set_restore_hook
     DatabaseStats stats_;
 };
 

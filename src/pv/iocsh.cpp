@@ -314,6 +314,7 @@ struct IocShell::Impl {
     };
     std::vector<Scope*> scopes;
     int depth = 0;
+    std::map<std::string, std::pair<std::string, CommandFn>, std::less<>> added; // add_command
 
     // A command: its words, where it is, and the stream its output goes to.
     struct Call {
@@ -495,6 +496,10 @@ struct IocShell::Impl {
             (this->*(it->second.fn))(c);
             return;
         }
+        if (auto ad = added.find(name); ad != added.end()) {
+            ad->second.second(c.argv, c.out);
+            return;
+        }
         if (name.size() > 27 && name.ends_with("_registerRecordDeviceDriver")) {
             cmd_ignored(c);
             return;
@@ -502,6 +507,10 @@ struct IocShell::Impl {
         std::string best;
         std::size_t best_d = std::max<std::size_t>(1, name.size() / 3) + 1;
         for (const auto& [known, cmd] : table) {
+            std::size_t d = edit_distance(name, known);
+            if (d < best_d) best_d = d, best = known;
+        }
+        for (const auto& [known, cmd] : added) {
             std::size_t d = edit_distance(name, known);
             if (d < best_d) best_d = d, best = known;
         }
@@ -880,6 +889,10 @@ void IocShell::set_access_security(const std::string& path, const std::string& s
 
 void IocShell::ioc_init() {
     impl_->ioc_init();
+}
+
+void IocShell::add_command(std::string name, std::string usage, CommandFn fn) {
+    impl_->added[std::move(name)] = {std::move(usage), std::move(fn)};
 }
 
 bool IocShell::initialised() const {

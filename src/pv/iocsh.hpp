@@ -74,6 +74,12 @@ public:
     // iocInit: initialises the records loaded so far, then calls hooks.init. Once only.
     void ioc_init();
 
+    // Adds a command to those of scripts (autosave's set_savefile_path, ...): `fn` gets the
+    // words (argv[0] is the name) and the stream the command's output goes to; an Error it
+    // throws is the error of the script line. `usage` is shown in messages.
+    using CommandFn = std::function<void(const std::vector<std::string>& argv, std::ostream& out)>;
+    void add_command(std::string name, std::string usage, CommandFn fn);
+
     bool initialised() const;
     std::size_t records_loaded() const; // by dbLoadRecords, dbLoadTemplate and -x
     // The access-security file ("" for none; as given, or absolute when `cd` moved away from where

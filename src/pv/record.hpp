@@ -199,6 +199,8 @@ public:
     void fwd_link(Link& l);
     // recGblInheritSevr: raise the pending alarm from another record's by an MS mode.
     void inherit_sevr(uint8_t ms, uint16_t stat, uint16_t sevr);
+    // The info(name, "value") items of the record's .db definition, in order.
+    const std::vector<std::pair<std::string, std::string>>& infos() const { return info_; }
     // Field descriptor by name (nullptr if the type has none).
     const FieldDesc* field(std::string_view name) const { return type_.find(name); }
 
