@@ -3,6 +3,7 @@
 #include "ca/protocol.hpp"
 #include "pv/convert.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -89,6 +90,8 @@ void to_wire(uint8_t* p, Prim prim, uint32_t n) {
 }
 
 } // namespace
+
+void host_to_wire(Prim prim, uint8_t* p, uint32_t n) { to_wire(p, prim, n); }
 
 bool dbr_valid(uint16_t t) { return t <= kLastDbr; }
 const DbrInfo& dbr_info(uint16_t t) { return kTable[t]; }
@@ -206,6 +209,61 @@ bool decode_put(uint16_t t, const uint8_t* payload, std::size_t len, uint32_t co
         break;
     }
     return true;
+}
+
+namespace {
+// Reads one metadata limit of the element type at p.
+double get_limit(const uint8_t* p, Prim prim) {
+    switch (prim) {
+    case Prim::Short: return double(int16_t(get16(p)));
+    case Prim::Char: return double(*p);
+    case Prim::Long: return double(int32_t(get32(p)));
+    case Prim::Float: return double(getf32(p));
+    case Prim::Double: return getf64(p);
+    default: return 0;
+    }
+}
+std::string fixed_string(const uint8_t* p, std::size_t max) {
+    const char* c = reinterpret_cast<const char*>(p);
+    return std::string(c, strnlen(c, max));
+}
+} // namespace
+
+bool decode_dbr(uint16_t t, const uint8_t* payload, std::size_t len, uint32_t count,
+                DbrValue& out) {
+    if (t > 34) return false;
+    const DbrInfo& d = kTable[t];
+    if (count == 0) count = 1;
+    if (count > (1u << 28) || len < dbr_payload_size(t, count)) return false;
+    out = DbrValue{};
+    out.prim = d.prim;
+    out.count = count;
+    if (d.kind != DbrKind::Plain) {
+        out.status = get16(payload);
+        out.severity = get16(payload + 2);
+    }
+    if (d.kind == DbrKind::Time) {
+        out.stamp.sec = get32(payload + 4);
+        out.stamp.nsec = get32(payload + 8);
+    }
+    if ((d.kind == DbrKind::Gr || d.kind == DbrKind::Ctrl) && d.prim != Prim::String) {
+        if (d.prim == Prim::Enum) {
+            unsigned n = std::min<unsigned>(get16(payload + 4), pv::kEnumStates);
+            for (unsigned i = 0; i < n; ++i)
+                out.enum_strings.push_back(fixed_string(payload + 6 + i * pv::kEnumStringSize, pv::kEnumStringSize));
+        } else {
+            bool fp = d.prim == Prim::Float || d.prim == Prim::Double;
+            std::size_t units_at = fp ? 8 : 4, lim_at = fp ? 16 : 12;
+            if (fp) out.precision = int16_t(get16(payload + 4));
+            out.units = fixed_string(payload + units_at, 8);
+            std::size_t w = pv::prim_size(d.prim);
+            double* lims[8] = {&out.disp_hi,   &out.disp_lo,    &out.alarm_hihi, &out.alarm_high,
+                               &out.alarm_low, &out.alarm_lolo, &out.ctrl_hi,    &out.ctrl_lo};
+            int nlim = d.kind == DbrKind::Ctrl ? 8 : 6;
+            for (int i = 0; i < nlim; ++i) *lims[i] = get_limit(payload + lim_at + i * w, d.prim);
+        }
+    }
+    return decode_put(t, payload + d.value_offset, len - d.value_offset, count, out.data);
 }
 
 } // namespace beamctl::ca

@@ -38,4 +38,28 @@ uint32_t encode_dbr(const pv::Database& db, const pv::Address& a, uint16_t t, ui
 bool decode_put(uint16_t t, const uint8_t* payload, std::size_t len, uint32_t count,
                 std::vector<char>& host);
 
+// Converts n host-order elements of type prim at p to big-endian in place (a put's payload).
+void host_to_wire(pv::Prim prim, uint8_t* p, uint32_t n);
+
+// A DBR payload as a client receives it: the elements in host order and the metadata its type
+// carries (alarm and time for STS/TIME; units, precision, limits, enum strings for GR/CTRL).
+struct DbrValue {
+    pv::Prim prim = pv::Prim::Double;
+    uint32_t count = 0;
+    std::vector<char> data; // count elements in host order; a string is char[40]
+    uint16_t status = 0, severity = 0;
+    pv::EpicsTime stamp;
+    std::string units;
+    int16_t precision = 0;
+    double disp_hi = 0, disp_lo = 0, alarm_hihi = 0, alarm_high = 0, alarm_low = 0,
+           alarm_lolo = 0, ctrl_hi = 0, ctrl_lo = 0;
+    std::vector<std::string> enum_strings;
+};
+
+// Decodes `count` elements (0 counts as 1) of DBR type t (0..34) from a payload of len bytes.
+// Returns false, leaving out in an unspecified state, if t is not a value type or the payload
+// is shorter than the type and count need.
+bool decode_dbr(uint16_t t, const uint8_t* payload, std::size_t len, uint32_t count,
+                DbrValue& out);
+
 } // namespace beamctl::ca

@@ -51,6 +51,76 @@ std::size_t decode_header(const uint8_t* p, std::size_t n, bool extended_ok, Hea
     return 16;
 }
 
+std::string eca_message(uint32_t eca) {
+    // libca's messages, indexed by the message number (eca >> 3).
+    static const char* const texts[] = {
+        "Normal successful completion",
+        "Maximum simultaneous IOC connections exceeded",
+        "Unknown internet host",
+        "Unknown internet service",
+        "Unable to allocate a new socket",
+        "Unable to connect to internet host or service",
+        "Unable to allocate additional dynamic memory",
+        "Unknown IO channel",
+        "Record field specified inappropriate for channel specified",
+        "The requested data transfer is greater than available memory or EPICS_CA_MAX_ARRAY_BYTES",
+        "User specified timeout on IO operation expired",
+        "Sorry, that feature is planned but not supported at this time",
+        "The supplied string is unusually large",
+        "The request was ignored because the specified channel is disconnected",
+        "The data type specifed is invalid",
+        "Remote Channel not found",
+        "Unable to locate all user specified channels",
+        "Channel Access Internal Failure",
+        "The requested local DB operation failed",
+        "Channel read request failed",
+        "Channel write request failed",
+        "Channel subscription request failed",
+        "Invalid element count requested",
+        "Invalid string",
+        "Virtual circuit disconnect",
+        "Identical process variable names on multiple servers",
+        "Request inappropriate within subscription (monitor) update callback",
+        "Database value get for that channel failed during channel search",
+        "Unable to initialize without the vxWorks VX_FP_TASK task option set",
+        "Event queue overflow has prevented first pass event after event add",
+        "Bad event subscription (monitor) identifier",
+        "Remote channel has new network address",
+        "New or resumed network connection",
+        "Specified task isn't a member of a CA context",
+        "Attempt to use defunct CA feature failed",
+        "The supplied string is empty",
+        "Unable to spawn the CA repeater thread- auto reconnect will fail",
+        "No channel id match for search reply- search reply ignored",
+        "Reseting dead connection- will try to reconnect",
+        "Server (IOC) has fallen behind or is not responding- still waiting",
+        "No internet interface with broadcast available",
+        "Invalid event selection mask",
+        "IO operations have completed",
+        "IO operations are in progress",
+        "Invalid synchronous group identifier",
+        "Put callback timed out",
+        "Read access denied",
+        "Write access denied",
+        "Requested feature is no longer supported",
+        "Empty PV search address list",
+        "No reasonable data conversion between client and server types",
+        "Invalid channel identifier",
+        "Invalid function pointer",
+        "Thread is already attached to a client context",
+        "Not supported by attached service",
+        "User destroyed channel",
+        "Invalid channel priority",
+        "Preemptive callback not enabled - additional threads may not join context",
+        "Client's protocol revision does not support transfers exceeding 16k bytes",
+        "Virtual circuit connection sequence aborted",
+        "Virtual circuit unresponsive",
+    };
+    std::size_t no = eca >> 3;
+    if (no < sizeof(texts) / sizeof(texts[0])) return texts[no];
+    return "unknown ECA code " + std::to_string(eca);
+}
+
 const char* cmd_name(uint16_t cmd) {
     static const char* names[] = {
         "VERSION", "EVENT_ADD", "EVENT_CANCEL", "READ", "WRITE", "SNAPSHOT", "SEARCH", "BUILD",

@@ -32,7 +32,11 @@ enum Eca : uint32_t {
     kEcaBadMonId = 242, kEcaDefunct = 278, kEcaBadMask = 330, kEcaPutCbInProg = 362,
     kEcaNoRdAccess = 368, kEcaNoWtAccess = 376, kEcaNoConvert = 400, kEcaUnavailInServ = 432,
     kEca16kArrayClient = 464,
+    kEcaTimeout = 80, kEcaDisconn = 192, // client side: no reply in time; channel disconnected
 };
+
+// The text of an ECA code as libca's ca_message() gives it ("unknown ECA code N" otherwise).
+std::string eca_message(uint32_t eca);
 
 inline uint16_t get16(const uint8_t* p) { return uint16_t(p[0] << 8 | p[1]); }
 inline uint32_t get32(const uint8_t* p) {
