@@ -63,6 +63,8 @@ RecordTypes& RecordTypes::global() {
         register_standard_records(*t);
         register_logic_records(*t);
         register_more_records(*t);
+        register_array_records(*t);
+        register_misc_records(*t);
         register_motor_record(*t);
         return t;
     }();

@@ -94,6 +94,8 @@ private:
 void register_standard_records(RecordTypes& types); // ai ao bi bo longin ... waveform
 void register_logic_records(RecordTypes& types);    // calc calcout seq fanout dfanout sel event
 void register_more_records(RecordTypes& types);     // mbbiDirect mbboDirect int64in int64out ...
+void register_array_records(RecordTypes& types);    // aai aao subArray compress histogram
+void register_misc_records(RecordTypes& types);     // permissive state printf
 
 // A view of a field's elements: scalars have count == capacity == 1.
 struct Elements {
