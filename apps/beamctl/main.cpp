@@ -8,6 +8,7 @@
 //   rcp-sim  stand in for a rapid-control-prototyping machine
 //   ca-repeater  the Channel Access repeater (also when invoked as `caRepeater`, EPICS's name)
 #include "ca/access_security.hpp"
+#include "ca/ca_link.hpp"
 #include "ca/repeater.hpp"
 #include "ca/server.hpp"
 #include "core/error.hpp"
@@ -164,6 +165,9 @@ int run_softioc(const SoftIocOptions& o) {
     pv::Database db;
     db.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     EventLoop loop;
+    // CA links to records of other servers, searched as EPICS_CA_ADDR_LIST etc. say (dbCa).
+    ca::CaLinks ca_links(db, ca::ClientConfig::from_env());
+    ca_links.start(loop);
     std::unique_ptr<ca::Server> server;
     int exit_status = 0;
     pv::IocShell* shell_ptr = nullptr;

@@ -71,6 +71,30 @@ Prim transfer_prim(Dbf to, Dbf from) {
     return Prim::Double;
 }
 
+// The type a link's value comes in: its target field's, a CA link's remote native type.
+Dbf source_dbf(const Link& l) {
+    if (l.target_field) return l.target_field->dbf;
+    if (RemoteLink* rl = l.remote()) {
+        switch (rl->type()) {
+        case Prim::String: return Dbf::String;
+        case Prim::Enum: return Dbf::Enum;
+        default: return Dbf::Double;
+        }
+    }
+    return Dbf::Double;
+}
+
+// A value of CA type p seen as a field, for converting what a CA link received (an enum as its
+// index: the states are the other server's).
+const FieldDesc& scratch_field(Prim p) {
+    static const FieldDesc fields[] = {
+        {"", Dbf::String, 0, kStringSize, nullptr, nullptr}, {"", Dbf::Short, 0, 2, nullptr, nullptr},
+        {"", Dbf::Float, 0, 4, nullptr, nullptr},            {"", Dbf::UShort, 0, 2, nullptr, nullptr},
+        {"", Dbf::UChar, 0, 1, nullptr, nullptr},            {"", Dbf::Long, 0, 4, nullptr, nullptr},
+        {"", Dbf::Double, 0, 8, nullptr, nullptr}};
+    return fields[int(p) <= 6 ? int(p) : 6];
+}
+
 double scan_period(uint16_t scan) {
     static const double periods[] = {0, 0, 0, 10, 5, 2, 1, 0.5, 0.2, 0.1};
     return scan < 10 ? periods[scan] : 0;
@@ -248,6 +272,9 @@ void Database::remove(std::string_view name) {
             ++w;
         }
     }
+    for (const FieldDesc& f : r->type().fields()) // its CA links stop
+        if (is_link(f.dbf))
+            if (RemoteLink* rl = field_ref<Link>(*r, f).remote()) rl->release();
     if (r->pn_ && --r->pn_->pending == 0 && r->pn_->started) finish_notify(r->pn_);
     for (Record* o : order_) {
         if (o->pn_ && o->pn_->origin == r) o->pn_->origin = nullptr;
@@ -316,7 +343,8 @@ void Database::resolve_links(const std::vector<Record*>& batch) {
         if (r->scan != 2 || std::find(bad.begin(), bad.end(), r) != bad.end()) continue;
         bool device = false;
         for (const FieldDesc& f : r->type().fields())
-            if (is_link(f.dbf) && field_ref<Link>(*r, f).device) device = true;
+            if (is_link(f.dbf) && field_ref<Link>(*r, f).kind == Link::Kind::Hw && field_ref<Link>(*r, f).device)
+                device = true;
         if (!device)
             errs.add(SB() << "record " << r->name() << ": SCAN \"I/O Intr\" needs device support with "
                              "interrupts (DTYP \"beamctl\" and an \"@signal\" link); Soft Channel has none "
@@ -352,10 +380,18 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
     const LinkSpec& spec = l.s();
     Record* t = find(spec.record);
     if (!t) {
-        if (l.proc == Link::kCa || l.proc == Link::kCp || l.proc == Link::kCpp)
+        if (l.proc != Link::kCa && l.proc != Link::kCp && l.proc != Link::kCpp)
+            return fail(SB() << "no record '" << spec.record << "' (a link to another server needs the CA modifier)");
+        if (!remote_binder_)
             return fail(SB() << "no record '" << spec.record
-                             << "' here; Channel Access links to other servers are not supported yet");
-        return fail(SB() << "no record '" << spec.record << "' (a link to another server needs the CA modifier)");
+                             << "' here, and this database has no Channel Access client for links to other servers");
+        if (f.dbf == Dbf::FwdLink && spec.field != "PROC") // dbCa writes 1 to the PROC it names
+            return fail(SB() << "no record '" << spec.record << "' here; a forward link to another server must name "
+                             << "its PROC field (\"" << spec.record << ".PROC CA\")");
+        RemoteLink* rl = remote_binder_(r, f, l, why);
+        if (!rl) return false;
+        l.device = rl;
+        return true;
     }
     std::string_view fname = spec.field.empty() ? std::string_view("VAL") : std::string_view(spec.field);
     const FieldDesc* tf = t->type().find(fname);
@@ -398,9 +434,10 @@ PutStatus Database::relink(Record& r, const FieldDesc& f, std::string_view text)
     Link& l = field_ref<Link>(r, f);
     if (fresh.spec) fresh.spec->loc = l.s().loc;
     if (!resolve_link(r, f, fresh, nullptr)) {
-        resolve_link(r, f, l, nullptr); // the old link stays, with its watch
+        if (!l.remote()) resolve_link(r, f, l, nullptr); // the old link stays, with its watch
         return PutStatus::BadValue;
     }
+    if (RemoteLink* old = l.remote()) old->release();
     l = std::move(fresh);
     return PutStatus::Ok;
 }
@@ -808,6 +845,11 @@ void Database::post_event(std::string_view name) {
 
 void Database::link_forward(Record& r, Link& l) {
     (void)r;
+    if (RemoteLink* rl = l.remote()) { // CA FLNK: PROC = 1 on the other server
+        int16_t one = 1;
+        if (!rl->put(Prim::Short, &one, 1)) stats_.link_errors++;
+        return;
+    }
     if (l.kind != Link::Kind::Db || !l.target) return;
     PutNotify* outer = notify_;
     if (r.pn_) notify_ = r.pn_; // an asynchronous record's forward link belongs to its put-callback
@@ -829,6 +871,17 @@ bool Database::link_get(Record& r, Link& l, Prim t, void* dest, uint32_t n, uint
         return true;
     }
     case Link::Kind::Db: {
+        if (RemoteLink* rl = l.remote()) { // CA link: the last value its monitor received
+            RemoteLink::Value v;
+            if (!rl->value(v)) break;
+            const FieldDesc& sf = scratch_field(v.type);
+            Elements e{sf.dbf, const_cast<void*>(v.data), v.count, v.count, uint16_t(prim_size(v.type))};
+            uint32_t k = std::min(v.count, n);
+            for (uint32_t i = 0; i < k; ++i) get_element(r, sf, e, i, t, static_cast<char*>(dest) + i * prim_size(t));
+            *got = k;
+            r.inherit_sevr(l.ms, v.stat, v.sevr);
+            return true;
+        }
         if (!l.target) break;
         Record& tr = *l.target;
         if (l.proc == Link::kPp && tr.scan == 0 && &tr != &r) process_record(tr);
@@ -859,6 +912,10 @@ bool Database::link_put(Record& r, Link& l, Prim t, const void* src, uint32_t n)
         break;
     }
     case Link::Kind::Db: {
+        if (RemoteLink* rl = l.remote()) { // CA link: a put, not waited for
+            if (rl->put(t, src, n)) return true;
+            break;
+        }
         if (!l.target) break;
         Record& tr = *l.target;
         const FieldDesc& tf = *l.target_field;
@@ -890,7 +947,7 @@ bool Database::link_read(Record& r, Link& l, const FieldDesc& f) {
         r.set_count(f, got);
         return true;
     }
-    Prim p = transfer_prim(f.dbf, l.target_field ? l.target_field->dbf : Dbf::Double);
+    Prim p = transfer_prim(f.dbf, source_dbf(l));
     alignas(8) char buf[kStringSize] = {};
     if (!link_get(r, l, p, buf, 1, &got)) return false;
     if (!got) return true;
@@ -901,7 +958,7 @@ bool Database::link_read(Record& r, Link& l, const FieldDesc& f) {
 }
 
 bool Database::link_read(Record& r, Link& l, double& v) {
-    Prim p = l.target_field && l.target_field->dbf == Dbf::String ? Prim::String : Prim::Double;
+    Prim p = source_dbf(l) == Dbf::String ? Prim::String : Prim::Double;
     alignas(8) char buf[kStringSize] = {};
     uint32_t got = 0;
     if (!link_get(r, l, p, buf, 1, &got)) return false;
@@ -924,14 +981,14 @@ bool Database::link_write(Record& r, Link& l, const FieldDesc& f) {
         for (uint32_t k = 0; k < e.count; ++k) get_element(r, f, e, k, p, buf.data() + std::size_t(k) * prim_size(p));
         return link_put(r, l, p, buf.data(), std::max<uint32_t>(e.count, 1));
     }
-    Prim p = transfer_prim(l.target_field ? l.target_field->dbf : Dbf::Double, f.dbf);
+    Prim p = transfer_prim(source_dbf(l), f.dbf);
     alignas(8) char buf[kStringSize] = {};
     get_element(r, f, e, 0, p, buf);
     return link_put(r, l, p, buf, 1);
 }
 
 bool Database::link_write(Record& r, Link& l, double v) {
-    Prim p = l.target_field && l.target_field->dbf == Dbf::String ? Prim::String : Prim::Double;
+    Prim p = source_dbf(l) == Dbf::String ? Prim::String : Prim::Double;
     alignas(8) char buf[kStringSize] = {};
     Elements e{Dbf::Double, &v, 1, 1, 8};
     get_element(r, kScratchDouble, e, 0, p, buf);

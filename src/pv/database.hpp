@@ -79,6 +79,9 @@ struct DatabaseStats {
 // Binds the hardware address of a link ("@ec0.s3.positionActual01") to a device; returns nullptr
 // with *why when it cannot. Called by init_records for every "@..." link.
 using LinkBinder = std::function<LinkDevice*(Record&, const FieldDesc&, Link&, std::string* why)>;
+// Makes the Channel Access link of a link to a record of another server (owned by the binder's
+// owner, told release() when the database lets it go); returns nullptr with *why when it cannot.
+using RemoteBinder = std::function<RemoteLink*(Record&, const FieldDesc&, Link&, std::string* why)>;
 
 class Database {
 public:
@@ -100,6 +103,9 @@ public:
     // processes those with PINI YES/RUN/RUNNING in PHAS order.
     void init_records();
     void set_link_binder(LinkBinder b) { binder_ = std::move(b); }
+    // Links with CA/CP/CPP to records not in this database become CA links through b (an IOC
+    // installs its CA client here); without a remote binder they are load errors.
+    void set_remote_binder(RemoteBinder b) { remote_binder_ = std::move(b); }
     // Called by init_records after the records' init() and constant links, before PINI
     // processing (autosave restores its values there, as synApps' pass 1).
     void set_restore_hook(std::function<void()> h) { restore_hook_ = std::move(h); }
@@ -222,6 +228,7 @@ private:
     PutNotify* notify_ = nullptr; // the put-callback the processing in progress belongs to
     std::vector<std::unique_ptr<class CpLinkWatch>> cp_watches_;
     LinkBinder binder_;
+    RemoteBinder remote_binder_;
     std::function<void()> restore_hook_; // set_restore_hook
     DatabaseStats stats_;
 };

@@ -11,6 +11,8 @@
 //                              followed by modifiers: NPP PP CA CP CPP (process) and NMS MS MSS MSI
 //                              (alarm propagation), blank- or comma-separated
 //   "@text"                    hardware address for the record's device support (DTYP)
+// A "rec..." link with CA, CP or CPP whose record is not in this database is a Channel Access
+// link (RemoteLink) when the database has a remote binder; without CA/CP/CPP it is a load error.
 // Threading: links belong to their record and are used on the database thread only.
 #pragma once
 
@@ -37,6 +39,33 @@ public:
     virtual std::string describe() const = 0; // for dbpr/introspection
     // SCAN "I/O Intr": true when the value differs from the one the record last read.
     virtual bool changed() { return false; }
+};
+
+// A Channel Access link to a record of another server (EPICS dbCa): made by the database's
+// remote binder (Database::set_remote_binder) for an INP/OUT/DOL/FLNK link with CA, CP or CPP
+// whose record is not in this database, and kept in Link::device of that Db link (whose target
+// stays null). Methods run on the database thread.
+class RemoteLink : public LinkDevice {
+public:
+    struct Value {
+        Prim type = Prim::Double;
+        uint32_t count = 0;
+        const void* data = nullptr; // count elements in host order (a string is char[40])
+        uint16_t stat = 0, sevr = 0;
+        EpicsTime time;
+    };
+    // The last value the link's monitor received; false while disconnected or before the first.
+    virtual bool value(Value& out) const = 0;
+    // Writes n elements of type t without waiting (WRITE); false while disconnected or read-only.
+    virtual bool put(Prim t, const void* data, uint32_t n) = 0;
+    virtual bool connected() const = 0;
+    // The remote field's native type once known (Double before).
+    virtual Prim type() const = 0;
+    // The link was replaced or its record removed: no more callbacks into the database.
+    virtual void release() = 0;
+    // LinkDevice, for code that sees any device: a scalar double in and out.
+    bool read(double&) override { return false; }
+    bool write(double v) override { return put(Prim::Double, &v, 1); }
 };
 
 // What a link was written as: kept apart from Link so that the many unset link fields of a
@@ -76,6 +105,10 @@ struct Link {
     bool empty() const { return kind == Kind::Empty; }
     bool is_constant() const { return kind == Kind::Constant; }
     bool is_db() const { return kind == Kind::Db; }
+    // The CA link of a Db link to another server (nullptr for any other link).
+    RemoteLink* remote() const {
+        return kind == Kind::Db && !target && device ? static_cast<RemoteLink*>(device) : nullptr;
+    }
     // Link text with its modifiers as EPICS prints them ("rec.VAL PP MS").
     std::string canonical() const;
 };
