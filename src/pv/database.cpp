@@ -104,7 +104,7 @@ double scan_period(uint16_t scan) {
 // Record types of EPICS base and the common synApps modules that beamctl does not serve (yet):
 // a database that uses one is told "not supported", not "unknown".
 static bool known_epics_type(std::string_view t) {
-    static const char* known[] = {"aSub", "sub", "swait", "sseq", "scalcout", "acalcout",
+    static const char* known[] = {"swait", "sseq", "scalcout", "acalcout",
                                   "transform", "scaler", "mca", "epid", "busy", "asyn", "timestamp",
                                   "digitel", "table", "sCalcout", "vs", "pid", "steppermotor"};
     for (const char* k : known)

@@ -6,6 +6,7 @@
 #include "pv/database.hpp"
 #include "pv/db_file.hpp"
 #include "pv/substitutions.hpp"
+#include "pv/sub_routines.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -355,6 +356,7 @@ struct IocShell::Impl {
             {"epicsEnvShow", {&Impl::cmd_env_show, "epicsEnvShow [NAME]"}},
             {"dbLoadRecords", {&Impl::cmd_load_records, "dbLoadRecords FILE [MACROS]"}},
             {"dbLoadTemplate", {&Impl::cmd_load_template, "dbLoadTemplate FILE [MACROS]"}},
+            {"dlload", {&Impl::cmd_dlload, "dlload LIBRARY.so"}},
             {"dbLoadDatabase", {&Impl::cmd_ignored, "dbLoadDatabase FILE [PATH] [SUBSTITUTIONS]"}},
             {"iocInit", {&Impl::cmd_ioc_init, "iocInit"}},
             {"dbpf", {&Impl::cmd_dbpf, "dbpf PV VALUE"}},
@@ -556,6 +558,12 @@ struct IocShell::Impl {
     void cmd_load_records(const Call& c) {
         need(c, 1);
         load_records(c.arg(1), c.arg(2), "dbLoadRecords: macros");
+    }
+
+    // A library of sub/aSub routines (include/beamctl/record_routines.h), as EPICS's dlload.
+    void cmd_dlload(const Call& c) {
+        need(c, 1);
+        RecordRoutines::global().load(c.arg(1));
     }
 
     void cmd_load_template(const Call& c) {

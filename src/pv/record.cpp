@@ -65,6 +65,7 @@ RecordTypes& RecordTypes::global() {
         register_more_records(*t);
         register_array_records(*t);
         register_misc_records(*t);
+        register_sub_records(*t);
         register_motor_record(*t);
         return t;
     }();

@@ -96,6 +96,7 @@ void register_logic_records(RecordTypes& types);    // calc calcout seq fanout d
 void register_more_records(RecordTypes& types);     // mbbiDirect mbboDirect int64in int64out ...
 void register_array_records(RecordTypes& types);    // aai aao subArray compress histogram
 void register_misc_records(RecordTypes& types);     // permissive state printf
+void register_sub_records(RecordTypes& types);      // sub aSub (routines from dlload libraries)
 
 // A view of a field's elements: scalars have count == capacity == 1.
 struct Elements {

@@ -165,6 +165,23 @@ template <typename Self> struct AnalogBase : Record {
 };
 
 
+// FTVL/FTA (menuFtype) to the element type and size beamctl stores; false for UINT64 and ENUM.
+inline bool ftvl_type(uint16_t ftvl, Dbf& t, uint16_t& size) {
+    switch (ftvl) {
+    case 0: t = Dbf::String; size = kStringSize; return true;
+    case 1: t = Dbf::Char; size = 1; return true;
+    case 2: t = Dbf::UChar; size = 1; return true;
+    case 3: t = Dbf::Short; size = 2; return true;
+    case 4: t = Dbf::UShort; size = 2; return true;
+    case 5: t = Dbf::Long; size = 4; return true;
+    case 6: t = Dbf::ULong; size = 4; return true;
+    case 7: t = Dbf::Int64; size = 8; return true;
+    case 9: t = Dbf::Float; size = 4; return true;
+    case 10: t = Dbf::Double; size = 8; return true;
+    default: return false;
+    }
+}
+
 template <typename R> void add_type(RecordTypes& types, const char* name) {
     types.add(std::make_unique<RecordType>(name, R::fields(), [](const RecordType& t) {
         return std::unique_ptr<Record>(new R(t));

@@ -18,23 +18,6 @@ using namespace support;
 
 bool linked(const Link& l) { return l.kind == Link::Kind::Db || l.kind == Link::Kind::Hw; }
 
-// FTVL (menuFtype) to the element type and size beamctl stores; false for UINT64 and ENUM.
-bool ftvl_type(uint16_t ftvl, Dbf& t, uint16_t& size) {
-    switch (ftvl) {
-    case 0: t = Dbf::String; size = kStringSize; return true;
-    case 1: t = Dbf::Char; size = 1; return true;
-    case 2: t = Dbf::UChar; size = 1; return true;
-    case 3: t = Dbf::Short; size = 2; return true;
-    case 4: t = Dbf::UShort; size = 2; return true;
-    case 5: t = Dbf::Long; size = 4; return true;
-    case 6: t = Dbf::ULong; size = 4; return true;
-    case 7: t = Dbf::Int64; size = 8; return true;
-    case 9: t = Dbf::Float; size = 4; return true;
-    case 10: t = Dbf::Double; size = 8; return true;
-    default: return false;
-    }
-}
-
 constexpr uint32_t kMaxElements = 64u * 1024 * 1024;
 
 // An element count a .db file set (NELM, MALM, NSAM): 1..64 Mi, else a clear error.

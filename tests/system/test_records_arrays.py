@@ -1,0 +1,143 @@
+"""The array record types (aai, aao, subArray, compress, histogram), printf, and sub/aSub with
+routines from a library loaded by `dlload`, seen by a real EPICS client (pyepics on libca)
+talking to `beamctl softioc`: arrays written and read whole through CA, NORD/NUSE, windows,
+compression, counts, and a startup script that loads routines.
+
+Every test serves its own small .db (through the `ioc` fixture, PV names prefixed with the
+test's unique $(P))."""
+
+from pathlib import Path
+
+import pytest
+
+from conftest import BEAMCTL, wait_for
+
+import epics
+
+
+def caget(name, **kw):
+    kw.setdefault("timeout", 5)
+    kw.setdefault("use_monitor", False)
+    return epics.caget(name, **kw)
+
+
+def caput(name, value, **kw):
+    kw.setdefault("timeout", 10)
+    kw.setdefault("wait", True)
+    return epics.caput(name, value, **kw)
+
+
+def as_list(v):
+    return [float(x) for x in v]
+
+
+def test_aao_writes_an_array_that_aai_reads_through_a_link(ioc, prefix):
+    ioc.start("""
+record(aao, "$(P)out") { field(NELM, "8") field(FTVL, "DOUBLE") field(OUT, "$(P)wf PP") }
+record(waveform, "$(P)wf") { field(NELM, "8") field(FTVL, "LONG") field(FLNK, "$(P)in") }
+record(aai, "$(P)in") { field(NELM, "8") field(FTVL, "SHORT") field(INP, "$(P)wf") }
+""")
+    p = prefix
+    assert caput(p + "out", [1.5, 2, 3, 4]) == 1
+    assert as_list(caget(p + "out", count=4)) == [1.5, 2, 3, 4]
+    assert caget(p + "out.NORD") == 4
+    assert as_list(caget(p + "wf", count=4)) == [1, 2, 3, 4]  # LONG elements
+    assert as_list(caget(p + "in", count=4)) == [1, 2, 3, 4]
+    assert caget(p + "in.NORD") == 4
+    assert caget(p + "in.SEVR", as_string=True) == "NO_ALARM"
+    assert caget(p + "in.FTVL", as_string=True) == "SHORT"
+    chan = epics.PV(p + "in")
+    assert chan.wait_for_connection(5)
+    assert chan.nelm == 8
+
+
+def test_subarray_window_follows_indx_and_nelm(ioc, prefix):
+    ioc.start("""
+record(waveform, "$(P)wf") { field(NELM, "10") field(FTVL, "DOUBLE") }
+record(subArray, "$(P)sa") { field(INP, "$(P)wf") field(MALM, "10") field(NELM, "3") field(INDX, "2") }
+""")
+    p = prefix
+    assert caput(p + "wf", [0, 1, 2, 3, 4, 5, 6, 7]) == 1
+    assert caput(p + "sa.PROC", 1) == 1
+    assert as_list(caget(p + "sa", count=3)) == [2, 3, 4]
+    assert caput(p + "sa.INDX", 6) == 1  # processes the record
+    assert caget(p + "sa.NORD") == 2
+    assert as_list(caget(p + "sa", count=2)) == [6, 7]
+
+
+def test_compress_circular_buffer_and_histogram_counts(ioc, prefix):
+    ioc.start("""
+record(ao, "$(P)x") { field(FLNK, "$(P)fan") }
+record(fanout, "$(P)fan") { field(LNK1, "$(P)buf") field(LNK2, "$(P)avg") field(LNK3, "$(P)h") }
+record(compress, "$(P)buf") { field(INP, "$(P)x") field(ALG, "Circular Buffer") field(NSAM, "4") }
+record(compress, "$(P)avg") { field(INP, "$(P)x") field(ALG, "N to 1 Average") field(N, "2") field(NSAM, "4") }
+record(histogram, "$(P)h") { field(SVL, "$(P)x") field(NELM, "5") field(LLIM, "0") field(ULIM, "10") }
+""")
+    p = prefix
+    for v in (1, 3, 5, 7, 9):
+        assert caput(p + "x", v) == 1
+    assert caget(p + "buf.NUSE") == 4
+    assert as_list(caget(p + "buf", count=4)) == [3, 5, 7, 9]  # oldest dropped
+    assert as_list(caget(p + "avg", count=2)) == [2, 6]
+    assert [int(c) for c in caget(p + "h", count=5)] == [1, 1, 1, 1, 1]
+    assert caput(p + "h.CMD", "Clear") == 1
+    assert [int(c) for c in caget(p + "h", count=5)] == [0, 0, 0, 0, 0]
+    assert caput(p + "buf.RES", 1) == 1
+    assert caget(p + "buf.NUSE") == 0
+
+
+def test_printf_formats_inputs(ioc, prefix):
+    ioc.start("""
+record(ao, "$(P)t") { field(VAL, "21.456") }
+record(longout, "$(P)n") { field(VAL, "3") }
+record(printf, "$(P)msg") { field(FMT, "T=%.1f n=%d (%x)") field(INP0, "$(P)t") field(INP1, "$(P)n") field(INP2, "$(P)n") }
+""")
+    p = prefix
+    assert caput(p + "msg.PROC", 1) == 1
+    assert caget(p + "msg", as_string=True) == "T=21.5 n=3 (3)"
+
+
+ROUTINES = Path(str(BEAMCTL)).parent / "tests" / "unit" / "record_routines_plugin.so"
+
+
+def test_sub_and_asub_routines_from_a_dlload_library(ioc, prefix, tmp_path):
+    if not ROUTINES.exists():
+        pytest.skip(f"{ROUTINES} not built (bbuild release record_routines_plugin)")
+    (tmp_path / "sub.db").write_text("""
+record(ao, "$(P)x") { field(VAL, "2") }
+record(sub, "$(P)s") { field(SNAM, "sub_sum") field(INPA, "$(P)x") field(INPB, "40") }
+record(waveform, "$(P)wf") { field(NELM, "4") }
+record(aSub, "$(P)a") {
+    field(SNAM, "asub_scale") field(INPA, "$(P)wf") field(NOA, "4") field(INPB, "10")
+    field(NOVA, "4") field(OUTA, "$(P)res PP")
+}
+record(waveform, "$(P)res") { field(NELM, "4") }
+""")
+    (tmp_path / "st.cmd").write_text(f"""dlload {ROUTINES}
+dbLoadRecords sub.db "P={prefix}"
+iocInit
+""")
+    ioc.start(db_files=[tmp_path / "st.cmd"])
+    p = prefix
+    assert caput(p + "s.PROC", 1) == 1
+    assert caget(p + "s") == 42
+    assert caput(p + "wf", [1, 2, 3]) == 1
+    assert caput(p + "a.PROC", 1) == 1
+    assert as_list(caget(p + "res", count=3)) == [10, 20, 30]
+    assert caget(p + "a.NEVA") == 3
+    assert caget(p + "a.SEVR", as_string=True) == "NO_ALARM"
+
+
+def test_an_snam_no_library_provides_stops_the_ioc_with_its_name(ioc, prefix, tmp_path):
+    from conftest import acquire_port, release_port
+    import subprocess
+    (tmp_path / "bad.db").write_text('record(sub, "$(P)s") { field(SNAM, "not_there") }\n')
+    port = acquire_port()
+    try:
+        r = subprocess.run([str(BEAMCTL), "softioc", "-m", f"P={prefix}", "-d", str(tmp_path / "bad.db")],
+                           capture_output=True, text=True, timeout=30, cwd=str(tmp_path),
+                           env={"EPICS_CAS_SERVER_PORT": str(port), "PATH": "/usr/bin:/bin"})
+    finally:
+        release_port(port)
+    assert r.returncode != 0
+    assert f"record {prefix}s: SNAM 'not_there'" in r.stderr, r.stderr
