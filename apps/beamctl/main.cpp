@@ -1,6 +1,7 @@
 // beamctl: the command-line program. Subcommands:
 //   run      run an IOC from its configuration (buses, RT engine, PVs, CA server)
 //   check    load a configuration and report every error
+//   signals  list an IOC's signals (the registry): name, type, direction, owner, writer, PV
 //   softioc  serve EPICS databases over Channel Access: softIoc's command line, st.cmd scripts
 //   db       print the loaded database as .db text
 //   sim      run a simulated EtherCAT segment behind a UDP socket or on a network interface
@@ -481,6 +482,12 @@ int main(int argc, char** argv) {
     add_ioc_options(*runcmd, runo);
     auto* checkcmd = app.add_subcommand("check", "Load an IOC configuration and report errors (exit 1 on any)");
     add_ioc_options(*checkcmd, checko);
+    IocOptions sigo;
+    std::string sig_pattern;
+    auto* sigcmd = app.add_subcommand(
+        "signals", "List the signals of an IOC: name, type, direction, owner, writer, PV (ioc.yaml [PATTERN])");
+    add_ioc_options(*sigcmd, sigo);
+    sigcmd->add_option("pattern", sig_pattern, "Glob of signal names, e.g. 'ec0.s3.*' or 'ax1.traj.*'");
 
     PlcCheckOptions plco;
     auto* plccmd = app.add_subcommand("plc", "Soft PLC tools");
@@ -567,6 +574,12 @@ int main(int argc, char** argv) {
             return ioc.run();
         }
         if (*checkcmd) return ioc::run_check(checko.file, macro_options(checko.macros)); // every error
+        if (*sigcmd) { // configured, not brought up: nothing touches a bus
+            rt::MonotonicClock clock;
+            ioc::Ioc ioc(sigo.load(), clock);
+            ioc.signals().print(std::cout, sig_pattern);
+            return ioc.signals().match(sig_pattern).empty() ? 1 : 0;
+        }
         if (*dbcmd) {
             if (dbo.files.size() == 1 && dbo.files[0].size() > 5 &&
                 (dbo.files[0].ends_with(".yaml") || dbo.files[0].ends_with(".yml"))) {

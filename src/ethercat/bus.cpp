@@ -106,13 +106,7 @@ bool Bus::write(const SignalInfo& s, uint64_t value) noexcept {
 void Bus::apply_writes() noexcept {
     OutputWrite w;
     uint8_t* img = master_->image();
-    while (writes_.pop(w)) {
-        for (uint32_t i = 0; i < w.bits; ++i) {
-            uint32_t b = w.bit_offset + i;
-            if (w.value >> i & 1) img[b >> 3] |= uint8_t(1u << (b & 7));
-            else img[b >> 3] &= uint8_t(~(1u << (b & 7)));
-        }
-    }
+    while (writes_.pop(w)) registry::image_write(img, w.bit_offset, w.bits, w.value);
 }
 
 const BusSnapshot& Bus::snapshot() noexcept {
@@ -121,12 +115,7 @@ const BusSnapshot& Bus::snapshot() noexcept {
 }
 
 uint64_t Bus::get(const std::vector<uint8_t>& image, const SignalInfo& s) noexcept {
-    uint64_t v = 0;
-    for (uint32_t i = 0; i < s.bits; ++i) {
-        uint32_t b = s.bit_offset + i;
-        if (image[b >> 3] >> (b & 7) & 1) v |= uint64_t(1) << i;
-    }
-    return v;
+    return registry::image_read(image.data(), s.bit_offset, s.bits);
 }
 
 } // namespace beamctl::ethercat

@@ -396,6 +396,7 @@ void Master::layout_process_image() {
             }
         }
     }
+    for (auto& sig : signals_) sig.is_signed = registry::datatype_is_signed(sig.datatype);
 }
 
 void Master::check_identity(const SlaveInfo& s) const {
@@ -901,27 +902,12 @@ const SignalInfo* Master::find_signal(std::string_view name) const {
 registry::BoundSignal Master::bind(std::string_view name, int bit) {
     const SignalInfo* s = find_signal(name);
     if (!s || (bit >= 0 && bit >= s->bits)) return {};
-    bool sign = s->datatype.rfind("INT", 0) == 0 || s->datatype.rfind("SINT", 0) == 0 ||
-                s->datatype.rfind("DINT", 0) == 0 || s->datatype.rfind("LINT", 0) == 0;
-    return registry::BoundSignal{image_.data(), s->bit_offset, s->bits, sign, bit};
+    return registry::BoundSignal{image_.data(), s->bit_offset, s->bits, s->is_signed, bit};
 }
 
-uint64_t Master::get(const SignalInfo& s) const {
-    uint64_t v = 0;
-    for (uint32_t i = 0; i < s.bits; ++i) {
-        uint32_t b = s.bit_offset + i;
-        if (image_[b >> 3] >> (b & 7) & 1) v |= uint64_t(1) << i;
-    }
-    return v;
-}
+uint64_t Master::get(const SignalInfo& s) const { return registry::image_read(image_.data(), s.bit_offset, s.bits); }
 
-void Master::set(const SignalInfo& s, uint64_t v) {
-    for (uint32_t i = 0; i < s.bits; ++i) {
-        uint32_t b = s.bit_offset + i;
-        if (v >> i & 1) image_[b >> 3] |= uint8_t(1u << (b & 7));
-        else image_[b >> 3] &= uint8_t(~(1u << (b & 7)));
-    }
-}
+void Master::set(const SignalInfo& s, uint64_t v) { registry::image_write(image_.data(), s.bit_offset, s.bits, v); }
 
 } // namespace beamctl::ethercat
 

@@ -67,7 +67,9 @@ struct SignalInfo {
     uint32_t bit_offset = 0; // in the process image
     uint8_t bits = 0;
     bool output = false;
-    std::string datatype;
+    std::string datatype;   // ETG.1020 name: UINT, DINT, BOOL, ...
+    bool is_signed = false; // two's complement (from datatype, set once at registration)
+    registry::ImageEntry entry() const { return {bit_offset, bits, is_signed}; }
 };
 
 struct SlaveInfo {

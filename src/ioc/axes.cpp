@@ -1,5 +1,7 @@
 #include "ioc/axes.hpp"
 
+#include "motion/axis_variables.hpp"
+
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "ioc/pv_util.hpp"
@@ -136,7 +138,7 @@ std::vector<std::pair<std::string, std::string>> field_init(const std::string& s
 } // namespace
 
 IocAxes::IocAxes(const std::vector<config::AxisEntry>& entries, const std::string& prefix,
-                 const std::set<std::string>& known_signals, pv::Database& db)
+                 registry::Registry& signals, pv::Database& db)
     : db_(db), prefix_(prefix) {
     std::set<int> ids;
     std::set<std::string> names;
@@ -151,17 +153,48 @@ IocAxes::IocAxes(const std::vector<config::AxisEntry>& entries, const std::strin
         if (!ids.insert(id).second) throw Error(SB() << e.where << ": axis id " << id << " is used twice (" << e.file << ")");
         if (!names.insert(a.cfg.epics.name).second)
             throw Error(SB() << e.where << ": axis name '" << a.cfg.epics.name << "' is used twice (" << e.file << ")");
-        for (const auto& r : motion::axis_signal_refs(a.cfg)) {
-            if (r.slave < 0) throw Error(SB() << at(r.where) << ": '" << r.text << "': the simulation slave (s-1) is not supported");
-            if (!known_signals.count(signal_name(r)))
-                throw Error(SB() << at(r.where) << ": no signal '" << signal_name(r) << "' on the configured buses (from '" << r.text << "')");
-        }
         a.params = motion::make_axis_params(a.cfg);
         a.params.id = id;
         a.pv = prefix + a.cfg.epics.name;
+        std::string owner = SB() << "axis " << id << " (" << a.cfg.epics.name << ")";
+        for (const auto& r : motion::axis_signal_refs(a.cfg)) {
+            if (r.slave < 0) throw Error(SB() << at(r.where) << ": '" << r.text << "': the simulation slave (s-1) is not supported");
+            const registry::Signal* sig = signals.find(signal_name(r));
+            if (!sig)
+                throw Error(SB() << at(r.where) << ": no signal '" << signal_name(r) << "' on the configured buses (from '" << r.text << "')");
+            std::string why;
+            if (sig->direction == registry::Direction::Output && !signals.claim(sig->name, owner, why))
+                throw Error(SB() << at(r.where) << ": " << owner << " cannot drive it: " << why);
+        }
+        // The axis as PLC code and records see it: ax<n>.enc.actpos, ax<n>.traj.extsetpos, ...
+        for (const motion::AxisVariableInfo& v : motion::axis_variables()) {
+            registry::Signal s;
+            s.name = SB() << "ax" << id << "." << v.name;
+            s.type = "LREAL";
+            s.direction = v.writable ? registry::Direction::Variable : registry::Direction::Input;
+            s.owner_kind = registry::OwnerKind::Axis;
+            s.owner = owner;
+            std::string_view n = v.name;
+            if (n == "enc.actpos") s.pv = a.pv + "-PosAct";
+            else if (n == "enc.actvel") s.pv = a.pv + "-VelAct";
+            else if (n == "traj.setpos") s.pv = a.pv + "-PosSet";
+            else if (n == "traj.targetpos") s.pv = a.pv + "-TgtPosCmd";
+            else if (n == "traj.targetvel") s.pv = a.pv + "-TgtVelCmd";
+            else if (n == "traj.busy") s.pv = a.pv + "-Busy";
+            else if (n == "drv.enabled") s.pv = a.pv + "-EnaAct";
+            else if (n == "mon.attarget") s.pv = a.pv + "-AtTarget";
+            else if (n == "mon.lowlim") s.pv = a.pv + "-LimBwd";
+            else if (n == "mon.highlim") s.pv = a.pv + "-LimFwd";
+            else if (n == "error") s.pv = a.pv + "-ErrId";
+            signals.declare(std::move(s));
+        }
         axes_.push_back(std::move(a));
     }
     for (std::size_t i = 0; i < axes_.size(); ++i) make_pvs(axes_[i], i);
+}
+
+std::string IocAxes::owner(std::size_t i) const {
+    return SB() << "axis " << axes_.at(i).params.id << " (" << axes_.at(i).cfg.epics.name << ")";
 }
 
 int IocAxes::find(const std::string& name) const {

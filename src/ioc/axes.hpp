@@ -16,6 +16,7 @@
 #include "motion/axis_config.hpp"
 #include "motion/axis_group.hpp"
 #include "pv/database.hpp"
+#include "registry/registry.hpp"
 #include "rt/engine.hpp"
 
 #include <functional>
@@ -28,10 +29,11 @@ namespace beamctl::ioc {
 
 class IocAxes {
 public:
-    // Loads the axis files and creates their PVs. `known_signals` holds every signal name the
-    // buses will have ("ec0.s3.driveStatus01", "ec0.s3.ONE", "ec0.masterstatus"). Throws Error.
+    // Loads the axis files and creates their PVs. Every bus signal an axis names must be in
+    // `signals` (declared by the buses); each axis declares its ax<n>.* variables there and
+    // becomes the one writer of the outputs it drives every cycle. Throws Error (file:line:col).
     IocAxes(const std::vector<config::AxisEntry>& entries, const std::string& prefix,
-            const std::set<std::string>& known_signals, pv::Database& db);
+            registry::Registry& signals, pv::Database& db);
 
     // Bring-up: binds every axis to the process images and adds the axis stage to the engine.
     using Resolver = std::function<registry::BoundSignal(const motion::SignalRef&)>;
@@ -50,6 +52,8 @@ public:
     const motion::AxisStatus& status(std::size_t i);
     const motion::AxisParams& params(std::size_t i) const { return axes_.at(i).params; }
     const std::string& name(std::size_t i) const { return axes_.at(i).cfg.epics.name; }
+    // "axis 1 (SampleX)": how errors and the registry name axis i as an owner or writer.
+    std::string owner(std::size_t i) const;
     // IOC loop: the soft limits of axis i's motor record (DLLM/DHLM, dial) become [lo, hi]: a
     // virtual axis's range as its kinematics group derives it. No-op without a motor record.
     void set_derived_limits(std::size_t i, double lo, double hi);

@@ -32,17 +32,6 @@ struct SimTimeStage : rt::Stage {
     void run(const rt::CycleInfo& c) noexcept override { seg.set_time(c.t_ns); }
 };
 
-bool is_signed(const std::string& datatype) {
-    return datatype.rfind("INT", 0) == 0 || datatype.rfind("SINT", 0) == 0 ||
-           datatype.rfind("DINT", 0) == 0 || datatype.rfind("LINT", 0) == 0;
-}
-
-double to_double(uint64_t raw, uint8_t bits, bool sign) {
-    if (sign && bits > 0 && bits < 64 && (raw >> (bits - 1) & 1)) return double(int64_t(raw | (~uint64_t(0) << bits)));
-    if (sign && bits == 64) return double(int64_t(raw));
-    return double(raw);
-}
-
 // Device support "beamctl": a record's "@ec0.s3.positionActual01" (or "...Input01.2", a bit) link
 // reads the entry from the bus snapshot of the IOC loop and writes an output through the bus's
 // write queue, as the entry's own PV does. IOC loop thread only.
@@ -63,9 +52,7 @@ public:
             raw = v != 0 ? raw | (uint64_t(1) << bit_) : raw & ~(uint64_t(1) << bit_);
             return bus_.write(sig_, raw);
         }
-        uint64_t raw = v < 0 ? uint64_t(int64_t(v)) : uint64_t(v);
-        if (sig_.bits < 64) raw &= (uint64_t(1) << sig_.bits) - 1;
-        return bus_.write(sig_, raw);
+        return bus_.write(sig_, registry::double_to_raw(v, sig_.bits));
     }
     std::string describe() const override {
         return bit_ >= 0 ? std::string(SB() << sig_.name << "." << bit_) : sig_.name;
@@ -82,7 +69,7 @@ private:
     double value(const ethercat::BusSnapshot& s) const {
         uint64_t raw = ethercat::Bus::get(s.image, sig_);
         if (bit_ >= 0) return double(raw >> bit_ & 1);
-        return to_double(raw, sig_.bits, is_signed(sig_.datatype));
+        return registry::raw_to_double(raw, sig_.entry());
     }
     ethercat::Bus& bus_;
     const ethercat::SignalInfo& sig_;
@@ -181,40 +168,62 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
         }
         b.bus = std::make_unique<ethercat::Bus>(bc.id, std::move(link), std::move(slaves), catalog_);
         b.bus->add_stages(*engine_);
-        make_bus_pvs(b, bc);
         buses_.push_back(std::move(b));
     }
-    SignalDirectory signals = signal_directory();
-    std::set<std::string> names;
-    for (const auto& entry : signals) names.insert(entry.first);
-    axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, names, db_);
+    declare_bus_signals();
+    for (std::size_t i = 0; i < buses_.size(); ++i) make_bus_pvs(buses_[i], cfg_.buses[i]);
+    axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, registry_, db_);
     std::vector<motion::AxisConfig> axis_configs;
     for (std::size_t i = 0; i < axes_->size(); ++i) axis_configs.push_back(axes_->config(i));
-    plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, std::move(signals), db_);
+    plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
+    registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     for (const auto& d : cfg_.db) db_.load(pv::load_db_file(d.file, d.macros));
 }
 
-SignalDirectory Ioc::signal_directory() const {
-    // The names the masters will register: default-assignment entries, ONE/ZERO, masterstatus.
-    SignalDirectory dir;
-    for (const auto& bc : cfg_.buses) {
-        dir[SB() << "ec" << bc.id << ".masterstatus"] = SignalDesc{false, "UDINT"};
-        for (const auto& s : bc.slaves) {
-            std::string pre = SB() << "ec" << bc.id << ".s" << s.position << ".";
-            dir[pre + "ONE"] = SignalDesc{false, "UDINT"};
-            dir[pre + "ZERO"] = SignalDesc{false, "UDINT"};
-            const ethercat::DeviceDesc* d = catalog_.find(s.type);
+void Ioc::declare_bus_signals() {
+    // The names the masters will register (the catalog's default assignment), ONE/ZERO and
+    // masterstatus; bound to the image once the bus is up.
+    for (std::size_t i = 0; i < cfg_.buses.size(); ++i) {
+        const config::BusConfig& bc = cfg_.buses[i];
+        std::string bus = SB() << "ec" << bc.id;
+        auto declare = [&](std::string name, std::string type, bool output) {
+            registry::Signal s;
+            s.name = std::move(name);
+            s.type = std::move(type);
+            s.direction = output ? registry::Direction::Output : registry::Direction::Input;
+            s.owner_kind = registry::OwnerKind::Bus;
+            s.owner = bus;
+            registry_.declare(std::move(s));
+        };
+        declare(bus + ".masterstatus", "UDINT", false);
+        for (const auto& sc : bc.slaves) {
+            std::string pre = SB() << bus << ".s" << sc.position << ".";
+            declare(pre + "ONE", "UDINT", false);
+            declare(pre + "ZERO", "UDINT", false);
+            const ethercat::DeviceDesc* d = catalog_.find(sc.type);
             if (!d) continue;
-            for (const auto& pd : d->rx_pdos)
-                for (const auto& e : pd.entries)
-                    if (!e.name.empty()) dir[pre + e.name] = SignalDesc{true, e.datatype};
-            for (const auto& pd : d->tx_pdos)
-                for (const auto& e : pd.entries)
-                    if (!e.name.empty()) dir[pre + e.name] = SignalDesc{false, e.datatype};
+            std::set<std::string> seen; // an entry in two alternative PDOs is one signal
+            for (bool out : {true, false})
+                for (const auto& pd : out ? d->rx_pdos : d->tx_pdos)
+                    for (const auto& e : pd.entries)
+                        if (!e.name.empty() && seen.insert(e.name).second) declare(pre + e.name, e.datatype, out);
         }
+        ethercat::Bus* busp = buses_[i].bus.get();
+        registry_.set_binder(bus + ".", [busp](const registry::Signal& s, int bit, std::string& why) {
+            const ethercat::SignalInfo* si = busp->master().find_signal(s.name);
+            if (!si) {
+                why = SB() << "no signal '" << s.name << "' on bus " << busp->id()
+                           << " after bring-up (not in the PDO assignment the slave reported)";
+                return registry::BoundSignal{};
+            }
+            if (bit >= int(si->bits)) {
+                why = SB() << "'" << s.name << "' has " << int(si->bits) << " bits, no bit " << bit;
+                return registry::BoundSignal{};
+            }
+            return busp->master().bind(s.name, bit);
+        });
     }
-    return dir;
 }
 
 Ioc::~Ioc() {
@@ -283,7 +292,9 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
                         }
                         f.records.push_back(record(type, name, fl));
                         auto& r = f.records.back();
-                        r.infos.push_back(pv::DbInfo{"ecmc:signal", SB() << "ec" << bc.id << ".s" << s.position << "." << e.name, r.loc});
+                        std::string sig = SB() << "ec" << bc.id << ".s" << s.position << "." << e.name;
+                        r.infos.push_back(pv::DbInfo{"ecmc:signal", sig, r.loc});
+                        registry_.set_pv(sig, name);
                     }
                 }
             }
@@ -324,14 +335,6 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
 void Ioc::make_entry_pvs(BusRt& b) {
     // Binds every entry PV to the master's signal of the same name (after bring-up).
     ethercat::Bus& bus = *b.bus;
-    // Outputs the axes write every cycle (drive control word, velocity setpoint, brake, latch arm)
-    // and who writes them.
-    std::map<std::string, std::string> owners;
-    for (std::size_t i = 0; i < axes_->size(); ++i)
-        for (const auto& r : motion::axis_signal_refs(axes_->config(i)))
-            if (r.bus == bus.id() && r.slave >= 0 && !r.is_constant())
-                owners[SB() << "ec" << r.bus << ".s" << r.slave << "." << r.entry] =
-                    SB() << "axis " << axes_->params(i).id << " (" << axes_->name(i) << ")";
     std::string m = SB() << cfg_.prefix << "m" << bus.id();
     for (const auto& sig : bus.master().signals()) {
         if (sig.slave < 0) continue; // the master's own signals (ec0.masterstatus) have bus PVs
@@ -344,9 +347,9 @@ void Ioc::make_entry_pvs(BusRt& b) {
         pv::Record* rec = db_.find(name);
         if (!rec) continue; // an entry outside the default assignment: no PV (yet)
         EntryPv e{rec, &sig, sig.output};
-        auto owner = owners.find(sig.name);
-        if (sig.output && owner != owners.end()) {
-            own_output(e, owner->second); // the axis writes it every cycle
+        const registry::Signal* reg = registry_.find(sig.name);
+        if (sig.output && reg && !reg->writer.empty()) {
+            own_output(e, reg->writer); // an axis or a PLC writes it every cycle
         } else if (sig.output) {
             ethercat::Bus* busp = &bus;
             const ethercat::SignalInfo* sg = &sig;
@@ -355,9 +358,7 @@ void Ioc::make_entry_pvs(BusRt& b) {
                 double v = 0;
                 pv::Elements el = r.elements(f);
                 pv::get_element(r, f, el, 0, pv::Prim::Double, &v);
-                uint64_t raw = v < 0 ? uint64_t(int64_t(v)) : uint64_t(v);
-                if (sg->bits < 64) raw &= (uint64_t(1) << sg->bits) - 1;
-                return busp->write(*sg, raw) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
+                return busp->write(*sg, registry::double_to_raw(v, sg->bits)) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
             };
         } else {
             rec->val_read_only = true;
@@ -383,38 +384,38 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         if (why) *why = std::move(m);
         return nullptr;
     };
-    std::string name = l.s().address;
+    const std::string& name = l.s().address;
     int bit = -1;
-    // "ec0.s3.binaryInput01.2": a bit
-    std::size_t last = name.rfind('.');
-    if (last != std::string::npos && std::count(name.begin(), name.end(), '.') == 3 &&
-        std::all_of(name.begin() + std::ptrdiff_t(last) + 1, name.end(), [](char c) { return c >= '0' && c <= '9'; })) {
-        bit = std::atoi(name.c_str() + last + 1);
-        name.resize(last);
+    const registry::Signal* sig = registry_.find_with_bit(name, bit);
+    if (!sig) {
+        // the entries of the same slave, if the name got that far
+        std::string slave = name.substr(0, name.rfind('.') + 1), have;
+        int shown = 0;
+        if (slave.rfind("ec", 0) == 0 && std::count(slave.begin(), slave.end(), '.') == 2)
+            for (const registry::Signal* s : registry_.match(slave + "*"))
+                if (shown++ < 12) have += (have.empty() ? "" : ", ") + s->name.substr(slave.size());
+        return fail(SB() << "no signal '" << name << "' in this IOC"
+                         << (have.empty() ? std::string(" (ec<bus>.s<slave>.<entry>[.<bit>]; `beamctl signals` lists them)")
+                                          : " (" + slave + "* has: " + have + (shown > 12 ? ", ..." : "") + ")"));
     }
-    for (auto& b : buses_) {
-        std::string pre = SB() << "ec" << b.bus->id() << ".";
-        if (name.rfind(pre, 0) != 0) continue;
-        for (const auto& sig : b.bus->master().signals()) {
-            if (sig.name != name) continue;
-            if (bit >= int(sig.bits)) return fail(SB() << "'" << name << "' has " << int(sig.bits) << " bits, no bit " << bit);
+    if (sig->owner_kind != registry::OwnerKind::Bus)
+        return fail(SB() << "'" << name << "' is a signal of " << sig->owner << "; device support reads and writes bus entries only (for now)");
+    std::string reason;
+    if (!registry_.bind(name, reason).bound()) return fail(reason);
+    for (auto& b : buses_)
+        for (const auto& si : b.bus->master().signals()) {
+            if (si.name != sig->name) continue;
             if (f.dbf == pv::Dbf::OutLink) {
-                if (!sig.output) return fail(SB() << "'" << name << "' is an input; an output link cannot write it");
+                if (!si.output) return fail(SB() << "'" << sig->name << "' is an input; an output link cannot write it");
+                std::string writer = SB() << "record " << r.name();
+                if (!registry_.claim(sig->name, writer, reason)) return fail(reason);
                 for (auto& e : b.entries)
-                    if (e.sig == &sig) {
-                        if (e.owned) {
-                            std::string desc(e.rec->desc, strnlen(e.rec->desc, sizeof e.rec->desc));
-                            return fail(SB() << "'" << name << "' already has its writer (" << desc << ")");
-                        }
-                        own_output(e, SB() << "record " << r.name());
-                    }
+                    if (e.sig == &si) own_output(e, writer);
             }
-            devices_.push_back(std::make_unique<EcLinkDevice>(*b.bus, sig, bit));
+            devices_.push_back(std::make_unique<EcLinkDevice>(*b.bus, si, bit));
             return devices_.back().get();
         }
-        return fail(SB() << "no signal '" << name << "' on bus " << b.bus->id());
-    }
-    return fail(SB() << "'" << l.s().address << "' names no signal of this IOC (ec<bus>.s<slave>.<entry>[.<bit>])");
+    return fail(SB() << "no signal '" << sig->name << "' on its bus after bring-up");
 }
 
 void Ioc::bring_up() {
@@ -425,49 +426,27 @@ void Ioc::bring_up() {
     }
     axes_->bind(
         [this](const motion::SignalRef& r) {
-            for (auto& b : buses_) {
-                if (b.bus->id() != r.bus) continue;
-                std::string name = r.entry == "masterstatus" ? std::string(SB() << "ec" << r.bus << ".masterstatus")
-                                                             : std::string(SB() << "ec" << r.bus << ".s" << r.slave << "." << r.entry);
-                registry::BoundSignal s = b.bus->master().bind(name, r.bit);
-                if (!s.bound())
-                    throw Error(SB() << r.where.file << ":" << r.where.line << ":" << r.where.col << ": no signal '" << name
-                                     << (r.bit >= 0 ? std::string(SB() << "." << r.bit) : std::string()) << "' after bring-up");
-                return s;
-            }
-            throw Error(SB() << r.where.file << ":" << r.where.line << ":" << r.where.col << ": no bus ec" << r.bus);
+            std::string name = r.entry == "masterstatus" ? std::string(SB() << "ec" << r.bus << ".masterstatus")
+                                                         : std::string(SB() << "ec" << r.bus << ".s" << r.slave << "." << r.entry);
+            if (r.bit >= 0) name += SB() << "." << r.bit;
+            std::string why;
+            registry::BoundSignal s = registry_.bind(name, why);
+            if (!s.bound()) throw Error(SB() << r.where.file << ":" << r.where.line << ":" << r.where.col << ": " << why);
+            return s;
         },
         *engine_);
     kinematics_->bind();
     std::vector<registry::BoundSignal> bus_ok;
-    for (auto& b : buses_) bus_ok.push_back(b.bus->master().bind(std::string(SB() << "ec" << b.bus->id() << ".masterstatus")));
-    plcs_->bind(
-        *engine_, axes_->group(),
-        [this](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
-            for (auto& b : buses_) {
-                std::string pre = SB() << "ec" << b.bus->id() << ".";
-                if (name.rfind(pre, 0) != 0) continue;
-                registry::BoundSignal s = b.bus->master().bind(name);
-                if (s.bound()) return plc::EcEntry{s};
-                why = SB() << "no signal '" << name << "' on bus " << b.bus->id() << " after bring-up";
-                return std::nullopt;
-            }
-            why = SB() << "no bus for '" << name << "'";
-            return std::nullopt;
-        },
-        std::move(bus_ok));
+    for (auto& b : buses_) {
+        std::string why;
+        bus_ok.push_back(registry_.bind(std::string(SB() << "ec" << b.bus->id() << ".masterstatus"), why));
+    }
+    plcs_->bind(*engine_, axes_->group(), std::move(bus_ok));
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
         return bind_device(r, f, l, why);
     });
-    // Outputs a PLC's code assigns belong to that PLC, as those of the axes to their axis.
-    if (plc::PlcRuntime* rt = plcs_->runtime())
-        for (std::size_t i = 0; i < rt->size(); ++i)
-            for (const std::string& name : rt->written_entries(i))
-                for (auto& b : buses_)
-                    for (auto& e : b.entries)
-                        if (e.output && !e.owned && e.sig->name == name) own_output(e, rt->prefix(i));
     db_.init_records();
     brought_up_ = true;
 }
@@ -516,7 +495,7 @@ void Ioc::publish() {
         }
         for (auto& e : b.entries) {
             if (e.output && !e.owned) continue;
-            double v = to_double(ethercat::Bus::get(s.image, *e.sig), e.sig->bits, is_signed(e.sig->datatype));
+            double v = registry::raw_to_double(ethercat::Bus::get(s.image, *e.sig), e.sig->entry());
             bool bad = !ok;
             if (v != e.last || bad != (e.rec->sevr == pv::kInvalid)) {
                 e.last = v;

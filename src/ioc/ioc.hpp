@@ -16,6 +16,7 @@
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "pv/database.hpp"
+#include "registry/registry.hpp"
 #include "rt/engine.hpp"
 
 #include <memory>
@@ -46,8 +47,9 @@ public:
     IocAxes& axes() { return *axes_; }
     IocPlcs& plcs() { return *plcs_; }
     IocKinematics& kinematics() { return *kinematics_; }
-    // Every process-data entry the configured buses will have, with its direction and type.
-    SignalDirectory signal_directory() const;
+    // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
+    // (`beamctl signals`). Frozen once the IOC is built.
+    const registry::Registry& signals() const { return registry_; }
 
     // Runs the IOC: engine on its RT thread, CA server and publisher on the calling thread,
     // until SIGINT/SIGTERM. Prints the ready line.
@@ -81,6 +83,7 @@ private:
                    *missed_cycles = nullptr, *stat_reset = nullptr;
         std::vector<std::pair<pv::Record*, pv::Record*>> slave_status; // Online, Operational
     };
+    void declare_bus_signals();
     void make_bus_pvs(BusRt& b, const config::BusConfig& bc);
     void make_entry_pvs(BusRt& b);
 
@@ -90,6 +93,7 @@ private:
     pv::Database db_;
     std::unique_ptr<rt::Engine> engine_;
     std::vector<BusRt> buses_;
+    registry::Registry registry_;
     std::unique_ptr<IocAxes> axes_;
     std::unique_ptr<IocPlcs> plcs_;
     std::unique_ptr<IocKinematics> kinematics_;

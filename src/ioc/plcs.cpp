@@ -51,9 +51,9 @@ plc::PlcSource plc_source(const config::PlcEntry& e) {
     return s;
 }
 
-IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisConfig>& axes, SignalDirectory signals,
+IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisConfig>& axes, registry::Registry& signals,
                  pv::Database& db)
-    : cycle_s_(1.0 / cfg.rate_hz), signals_(std::move(signals)), db_(db) {
+    : cycle_s_(1.0 / cfg.rate_hz), signals_(signals), db_(db) {
     for (const auto& a : axes) axis_ids_.push_back(a.axis.id.value_or(1));
     for (const auto& p : cfg.plugins) {
         try {
@@ -95,6 +95,29 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
         }
     }
     if (!errors.empty()) throw plc::CompileError(std::move(errors));
+    // The registry: each PLC's own variables, and the outputs its code writes (one writer each).
+    for (std::size_t i = 0; i < sources_.size(); ++i) {
+        const plc::PlcSource& s = sources_[i];
+        std::string owner = check.prefix(i);
+        std::string pv = s.axis_plc ? std::string() : cfg.prefix + "PLC" + two_digits(s.id);
+        for (const char* v : {"enable", "error", "scantime", "firstscan", "dbg"}) {
+            registry::Signal sig;
+            sig.name = owner + "." + v;
+            sig.type = "LREAL";
+            bool rw = std::string_view(v) != "scantime" && std::string_view(v) != "firstscan";
+            sig.direction = rw ? registry::Direction::Variable : registry::Direction::Input;
+            sig.owner_kind = registry::OwnerKind::Plc;
+            sig.owner = owner;
+            if (!pv.empty() && std::string_view(v) == "enable") sig.pv = pv + "-EnaCmd";
+            if (!pv.empty() && std::string_view(v) == "scantime") sig.pv = pv + "-ScanTime";
+            if (!pv.empty() && std::string_view(v) == "error") sig.pv = pv + "-Err";
+            signals.declare(std::move(sig));
+        }
+        for (const std::string& entry : check.written_entries(i)) {
+            std::string why;
+            if (!signals.claim(entry, owner, why)) throw Error(SB() << s.file << ": " << owner << " cannot write: " << why);
+        }
+    }
     make_pvs(cfg.prefix, db);
 }
 
@@ -108,14 +131,14 @@ plc::PlcRuntime::Options IocPlcs::check_options() const {
     o.cycle_s = cycle_s_;
     o.check_only = true;
     o.known_axis_ids = axis_ids_;
-    const SignalDirectory* dir = &signals_;
-    o.ec = [dir](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
-        auto it = dir->find(name);
-        if (it == dir->end()) {
+    const registry::Registry* reg = &signals_;
+    o.ec = [reg](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
+        const registry::Signal* s = reg->find(name);
+        if (!s || s->owner_kind != registry::OwnerKind::Bus) {
             why = SB() << "no process-data entry '" << name << "' on the configured buses";
             return std::nullopt;
         }
-        return plc::EcEntry{{}, kind_of(it->second.datatype), it->second.output};
+        return plc::EcEntry{{}, kind_of(s->type), s->direction == registry::Direction::Output};
     };
     for (const auto& p : plugins_) o.plugins.push_back(p.get());
     return o;
@@ -161,19 +184,19 @@ void IocPlcs::make_pvs(const std::string& prefix, pv::Database& db) {
     last_fault_.assign(sources_.size(), std::string());
 }
 
-void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, const EcResolver& ec,
-                   std::vector<registry::BoundSignal> bus_ok) {
+void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok) {
     if (sources_.empty() && plugins_.empty()) return;
     plc::PlcRuntime::Options o;
     o.cycle_s = cycle_s_;
-    o.ec = [this, ec](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
-        auto it = signals_.find(name);
-        std::optional<plc::EcEntry> e = ec(name, why);
-        if (e && it != signals_.end()) {
-            e->kind = kind_of(it->second.datatype);
-            e->writable = it->second.output;
+    o.ec = [this](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
+        const registry::Signal* s = signals_.find(name);
+        if (!s || s->owner_kind != registry::OwnerKind::Bus) {
+            why = SB() << "no process-data entry '" << name << "' on the configured buses";
+            return std::nullopt;
         }
-        return e;
+        registry::BoundSignal b = signals_.bind(name, why);
+        if (!b.bound()) return std::nullopt;
+        return plc::EcEntry{b, kind_of(s->type), s->direction == registry::Direction::Output};
     };
     o.bus_ok = std::move(bus_ok);
     if (group)

@@ -17,6 +17,7 @@
 #include "plc/plugin.hpp"
 #include "plc/runtime.hpp"
 #include "pv/database.hpp"
+#include "registry/registry.hpp"
 #include "rt/engine.hpp"
 
 #include <map>
@@ -26,26 +27,19 @@
 
 namespace beamctl::ioc {
 
-// A process-data entry as the configuration knows it before bring-up.
-struct SignalDesc {
-    bool output = false;  // written by the master (PLC code may write it)
-    std::string datatype; // catalog data type (BOOL, INT, UINT, DINT, REAL, LREAL, ...)
-};
-using SignalDirectory = std::map<std::string, SignalDesc>; // "ec0.s3.binaryInput01" -> desc
-
 class IocPlcs {
 public:
-    // Loads the plugins, reads every PLC and compiles it against `signals` and the axes' ids.
+    // Loads the plugins, reads every PLC and compiles it against the bus signals of `signals`
+    // and the axes' ids; declares each PLC's plc<n>.* variables there and makes each PLC the one
+    // writer of the outputs its code assigns (a second writer is an error naming the first).
     // Throws plc::CompileError (every error) or Error.
     IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisConfig>& axes,
-            SignalDirectory signals, pv::Database& db);
+            registry::Registry& signals, pv::Database& db);
     ~IocPlcs();
 
-    // Bring-up: compiles for real (names bound to the image and the axes), adds the general
-    // PLCs' stage and the axis PLCs' hook. `ec` resolves an entry after bring-up.
-    using EcResolver = std::function<std::optional<plc::EcEntry>(const std::string& name, std::string& why)>;
-    void bind(rt::Engine& engine, motion::AxisGroup* group, const EcResolver& ec,
-              std::vector<registry::BoundSignal> bus_ok);
+    // Bring-up: compiles for real (ec names bound through the registry, after the buses are up;
+    // ax names to the axes), adds the general PLCs' stage and the axis PLCs' hook.
+    void bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok);
     // IOC loop: statuses into PVs, output lines to stdout, faults to the log.
     void publish();
 
@@ -66,7 +60,7 @@ private:
     void make_pvs(const std::string& prefix, pv::Database& db);
 
     double cycle_s_;
-    SignalDirectory signals_;
+    const registry::Registry& signals_;
     std::vector<int> axis_ids_;
     std::vector<std::unique_ptr<plc::Plugin>> plugins_;
     std::vector<plc::PlcSource> sources_;

@@ -4,8 +4,9 @@
 // Threading: RT thread only (the image belongs to the bus's cycle).
 #pragma once
 
+#include "registry/image.hpp"
+
 #include <cstdint>
-#include <cstring>
 
 namespace beamctl::registry {
 
@@ -20,12 +21,11 @@ struct BoundSignal {
     // The raw entry (zero- or sign-extended), or 0/1 for a single bit.
     int64_t get() const noexcept {
         if (!image) return 0;
-        uint64_t v = read(bit_offset, bits);
+        uint64_t v = image_read(image, bit_offset, bits);
         if (bit >= 0) return int64_t(v >> bit & 1);
-        if (is_signed && bits > 0 && bits < 64 && (v >> (bits - 1) & 1)) v |= ~uint64_t(0) << bits;
-        return int64_t(v);
+        return is_signed ? sign_extend(v, bits) : int64_t(v);
     }
-    uint64_t get_raw() const noexcept { return image ? read(bit_offset, bits) : 0; }
+    uint64_t get_raw() const noexcept { return image ? image_read(image, bit_offset, bits) : 0; }
     bool get_bit(unsigned n) const noexcept { return get_raw() >> n & 1; }
     // Writes the entry (truncated to its width), or only the one bit when `bit` >= 0.
     void set(int64_t v) const noexcept {
@@ -34,36 +34,10 @@ struct BoundSignal {
             set_bit(unsigned(bit), v != 0);
             return;
         }
-        write(bit_offset, bits, uint64_t(v));
+        image_write(image, bit_offset, bits, uint64_t(v));
     }
     void set_bit(unsigned n, bool on) const noexcept {
-        if (!image) return;
-        uint32_t b = bit_offset + n;
-        if (on) image[b >> 3] |= uint8_t(1u << (b & 7));
-        else image[b >> 3] &= uint8_t(~(1u << (b & 7)));
-    }
-
-private:
-    uint64_t read(uint32_t at, uint8_t n) const noexcept {
-        if ((at & 7) == 0 && (n & 7) == 0) {
-            uint64_t v = 0;
-            std::memcpy(&v, image + at / 8, n / 8); // little-endian host, as EtherCAT
-            return v;
-        }
-        uint64_t v = 0;
-        for (uint32_t i = 0; i < n; ++i) v |= uint64_t(image[(at + i) >> 3] >> ((at + i) & 7) & 1) << i;
-        return v;
-    }
-    void write(uint32_t at, uint8_t n, uint64_t v) const noexcept {
-        if ((at & 7) == 0 && (n & 7) == 0) {
-            std::memcpy(image + at / 8, &v, n / 8);
-            return;
-        }
-        for (uint32_t i = 0; i < n; ++i) {
-            uint32_t b = at + i;
-            if (v >> i & 1) image[b >> 3] |= uint8_t(1u << (b & 7));
-            else image[b >> 3] &= uint8_t(~(1u << (b & 7)));
-        }
+        if (image) image_write(image, bit_offset + n, 1, on ? 1 : 0);
     }
 };
 

@@ -1,0 +1,69 @@
+// Reading and writing one entry of an EtherCAT process image: the only place that knows bit
+// offsets, widths and signedness. The bus (send/receive, output writes), the master, bound
+// signals of axes and PLCs, and device support of records all go through these.
+// Threading: none of its own; the caller owns the image (RT thread, or a snapshot copy).
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <string_view>
+
+namespace beamctl::registry {
+
+// Where an entry sits: its first bit in the image, its width and whether it is two's complement.
+struct ImageEntry {
+    uint32_t bit_offset = 0;
+    uint8_t bits = 0;
+    bool is_signed = false;
+};
+
+// The raw entry, zero-extended. Byte-aligned whole bytes are a memcpy (little-endian host, as EtherCAT).
+inline uint64_t image_read(const uint8_t* image, uint32_t bit_offset, uint8_t bits) noexcept {
+    uint64_t v = 0;
+    if ((bit_offset & 7) == 0 && (bits & 7) == 0 && bits <= 64) {
+        std::memcpy(&v, image + bit_offset / 8, bits / 8);
+        return v;
+    }
+    for (uint32_t i = 0; i < bits && i < 64; ++i) v |= uint64_t(image[(bit_offset + i) >> 3] >> ((bit_offset + i) & 7) & 1) << i;
+    return v;
+}
+
+// Writes the entry, truncated to its width; the bits around it are kept.
+inline void image_write(uint8_t* image, uint32_t bit_offset, uint8_t bits, uint64_t v) noexcept {
+    if ((bit_offset & 7) == 0 && (bits & 7) == 0 && bits <= 64) {
+        std::memcpy(image + bit_offset / 8, &v, bits / 8);
+        return;
+    }
+    for (uint32_t i = 0; i < bits && i < 64; ++i) {
+        uint32_t b = bit_offset + i;
+        if (v >> i & 1) image[b >> 3] |= uint8_t(1u << (b & 7));
+        else image[b >> 3] &= uint8_t(~(1u << (b & 7)));
+    }
+}
+
+// The raw value of a `bits` wide entry as a signed number (two's complement).
+inline int64_t sign_extend(uint64_t raw, uint8_t bits) noexcept {
+    if (bits > 0 && bits < 64 && (raw >> (bits - 1) & 1)) raw |= ~uint64_t(0) << bits;
+    return int64_t(raw);
+}
+
+// The entry as a number: signed entries sign-extended.
+inline double raw_to_double(uint64_t raw, const ImageEntry& e) noexcept {
+    return e.is_signed ? double(sign_extend(raw, e.bits)) : double(raw);
+}
+
+// A number as the entry's raw bits: negative values in two's complement, then truncated to the
+// width (what an output of that width sends).
+inline uint64_t double_to_raw(double v, uint8_t bits) noexcept {
+    uint64_t raw = v < 0 ? uint64_t(int64_t(v)) : uint64_t(v);
+    if (bits < 64) raw &= (uint64_t(1) << bits) - 1;
+    return raw;
+}
+
+// Whether an EtherCAT (ETG.1020) data type name is two's complement: SINT, INT, DINT, LINT and
+// the INTn spellings; USINT, UINT, UDINT, ULINT, BOOL, BITn and the UINTn spellings are not.
+inline bool datatype_is_signed(std::string_view t) noexcept {
+    return t.rfind("INT", 0) == 0 || t.rfind("SINT", 0) == 0 || t.rfind("DINT", 0) == 0 || t.rfind("LINT", 0) == 0;
+}
+
+} // namespace beamctl::registry
