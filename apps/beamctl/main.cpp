@@ -167,7 +167,7 @@ int run_softioc(const SoftIocOptions& o) {
     db.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     EventLoop loop;
     // CA links to records of other servers, searched as EPICS_CA_ADDR_LIST etc. say (dbCa).
-    ca::CaLinks ca_links(db, ca::ClientConfig::from_env());
+    ca::CaLinks ca_links(db);
     ca_links.start(loop);
     std::unique_ptr<ca::Server> server;
     int exit_status = 0;

@@ -88,10 +88,18 @@ private:
     bool released_ = false;
 };
 
-CaLinks::CaLinks(pv::Database& db, ClientConfig cfg) : db_(db), cfg_(std::move(cfg)) {
+CaLinks::CaLinks(pv::Database& db, ClientConfig cfg) : CaLinks(db) { cfg_ = std::move(cfg); }
+
+CaLinks::CaLinks(pv::Database& db) : db_(db) {
     db_.set_remote_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) {
         return bind(r, f, l, why);
     });
+}
+
+void CaLinks::make_client() {
+    if (client_) return;
+    if (!cfg_) cfg_ = ClientConfig::from_env();
+    client_ = std::make_unique<Client>(*loop_, *cfg_);
 }
 
 CaLinks::~CaLinks() {
@@ -109,7 +117,7 @@ pv::RemoteLink* CaLinks::bind(pv::Record& r, const pv::FieldDesc& f, pv::Link& l
     links_.push_back(std::make_unique<Link>(db_, r, f, l.proc, name));
     Link* link = links_.back().get();
     if (loop_) {
-        if (!client_) client_ = std::make_unique<Client>(*loop_, cfg_);
+        make_client();
         link->attach(*client_);
     }
     return link;
@@ -118,7 +126,7 @@ pv::RemoteLink* CaLinks::bind(pv::Record& r, const pv::FieldDesc& f, pv::Link& l
 void CaLinks::start(EventLoop& loop) {
     loop_ = &loop;
     if (links_.empty()) return;
-    if (!client_) client_ = std::make_unique<Client>(loop, cfg_);
+    make_client();
     for (auto& l : links_) l->attach(*client_);
 }
 

@@ -12,6 +12,7 @@
 #include "pv/database.hpp"
 
 #include <memory>
+#include <optional>
 #include <vector>
 
 namespace beamctl::ca {
@@ -21,6 +22,9 @@ public:
     // Installs itself as db's remote binder (before Database::init_records). The client is made
     // only once a CA link exists, from `cfg`.
     CaLinks(pv::Database& db, ClientConfig cfg);
+    // As above with ClientConfig::from_env(), read when the first CA link needs the client (so
+    // a database without CA links never reads EPICS_CA_*).
+    explicit CaLinks(pv::Database& db);
     ~CaLinks();
     CaLinks(const CaLinks&) = delete;
     CaLinks& operator=(const CaLinks&) = delete;
@@ -37,9 +41,10 @@ public:
 private:
     class Link;
     pv::RemoteLink* bind(pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why);
+    void make_client();
 
     pv::Database& db_;
-    ClientConfig cfg_;
+    std::optional<ClientConfig> cfg_; // empty: from the environment
     EventLoop* loop_ = nullptr;
     std::unique_ptr<Client> client_;
     std::vector<std::unique_ptr<Link>> links_;
