@@ -447,6 +447,8 @@ void Ioc::bring_up() {
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
         return bind_device(r, f, l, why);
     });
+    // Links with CA/CP/CPP to records of other servers (EPICS_CA_ADDR_LIST etc.), as dbCa.
+    if (!ca_links_) ca_links_ = std::make_unique<ca::CaLinks>(db_);
     db_.init_records();
     brought_up_ = true;
 }
@@ -509,6 +511,13 @@ int Ioc::run() {
     block_stop_signals(); // before any thread starts: only the loop's signalfd sees them
     if (!brought_up_) bring_up();
     EventLoop loop;
+    struct StopCaLinks { // the CA client closes before its loop goes
+        ca::CaLinks* links;
+        ~StopCaLinks() {
+            if (links) links->stop();
+        }
+    } stop_ca_links{ca_links_.get()};
+    if (ca_links_) ca_links_->start(loop);
     ca::ServerConfig sc = ca::ServerConfig::from_env();
     if (cfg_.ca_port) sc.set_port(*cfg_.ca_port, cfg_.path + ": ca: port");
     ca::Server server(loop, db_, sc);

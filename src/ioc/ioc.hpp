@@ -4,6 +4,7 @@
 // the cycle. The IOC loop thread owns the PV database and the CA server.
 #pragma once
 
+#include "ca/ca_link.hpp"
 #include "ca/server.hpp"
 #include "config/ioc_config.hpp"
 #include "core/event_loop.hpp"
@@ -91,6 +92,7 @@ private:
     rt::Clock& clock_;
     const ethercat::Catalog& catalog_;
     pv::Database db_;
+    std::unique_ptr<ca::CaLinks> ca_links_; // CA links of db_ to other servers (run() connects them)
     std::unique_ptr<rt::Engine> engine_;
     std::vector<BusRt> buses_;
     registry::Registry registry_;
