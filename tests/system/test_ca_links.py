@@ -93,3 +93,26 @@ def test_link_goes_invalid_when_the_other_ioc_dies_and_reconnects_when_it_return
     assert put(p + "A:out", 6) == 1
     assert wait_for(lambda: get(p + "B:sink") == 6, timeout=30)
     assert a.alive()
+
+
+def test_beamctl_run_db_files_have_ca_links_too(ioc, prefix, tmp_path):
+    from conftest import RunServer, acquire_port, release_port
+    p = prefix
+    b = ioc.start(DB_B)
+    (tmp_path / "a.db").write_text(DB_A)
+    cfg = tmp_path / "ioc.yaml"
+    cfg.write_text(f'ioc: {{name: RUNA, prefix: "{p}R:"}}\ndb:\n  - {{file: a.db, macros: {{P: "{p}"}}}}\n')
+    port = acquire_port()
+    run = RunServer(tmp_path, cfg, port)
+    run.extra_env = {"EPICS_CA_ADDR_LIST": f"127.0.0.1:{b.port}", "EPICS_CA_AUTO_ADDR_LIST": "NO"}
+    try:
+        run.start()
+        assert wait_for(lambda: get(p + "A:in") == 1, timeout=30), run.stderr()[-2000:]
+        assert put(p + "B:val", 3) == 1
+        assert wait_for(lambda: get(p + "A:in") == 3, timeout=30)
+        assert put(p + "A:out", 4.5) == 1
+        assert wait_for(lambda: get(p + "B:sink") == 4.5, timeout=30)
+        assert run.stop() == 0  # a clean stop with the CA client open
+    finally:
+        run.kill()
+        release_port(port)
