@@ -17,7 +17,10 @@
 #include "core/log.hpp"
 #include "core/macros.hpp"
 #include "core/signals.hpp"
+#include "pv/autosave.hpp"
 #include "pv/database.hpp"
+#include "pv/db_shell.hpp"
+#include "pv/shell_server.hpp"
 #include "pv/db_file.hpp"
 #include "pv/iocsh.hpp"
 #include "config/ioc_config.hpp"
@@ -141,6 +144,9 @@ struct SoftIocOptions {
     std::vector<std::string> macros, dbs, exits, acfs, files, include_path;
     std::string dbd;                                           // -D: accepted, not needed
     bool no_shell = false, old_shell = false, verbose = false; // -S, -s, -v
+    std::string autosave_dir;     // --autosave DIR: info-tag defaults (autosave.hpp)
+    std::string shell_socket;     // --shell-socket PATH ("none": no `beamctl shell`)
+    double autosave_period_s = 5; // --autosave-period
     std::vector<SoftIocStep> steps;
 };
 
@@ -189,6 +195,15 @@ int run_softioc(const SoftIocOptions& o) {
     so.include_path = o.include_path;
     pv::IocShell shell(db, so, hooks);
     shell_ptr = &shell;
+    // Autosave: st.cmd's synApps commands and/or --autosave DIR; restored before PINI.
+    auto autosave_note = [](const std::string& m) {
+        std::fprintf(stderr, "%s\n", m.c_str());
+        std::fflush(stderr);
+    };
+    pv::Autosave autosave(db, autosave_note);
+    pv::add_autosave_commands(shell, autosave, autosave_note);
+    if (!o.autosave_dir.empty()) pv::autosave_defaults_before_init(autosave, o.autosave_dir);
+    db.set_restore_hook([&autosave] { autosave.restore(); });
 
     std::string macros, all_macros; // the -m in effect; every -m joined (for positional .db files)
     for (const auto& m : o.macros) all_macros += (all_macros.empty() ? "" : ",") + m;
@@ -264,12 +279,21 @@ int run_softioc(const SoftIocOptions& o) {
     }
     LoopSignals signals(loop, reload);
     if (!db.records().empty()) loop.call_every(0.01, [&db] { db.scan_periodic(EventLoop::now_s()); });
+    if (!o.autosave_dir.empty()) pv::autosave_defaults_after_init(autosave, db, o.autosave_period_s);
+    if (autosave.set_count() > 0) {
+        autosave.tick(EventLoop::now_s());
+        loop.call_every(0.1, [&autosave] { autosave.tick(EventLoop::now_s()); });
+    }
 
+    // `beamctl shell`: introspection on a local UNIX socket, served on this loop.
+    pv::DbShell db_shell(db, {[&server](int level, std::ostream& os) { server->report(level, os); }});
+    auto shell_server = pv::start_shell_server(loop, db_shell, SB() << "softioc-" << ::getpid(), o.shell_socket);
     std::printf("ready: CA on %s, %zu PVs\n", server->listen_description().c_str(), db.size());
     std::printf("  try: EPICS_CA_ADDR_LIST=127.0.0.1:%u EPICS_CA_AUTO_ADDR_LIST=NO caget <pv>\n",
                 unsigned(server->udp_port()));
     std::fflush(stdout);
     loop.run();
+    autosave.flush(); // a clean stop saves what changed since the last save
     return exit_status;
 }
 
@@ -464,6 +488,15 @@ int main(int argc, char** argv) {
     softioc->add_flag("-S", soft.no_shell, "No interactive shell: accepted (beamctl never starts one)");
     softioc->add_flag("-s", soft.old_shell, "Accepted and ignored (as softIoc)");
     softioc->add_flag("-v", soft.verbose, "Print the steps taken during startup");
+    softioc->add_option("--autosave", soft.autosave_dir,
+                        "Autosave with synApps' defaults: restore DIR/info_positions.sav and info_settings.sav before PINI, "
+                        "save the info(autosaveFields_pass0/autosaveFields) fields there on change");
+    softioc->add_option("--autosave-period", soft.autosave_period_s,
+                        "Seconds between saves of a changed autosave file (default 5)")
+        ->check(CLI::Range(0.1, 86400.0));
+    softioc->add_option("--shell-socket", soft.shell_socket,
+                        "UNIX socket of 'beamctl shell' (default $XDG_RUNTIME_DIR/beamctl/softioc-PID.sock, "
+                        "else /tmp/beamctl-UID/...; $BEAMCTL_SHELL_SOCKET; 'none': no shell)");
     auto* soft_files = softioc->add_option(
         "files", soft.files, "Startup scripts (st.cmd) and database files (.db, .vdb, .template)");
 
@@ -480,6 +513,10 @@ int main(int argc, char** argv) {
     IocOptions runo, checko;
     auto* runcmd = app.add_subcommand("run", "Run an IOC: buses, RT engine, PVs and CA server (ioc.yaml)");
     add_ioc_options(*runcmd, runo);
+    std::string run_shell_socket;
+    runcmd->add_option("--shell-socket", run_shell_socket,
+                       "UNIX socket of 'beamctl shell' (default $XDG_RUNTIME_DIR/beamctl/NAME.sock, else "
+                       "/tmp/beamctl-UID/NAME.sock; $BEAMCTL_SHELL_SOCKET; 'none': no shell)");
     auto* checkcmd = app.add_subcommand("check", "Load an IOC configuration and report errors (exit 1 on any)");
     add_ioc_options(*checkcmd, checko);
     IocOptions sigo;
@@ -529,6 +566,17 @@ int main(int argc, char** argv) {
                      "With --iface: spin on the socket instead of sleeping (answers at once like hardware; keeps a CPU busy)")
         ->needs(sim_iface_opt);
 
+    pv::ShellClientOptions shello;
+    auto* shellcmd = app.add_subcommand(
+        "shell", "Run iocsh commands (dbl, dbpr, dbgf, dbpf, dbtr, scanppl, casr, help) in a running IOC "
+                 "through its local socket: -c CMD, or lines from stdin (a prompt on a terminal)");
+    shellcmd->add_option("--socket", shello.socket, "The IOC's socket (printed as 'shell: PATH' at its start)");
+    shellcmd->add_option("-c,--command", shello.commands, "A command to run (repeatable), e.g. -c 'dbgf rec.VAL'")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    shellcmd->add_option("name", shello.name,
+                         "IOC name (ioc: name of ioc.yaml, softioc-PID) or socket path; default: the only IOC running");
+
     int repeater_port = 0;
     auto* repcmd = app.add_subcommand(
         "ca-repeater", "Run the Channel Access repeater (EPICS caRepeater): fan CA server beacons out to this host's clients");
@@ -564,6 +612,7 @@ int main(int argc, char** argv) {
             return run_softioc(soft);
         }
         if (*plccheck) return run_plc_check(plco);
+        if (*shellcmd) return pv::run_shell_client(shello);
         if (*rcpcmd) return bridge::rcp::run_rcp_sim(rcp_model, rcpo);
         if (*repcmd)
             return ca::run_ca_repeater(repeater_port ? uint16_t(repeater_port) : ca::repeater_port_from_env());
@@ -571,6 +620,7 @@ int main(int argc, char** argv) {
         if (*runcmd) {
             rt::MonotonicClock clock;
             ioc::Ioc ioc(runo.load(), clock);
+            ioc.set_shell_socket(run_shell_socket);
             return ioc.run();
         }
         if (*checkcmd) return ioc::run_check(checko.file, macro_options(checko.macros)); // every error

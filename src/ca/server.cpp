@@ -5,6 +5,7 @@
 #include "core/error.hpp"
 #include "core/log.hpp"
 
+#include <algorithm>
 #include <arpa/inet.h>
 #include <cerrno>
 #include <cstdlib>
@@ -13,6 +14,7 @@
 #include <ifaddrs.h>
 #include <net/if.h>
 #include <netinet/tcp.h>
+#include <ostream>
 #include <sstream>
 #include <sys/epoll.h>
 #include <sys/socket.h>
@@ -507,6 +509,35 @@ void Server::handle_datagram(int fd, const uint8_t* p, std::size_t n, const sock
     answer_search(ctx_.db, ctx_.tcp_port, p, n, replies, ctx_.stats);
     for (auto& r : replies)
         sendto(fd, r.data(), r.size(), 0, reinterpret_cast<const sockaddr*>(&from), sizeof from);
+}
+
+void Server::report(int level, std::ostream& os) const {
+    os << "Channel Access Server V4.13\n";
+    if (conns_.empty()) {
+        os << "No clients connected.\n";
+    } else {
+        os << "Connected circuits:\n";
+        std::vector<const Conn*> conns;
+        for (const auto& [fd, c] : conns_) conns.push_back(c.get());
+        std::sort(conns.begin(), conns.end(), [](const Conn* a, const Conn* b) { return a->fd < b->fd; });
+        for (const Conn* c : conns) {
+            const Circuit& k = *c->circuit;
+            os << "TCP " << k.peer() << "(" << k.host() << "): User=\"" << k.user() << "\", V4.13, "
+               << k.channel_count() << " Channel" << (k.channel_count() == 1 ? "" : "s") << ", Priority=0\n";
+            if (level >= 1)
+                os << "\t" << k.subscription_count() << " subscription(s), " << k.output_size()
+                   << " bytes waiting to be sent\n";
+        }
+    }
+    if (level >= 2) {
+        os << "Server: " << listen_description() << " (UDP and TCP), " << beacon_targets_.size()
+           << " beacon address(es)\n";
+        const ServerStats& s = ctx_.stats;
+        os << "Circuits opened " << s.circuits_opened << ", closed " << s.circuits_closed
+           << "; messages " << s.messages << "; UDP searches " << s.searches_udp << " (" << s.search_hits
+           << " answered); protocol errors " << s.protocol_errors << "; puts denied " << s.put_denied
+           << "; events sent " << s.events_sent << "\n";
+    }
 }
 
 } // namespace beamctl::ca

@@ -9,6 +9,7 @@
 #include "pv/database.hpp"
 
 #include <cstdint>
+#include <iosfwd>
 #include <memory>
 #include <netinet/in.h>
 #include <string>
@@ -74,6 +75,10 @@ public:
     bool reload_access_security(const std::string& path);
     const ServerStats& stats() const { return ctx_.stats; }
     std::size_t client_count() const { return conns_.size(); }
+    // casr: the connected circuits as EPICS casr prints them (peer, user, protocol version,
+    // channels), with subscriptions (level 1) and the server's sockets and counters (level 2).
+    // Loop thread.
+    void report(int level, std::ostream& os) const;
 
 private:
     struct Conn;

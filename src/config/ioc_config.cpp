@@ -158,7 +158,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "db", "bridges", "ca"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "db", "bridges", "ca", "autosave"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -292,6 +292,13 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             cfg.acf = resolve(dir, *a);
             cfg.acf_where = ca["acf"].where();
         }
+    }
+    if (YamlNode as = root["autosave"]; as.keys({"dir", "period_s"}) && as) {
+        AutosaveEntry e;
+        e.where = as.where();
+        if (auto d = as.required("dir", " (the directory of the .sav files)").string()) e.dir = resolve(dir, *d);
+        e.period_s = as["period_s"].number(between(0.1, 86400)).value_or(e.period_s);
+        cfg.autosave = e;
     }
     rd.take_errors(errors);
     return cfg;

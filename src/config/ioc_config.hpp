@@ -116,6 +116,14 @@ struct RcpBridgeEntry {
     std::string where;
 };
 
+// Autosave of the records' info(autosaveFields[_pass0], "...") fields (docs/autosave.md):
+// `autosave: {dir: DIR, period_s: 5}`.
+struct AutosaveEntry {
+    std::string dir;     // resolved path of the .sav files
+    double period_s = 5; // [s] at most one save of a changed file per period
+    std::string where;   // file:line:col of the entry
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -133,6 +141,7 @@ struct IocConfig {
     std::optional<uint16_t> ca_port; // default: EPICS_CAS_SERVER_PORT / 5064
     std::string acf;                 // resolved path
     std::string acf_where;           // file:line:col of `acf`
+    std::optional<AutosaveEntry> autosave;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

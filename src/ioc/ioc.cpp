@@ -1,4 +1,6 @@
 #include "ioc/ioc.hpp"
+#include "pv/db_shell.hpp"
+#include "pv/shell_server.hpp"
 
 #include "ioc/pv_util.hpp"
 #include "motion/axis_setup.hpp"
@@ -449,6 +451,19 @@ void Ioc::bring_up() {
     });
     // Links with CA/CP/CPP to records of other servers (EPICS_CA_ADDR_LIST etc.), as dbCa.
     if (!ca_links_) ca_links_ = std::make_unique<ca::CaLinks>(db_);
+    // Autosave (ioc.yaml autosave:): the info-tagged fields, restored after init, before PINI.
+    if (cfg_.autosave && !autosave_) {
+        autosave_ = std::make_unique<pv::Autosave>(db_, [](const std::string& m) {
+            std::fprintf(stderr, "%s\n", m.c_str());
+            std::fflush(stderr);
+        });
+        try {
+            pv::autosave_defaults_before_init(*autosave_, cfg_.autosave->dir);
+        } catch (const Error& e) {
+            throw Error(SB() << cfg_.autosave->where << ": autosave: " << e.what());
+        }
+        db_.set_restore_hook([this] { autosave_->restore(); });
+    }
     db_.init_records();
     brought_up_ = true;
 }
@@ -553,11 +568,20 @@ int Ioc::run() {
         db_.scan_io_intr(); // records on engine signals that changed since the last snapshot
     });
     loop.call_every(0.01, [this] { db_.scan_periodic(EventLoop::now_s()); });
+    if (autosave_) {
+        pv::autosave_defaults_after_init(*autosave_, db_, cfg_.autosave->period_s);
+        autosave_->tick(EventLoop::now_s());
+        loop.call_every(0.1, [this] { autosave_->tick(EventLoop::now_s()); });
+    }
+    // `beamctl shell`: introspection on a local UNIX socket, served on this loop.
+    pv::DbShell db_shell(db_, {[&server](int level, std::ostream& os) { server.report(level, os); }});
+    auto shell_server = pv::start_shell_server(loop, db_shell, cfg_.name, shell_socket_);
     std::string rcp_text = rcp ? std::string(SB() << ", RCP bridge on udp " << cfg_.rcp->listen << ":" << rcp->port()) : std::string();
     std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)%s\n", server.listen_description().c_str(),
                 db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str(), rcp_text.c_str());
     std::fflush(stdout);
     loop.run();
+    if (autosave_) autosave_->flush(); // a clean stop saves what changed since the last save
     shutdown(&signals);
     return 0;
 }

@@ -16,6 +16,7 @@
 #include "ioc/plcs.hpp"
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
+#include "pv/autosave.hpp"
 #include "pv/database.hpp"
 #include "registry/registry.hpp"
 #include "rt/engine.hpp"
@@ -55,6 +56,8 @@ public:
     // Runs the IOC: engine on its RT thread, CA server and publisher on the calling thread,
     // until SIGINT/SIGTERM. Prints the ready line.
     int run();
+    // The UNIX socket of `beamctl shell` (default: pv::start_shell_server's, by the IOC's name).
+    void set_shell_socket(std::string path) { shell_socket_ = std::move(path); }
     // The clean stop run() ends with (public for tests in virtual time); `signals` (may be null)
     // is watched for a second signal, which exits at once.
     void shutdown(LoopSignals* signals = nullptr);
@@ -100,6 +103,8 @@ private:
     std::unique_ptr<IocPlcs> plcs_;
     std::unique_ptr<IocKinematics> kinematics_;
     bool brought_up_ = false;
+    std::unique_ptr<pv::Autosave> autosave_; // ioc.yaml autosave:
+    std::string shell_socket_;
 };
 
 // PV name suffix of a process-data entry, as ecmccfg names them: binaryInput01 -> BI01,

@@ -90,26 +90,6 @@ MacroMap environment_macros() {
     return m;
 }
 
-// Shell-style wildcard match: '*' any run, '?' one character (epicsStrGlobMatch).
-bool glob_match(std::string_view s, std::string_view pat) {
-    std::size_t si = 0, pi = 0, star = std::string_view::npos, mark = 0;
-    while (si < s.size()) {
-        if (pi < pat.size() && (pat[pi] == '?' || pat[pi] == s[si])) {
-            ++si, ++pi;
-        } else if (pi < pat.size() && pat[pi] == '*') {
-            star = pi++;
-            mark = si;
-        } else if (star != std::string_view::npos) {
-            pi = star + 1;
-            si = ++mark;
-        } else {
-            return false;
-        }
-    }
-    while (pi < pat.size() && pat[pi] == '*') ++pi;
-    return pi == pat.size();
-}
-
 std::size_t edit_distance(std::string_view a, std::string_view b) {
     std::vector<std::size_t> row(b.size() + 1);
     for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
@@ -271,24 +251,6 @@ std::string split_words(std::string_view line, Words& w) {
     if (quote) return "Unbalanced quote.";
     if (backslash) return "Trailing backslash.";
     return "";
-}
-
-const char* put_status_text(PutStatus st) {
-    switch (st) {
-    case PutStatus::Ok:
-        return "ok";
-    case PutStatus::ReadOnly:
-        return "the field is read-only";
-    case PutStatus::BadValue:
-        return "the value cannot be converted to the field's type";
-    case PutStatus::NoAccess:
-        return "access denied";
-    case PutStatus::Failed:
-        return "the record refused the value";
-    case PutStatus::Disconnected:
-        return "the record went away";
-    }
-    return "refused";
 }
 
 } // namespace
@@ -587,78 +549,7 @@ struct IocShell::Impl {
         need(c, 1);
         if (!c.has(2)) throw Error("dbpf: missing the value (usage: dbpf PV VALUE)");
         if (!initialised) throw Error("dbpf only works after iocInit");
-        const std::string& name = c.arg(1);
-        const std::string& value = c.arg(2);
-        Address a;
-        if (!db.resolve(name, a)) throw Error(SB() << "dbpf: PV '" << name << "' not found");
-        PutStatus st;
-        if (a.count > 1 && a.native == Prim::Char) { // char arrays (and rec.FIELD$) take the text
-            std::vector<char> s(value.begin(), value.end());
-            s.push_back('\0');
-            st =
-                db.put(a, Prim::Char, s.data(), uint32_t(std::min<std::size_t>(s.size(), a.count)));
-        } else if (a.count > 1) {
-            std::vector<std::string> items = json_array(value);
-            if (items.empty())
-                throw Error(SB() << "dbpf " << name << ": no value in '" << value << "'");
-            std::vector<char> buf(items.size() * kStringSize, '\0');
-            for (std::size_t k = 0; k < items.size(); ++k)
-                copy_string(&buf[k * kStringSize], kStringSize, items[k]);
-            st = db.put(a, Prim::String, buf.data(),
-                        uint32_t(std::min<std::size_t>(items.size(), a.count)));
-        } else {
-            char s[kStringSize];
-            copy_string(s, sizeof s, value);
-            st = db.put(a, Prim::String, s, 1);
-        }
-        print_field(db, name, c.out);
-        if (st != PutStatus::Ok)
-            throw Error(SB() << "dbpf " << name << " \"" << value << "\": " << put_status_text(st));
-    }
-
-    // dbpf's value for an array: a JSON array ([1, 2, "a"]) or one value.
-    static std::vector<std::string> json_array(const std::string& v) {
-        std::vector<std::string> items;
-        std::size_t i = 0;
-        auto skip = [&] {
-            while (i < v.size() && std::isspace(static_cast<unsigned char>(v[i]))) ++i;
-        };
-        skip();
-        if (i >= v.size() || v[i] != '[') {
-            items.push_back(v);
-            return items;
-        }
-        ++i;
-        while (true) {
-            skip();
-            if (i >= v.size())
-                throw Error(SB() << "dbpf: array value '" << v << "' has no closing ']'");
-            if (v[i] == ']') break;
-            std::string item;
-            if (v[i] == '"') {
-                ++i;
-                while (i < v.size() && v[i] != '"') {
-                    if (v[i] == '\\' && i + 1 < v.size()) ++i;
-                    item += v[i++];
-                }
-                if (i >= v.size())
-                    throw Error(SB()
-                                << "dbpf: array value '" << v << "' has an unterminated string");
-                ++i;
-            } else {
-                while (i < v.size() && v[i] != ',' && v[i] != ']' &&
-                       !std::isspace(static_cast<unsigned char>(v[i])))
-                    item += v[i++];
-            }
-            items.push_back(item);
-            skip();
-            if (i < v.size() && v[i] == ',')
-                ++i;
-            else if (i < v.size() && v[i] != ']')
-                throw Error(SB() << "dbpf: array value '" << v
-                                 << "': expected ',' or ']' at column " << (i + 1));
-        }
-        return items;
+        put_field_text(db, c.arg(1), c.arg(2), c.out);
     }
 
     void cmd_dbgf(const Call& c) {
@@ -671,31 +562,11 @@ struct IocShell::Impl {
     void cmd_dbl(const Call& c) {
         std::string type = c.arg(1);
         if (type == "*") type.clear();
-        std::vector<std::string> fields;
-        std::istringstream fs_(c.arg(2));
-        for (std::string f; fs_ >> f;) fields.push_back(f);
         if (!type.empty() && !RecordTypes::global().find(type)) {
             c.out << "No record type\n";
             return;
         }
-        // Record types in name order, records in load order (as dbl walks the database).
-        std::map<std::string, std::vector<Record*>> by_type;
-        for (Record* r : db.records())
-            if (type.empty() || r->type().name() == type) by_type[r->type().name()].push_back(r);
-        for (const auto& [t, recs] : by_type)
-            for (Record* r : recs) {
-                c.out << r->name();
-                for (const auto& f : fields) {
-                    if (f == "recordType") {
-                        c.out << ", \"" << r->type().name() << "\"";
-                    } else if (const FieldDesc* fd = r->type().find(f)) {
-                        c.out << ", \"" << format_field(*r, *fd) << "\"";
-                    } else {
-                        c.out << ", ";
-                    }
-                }
-                c.out << "\n";
-            }
+        print_record_list(db, type, "", c.arg(2), c.out);
     }
 
     void cmd_as_set_filename(const Call& c) {

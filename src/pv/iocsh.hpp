@@ -21,6 +21,8 @@
 // `on error continue` errors are printed to the error stream and the script goes on.
 #pragma once
 
+#include "pv/types.hpp"
+
 #include <functional>
 #include <iosfwd>
 #include <memory>
@@ -96,5 +98,31 @@ private:
 // dbpf/dbgf and tests. Returns false (printing "PV 'name' not found") if the name resolves to
 // nothing.
 bool print_field(const Database& db, std::string_view channel, std::ostream& os);
+
+// The introspection commands of iocsh (dbl, dbpf, dbpr, dbtr, scanppl) as functions, shared by
+// startup scripts and `beamctl shell` (pv/db_shell.hpp); output as EPICS prints it. Database
+// thread only.
+
+// dbl: the records of record type `type` ("" for all) whose names match the glob `pattern` ("" for
+// all), one a line in load order within record types in name order, each followed by the values
+// of `fields` (blank-separated; "recordType" is the type) as `, "value"`.
+void print_record_list(const Database& db, std::string_view type, std::string_view pattern,
+                       std::string_view fields, std::ostream& os);
+// dbpf: writes `value` (text; an array as [1, 2, "a"] or one value) through Database::put as a CA
+// put does (read-only fields refused, pp fields process the record), then prints the field as
+// dbgf. Throws Error "dbpf NAME "VALUE": why" when the name is unknown or the put refused.
+void put_field_text(Database& db, const std::string& channel, const std::string& value,
+                    std::ostream& os);
+// dbpr: the fields of a record as "NAME: value" in columns of 20, in name order; level 0 the
+// fields dbpr shows at interest level 0 (ASG DESC DISA DISP DISV NAME SEVR STAT TPRO VAL),
+// 1 and up every field. Returns false (printing "Record 'x' not found") for an unknown name.
+bool print_record(const Database& db, std::string_view name, int level, std::ostream& os);
+// scanppl: the records of each periodic scan list ("Scan list for 1 second:" and the names), or
+// only those of `period` ("1 second", "1", ".5 second", ...) when given.
+void print_scan_lists(const Database& db, std::string_view period, std::ostream& os);
+// What a refused put's status means ("the field is read-only", ...).
+const char* put_status_text(PutStatus st);
+// Shell-style wildcard match: '*' any run, '?' one character (epicsStrGlobMatch).
+bool glob_match(std::string_view s, std::string_view pattern);
 
 } // namespace beamctl::pv

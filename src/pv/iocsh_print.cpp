@@ -1,14 +1,20 @@
 // print_field (iocsh.hpp): a field's value as EPICS dbgf/dbpf print it (dbTest.c's layout).
 #include "pv/iocsh.hpp"
 
+#include "core/error.hpp"
+#include "pv/convert.hpp"
 #include "pv/database.hpp"
 
 #include <algorithm>
 #include <cctype>
 #include <cinttypes>
+#include <cmath>
 #include <cstdarg>
 #include <cstdio>
 #include <cstring>
+#include <map>
+#include <sstream>
+#include <vector>
 #include <ostream>
 #include <string>
 
@@ -20,10 +26,10 @@ namespace {
 // the next one; a line holds at most 80 characters.
 class TabLine {
 public:
-    explicit TabLine(std::ostream& os)
-        : os_(os) {}
+    explicit TabLine(std::ostream& os, std::size_t tab = 10)
+        : os_(os), kTab(tab) {}
     void add(std::string msg) {
-        constexpr std::size_t kMax = 80, kTab = 10;
+        constexpr std::size_t kMax = 80;
         if (msg.size() > kMax) msg.resize(kMax);
         if (line_.size() + msg.size() > kMax) flush();
         line_ += msg;
@@ -36,6 +42,7 @@ public:
 
 private:
     std::ostream& os_;
+    const std::size_t kTab; // dbgf 10, dbpr 20
     std::string line_;
 };
 
@@ -244,6 +251,207 @@ bool print_field(const Database& db, std::string_view channel, std::ostream& os)
     }
     line.flush();
     return true;
+}
+
+// --- dbl, dbpf, dbpr, scanppl ------------------------------------------------------------------
+
+bool glob_match(std::string_view s, std::string_view pat) {
+    std::size_t si = 0, pi = 0, star = std::string_view::npos, mark = 0;
+    while (si < s.size()) {
+        if (pi < pat.size() && (pat[pi] == '?' || pat[pi] == s[si])) {
+            ++si, ++pi;
+        } else if (pi < pat.size() && pat[pi] == '*') {
+            star = pi++;
+            mark = si;
+        } else if (star != std::string_view::npos) {
+            pi = star + 1;
+            si = ++mark;
+        } else {
+            return false;
+        }
+    }
+    while (pi < pat.size() && pat[pi] == '*') ++pi;
+    return pi == pat.size();
+}
+
+const char* put_status_text(PutStatus st) {
+    switch (st) {
+    case PutStatus::Ok:
+        return "ok";
+    case PutStatus::ReadOnly:
+        return "the field is read-only";
+    case PutStatus::BadValue:
+        return "the value cannot be converted to the field's type";
+    case PutStatus::NoAccess:
+        return "access denied";
+    case PutStatus::Failed:
+        return "the record refused the value";
+    case PutStatus::Disconnected:
+        return "the record went away";
+    }
+    return "refused";
+}
+
+void print_record_list(const Database& db, std::string_view type, std::string_view pattern,
+                       std::string_view fields, std::ostream& os) {
+    std::vector<std::string> names;
+    std::istringstream fs_{std::string(fields)};
+    for (std::string f; fs_ >> f;) names.push_back(f);
+    // Record types in name order, records in load order (as dbl walks the database).
+    std::map<std::string, std::vector<Record*>, std::less<>> by_type;
+    for (Record* r : db.records())
+        if ((type.empty() || r->type().name() == type) &&
+            (pattern.empty() || glob_match(r->name(), pattern)))
+            by_type[r->type().name()].push_back(r);
+    for (const auto& [t, recs] : by_type)
+        for (Record* r : recs) {
+            os << r->name();
+            for (const auto& f : names) {
+                if (f == "recordType") {
+                    os << ", \"" << r->type().name() << "\"";
+                } else if (const FieldDesc* fd = r->type().find(f)) {
+                    os << ", \"" << format_field(*r, *fd) << "\"";
+                } else {
+                    os << ", ";
+                }
+            }
+            os << "\n";
+        }
+}
+
+namespace {
+
+// dbpf's value for an array: a JSON array ([1, 2, "a"]) or one value.
+std::vector<std::string> json_array(const std::string& v) {
+    std::vector<std::string> items;
+    std::size_t i = 0;
+    auto skip = [&] {
+        while (i < v.size() && std::isspace(static_cast<unsigned char>(v[i]))) ++i;
+    };
+    skip();
+    if (i >= v.size() || v[i] != '[') {
+        items.push_back(v);
+        return items;
+    }
+    ++i;
+    while (true) {
+        skip();
+        if (i >= v.size()) throw Error(SB() << "dbpf: array value '" << v << "' has no closing ']'");
+        if (v[i] == ']') break;
+        std::string item;
+        if (v[i] == '"') {
+            ++i;
+            while (i < v.size() && v[i] != '"') {
+                if (v[i] == '\\' && i + 1 < v.size()) ++i;
+                item += v[i++];
+            }
+            if (i >= v.size())
+                throw Error(SB() << "dbpf: array value '" << v << "' has an unterminated string");
+            ++i;
+        } else {
+            while (i < v.size() && v[i] != ',' && v[i] != ']' &&
+                   !std::isspace(static_cast<unsigned char>(v[i])))
+                item += v[i++];
+        }
+        items.push_back(item);
+        skip();
+        if (i < v.size() && v[i] == ',')
+            ++i;
+        else if (i < v.size() && v[i] != ']')
+            throw Error(SB() << "dbpf: array value '" << v << "': expected ',' or ']' at column "
+                             << (i + 1));
+    }
+    return items;
+}
+
+} // namespace
+
+void put_field_text(Database& db, const std::string& name, const std::string& value,
+                    std::ostream& os) {
+    Address a;
+    if (!db.resolve(name, a)) throw Error(SB() << "dbpf: PV '" << name << "' not found");
+    PutStatus st;
+    if (a.count > 1 && a.native == Prim::Char) { // char arrays (and rec.FIELD$) take the text
+        std::vector<char> s(value.begin(), value.end());
+        s.push_back('\0');
+        st = db.put(a, Prim::Char, s.data(), uint32_t(std::min<std::size_t>(s.size(), a.count)));
+    } else if (a.count > 1) {
+        std::vector<std::string> items = json_array(value);
+        if (items.empty()) throw Error(SB() << "dbpf " << name << ": no value in '" << value << "'");
+        std::vector<char> buf(items.size() * kStringSize, '\0');
+        for (std::size_t k = 0; k < items.size(); ++k)
+            copy_string(&buf[k * kStringSize], kStringSize, items[k]);
+        st = db.put(a, Prim::String, buf.data(),
+                    uint32_t(std::min<std::size_t>(items.size(), a.count)));
+    } else {
+        char s[kStringSize];
+        copy_string(s, sizeof s, value);
+        st = db.put(a, Prim::String, s, 1);
+    }
+    print_field(db, name, os);
+    if (st != PutStatus::Ok)
+        throw Error(SB() << "dbpf " << name << " \"" << value << "\": " << put_status_text(st));
+}
+
+bool print_record(const Database& db, std::string_view name, int level, std::ostream& os) {
+    Record* r = db.find(name);
+    if (!r) {
+        os << "Record '" << name << "' not found\n";
+        return false;
+    }
+    static const char* kLevel0[] = {"ASG", "DESC", "DISA", "DISP", "DISV",
+                                    "NAME", "SEVR", "STAT", "TPRO", "VAL"};
+    std::vector<const FieldDesc*> fields;
+    for (const FieldDesc& f : r->type().fields()) {
+        bool show = level > 0;
+        for (const char* n : kLevel0) show = show || std::strcmp(f.name, n) == 0;
+        if (show) fields.push_back(&f);
+    }
+    std::sort(fields.begin(), fields.end(),
+              [](const FieldDesc* x, const FieldDesc* y) { return std::strcmp(x->name, y->name) < 0; });
+    TabLine line(os, 20);
+    for (const FieldDesc* f : fields) {
+        std::string channel = std::string(r->name()) + "." + f->name;
+        Address a;
+        std::string value;
+        if (!db.resolve(channel, a)) continue;
+        if (f->flags & kArray) {
+            value = fmt("(%u of %u elements)", db.current_count(a), a.count);
+        } else {
+            char s[kStringSize] = {};
+            db.get(a, Prim::String, s, 1);
+            value.assign(s, strnlen(s, sizeof s));
+        }
+        line.add(std::string(f->name) + ": " + value);
+    }
+    line.flush();
+    return true;
+}
+
+void print_scan_lists(const Database& db, std::string_view period, std::ostream& os) {
+    // The periodic choices of menuScan (3 and up) in menu order, slowest first.
+    const auto& choices = kMenuScan.choices;
+    std::string want(period);
+    if (!want.empty() && want.find(' ') == std::string::npos) {
+        double v = 0;
+        if (parse_double(want, v))
+            for (std::size_t i = 3; i < choices.size(); ++i) {
+                double c = std::strtod(choices[i], nullptr);
+                if (std::fabs(c - v) < 1e-9) want = choices[i];
+            }
+    }
+    bool any = false;
+    for (std::size_t i = 3; i < choices.size(); ++i) {
+        if (!want.empty() && want != choices[i]) continue;
+        any = true;
+        std::vector<Record*> recs;
+        for (Record* r : db.records())
+            if (r->scan == i) recs.push_back(r);
+        std::stable_sort(recs.begin(), recs.end(), [](Record* x, Record* y) { return x->phas < y->phas; });
+        os << "Scan list for " << choices[i] << ":\n";
+        for (Record* r : recs) os << "    " << r->name() << "\n";
+    }
+    if (!any) os << "No periodic scan list of period '" << period << "'\n";
 }
 
 } // namespace beamctl::pv
