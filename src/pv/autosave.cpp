@@ -373,6 +373,7 @@ struct Autosave::Impl {
     std::vector<Set> sets;
     uint64_t writes = 0, write_failures = 0;
     std::size_t restored = 0;
+    bool restore_done = false;
 
     void note(const std::string& m) const {
         if (report) report(m);
@@ -513,7 +514,7 @@ struct Autosave::Impl {
 };
 
 Autosave::Autosave(Database& db, Report report)
-    : impl_(std::make_unique<Impl>(Impl{db, std::move(report), {}, {}, {}, {}, 0, 0, 0})) {}
+    : impl_(std::make_unique<Impl>(Impl{db, std::move(report), {}, {}, {}, {}, 0, 0, 0, false})) {}
 Autosave::~Autosave() = default;
 
 void Autosave::set_save_dir(std::string dir) { impl_->save_dir = std::move(dir); }
@@ -552,6 +553,10 @@ void Autosave::write_request_from_info(const std::string& req_path, std::string_
 
 void Autosave::restore() {
     Impl& i = *impl_;
+    // Once, at the IOC's start: records added later (an RCP application's) must not get every
+    // saved value put back over the running ones.
+    if (i.restore_done) return;
+    i.restore_done = true;
     for (int pass : {0, 1})
         for (const auto& [p, name] : i.restore_files) {
             if (p != pass) continue;

@@ -78,7 +78,8 @@ public:
     // makeAutosaveFileFromDbInfo: writes a request file of the fields the info tag names.
     void write_request_from_info(const std::string& req_path, std::string_view tag) const;
 
-    // Restores every restore file (the hook Database::init_records calls before PINI). A missing
+    // Restores every restore file (the hook Database::init_records calls before PINI), once: later
+    // calls (records added while the IOC runs) do nothing. A missing
     // file is noted; a bad or truncated one is reported and its .savB used if that is good; a
     // name that is not in the database (or a value it refuses) is reported and skipped.
     void restore();

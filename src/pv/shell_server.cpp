@@ -238,6 +238,13 @@ std::unique_ptr<ShellServer> start_shell_server(EventLoop& loop, DbShell& shell,
         if (!p.empty()) {
             server->start(p);
         } else {
+            // The default directory must be ours alone (/tmp is everybody's).
+            const std::string dir = shell_socket_dir();
+            struct stat st {};
+            if (::lstat(dir.c_str(), &st) == 0 &&
+                (!S_ISDIR(st.st_mode) || st.st_uid != ::getuid() || (st.st_mode & 077) != 0))
+                throw Error(SB() << "shell socket directory " << dir
+                                 << ": not a directory of this user with mode 0700");
             try {
                 server->start(default_shell_socket(name));
             } catch (const Error&) { // another IOC of this name runs: one of this process's own

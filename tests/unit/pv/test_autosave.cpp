@@ -218,6 +218,19 @@ record(ao, "B") { }
     EXPECT_EQ(getd("B"), 42);
 }
 
+TEST_F(AutosaveTest, RestoresOnceNotAgainWhenRecordsAreAddedLater) {
+    spit(dir.file("s.sav"), "# save/restore V5.11\nA.VAL 42\n<END>\n");
+    make();
+    as->add_restore_file("s.sav", 1);
+    db.set_restore_hook([this] { as->restore(); });
+    load("record(ao, \"A\") { }\n");
+    EXPECT_EQ(getd("A"), 42);
+    put("A", 5);
+    load("record(ao, \"LATER\") { }\n"); // init_records again (an RCP application's records)
+    EXPECT_EQ(getd("A"), 5);
+    EXPECT_EQ(as->restored(), 1u);
+}
+
 TEST_F(AutosaveTest, TruncatedFileIsReportedAndTheBackupUsed) {
     spit(dir.file("s.sav"), "# save/restore V5.11\nA.VAL 42\nB.VAL 4"); // cut mid-write
     spit(dir.file("s.savB"), "# save/restore V5.11\nA.VAL 7\nGONE.VAL 3\n<END>\n");
