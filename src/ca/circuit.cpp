@@ -3,6 +3,7 @@
 #include "ca/dbr.hpp"
 #include "core/log.hpp"
 
+#include <algorithm>
 #include <arpa/inet.h>
 #include <cstring>
 
@@ -509,6 +510,15 @@ void Circuit::fill_events(std::size_t high_water) {
         queued_bytes_ -= e.msg.size();
         queue_.pop_front();
     }
+}
+
+std::vector<std::string> Circuit::channel_names() const {
+    std::vector<std::pair<uint32_t, std::string>> by_sid;
+    for (const auto& [sid, ch] : channels_) by_sid.emplace_back(sid, ch->name);
+    std::sort(by_sid.begin(), by_sid.end());
+    std::vector<std::string> out;
+    for (auto& [sid, name] : by_sid) out.push_back(std::move(name));
+    return out;
 }
 
 } // namespace beamctl::ca

@@ -65,6 +65,8 @@ public:
     // Called after a client wrote some record's ASG field (rights of all circuits may change).
     std::function<void()> on_asg_changed;
     std::size_t channel_count() const { return channels_.size(); }
+    // The names of the open channels, in sid order (casr).
+    std::vector<std::string> channel_names() const;
     std::size_t subscription_count() const { return monitors_.size(); }
     const std::string& user() const { return user_; }
     const std::string& host() const { return host_; }

@@ -524,9 +524,11 @@ void Server::report(int level, std::ostream& os) const {
             const Circuit& k = *c->circuit;
             os << "TCP " << k.peer() << "(" << k.host() << "): User=\"" << k.user() << "\", V4.13, "
                << k.channel_count() << " Channel" << (k.channel_count() == 1 ? "" : "s") << ", Priority=0\n";
-            if (level >= 1)
+            if (level >= 1) {
                 os << "\t" << k.subscription_count() << " subscription(s), " << k.output_size()
                    << " bytes waiting to be sent\n";
+                for (const auto& n : k.channel_names()) os << "\t" << n << "\n";
+            }
         }
     }
     if (level >= 2) {

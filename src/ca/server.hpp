@@ -76,8 +76,8 @@ public:
     const ServerStats& stats() const { return ctx_.stats; }
     std::size_t client_count() const { return conns_.size(); }
     // casr: the connected circuits as EPICS casr prints them (peer, user, protocol version,
-    // channels), with subscriptions (level 1) and the server's sockets and counters (level 2).
-    // Loop thread.
+    // channels), with subscriptions and channel names (level 1) and the server's sockets and
+    // counters (level 2). Loop thread.
     void report(int level, std::ostream& os) const;
 
 private:

@@ -146,6 +146,7 @@ def test_casr_counts_clients_and_channels(softioc, prefix):
     assert "Connected circuits:" in out, out
     assert "2 Channels" in out, out
     assert "subscription(s)" in out and "Circuits opened" in out
+    assert f"\t{prefix}calc\n" in out, out  # level 1 and up: the channel names
 
 
 def test_stdin_lines_and_malformed_input(softioc, prefix):
