@@ -567,8 +567,8 @@ struct ClientImpl : std::enable_shared_from_this<ClientImpl> {
         LOG_DEBUG(lg, "circuit to " << ip_port(c.ip, c.port) << " gone: " << why);
         std::set<uint32_t> cids;
         cids.swap(c.cids);
-        for (uint32_t cid : cids)
-            if (Chan* ch = chan(cid); ch && ch->circ == &c) disconnect(*ch);
+        for (uint32_t cid : cids) // a server that never accepted keeps the back-off (no 50 Hz retries)
+            if (Chan* ch = chan(cid); ch && ch->circ == &c) disconnect(*ch, c.established);
         for (auto it = ios.begin(); it != ios.end();) {
             if (it->second.circ == &c) {
                 ResultCallback cb = std::move(it->second.cb);
@@ -580,13 +580,19 @@ struct ClientImpl : std::enable_shared_from_this<ClientImpl> {
         }
     }
 
-    void disconnect(Chan& ch) {
+    void disconnect(Chan& ch, bool reset_backoff = true) {
         bool was = ch.state == ChanState::Connected;
         if (ch.circ) ch.circ->cids.erase(ch.cid);
         for (uint32_t s : ch.subids)
             if (auto m = mons.find(s); m != mons.end()) m->second.added = false;
         ch.rights = 0;
-        restart_search(ch);
+        if (reset_backoff) {
+            restart_search(ch);
+        } else {
+            ch.state = ChanState::Searching;
+            ch.circ = nullptr;
+            ch.next_search_s = EventLoop::now_s() + ch.interval_s;
+        }
         if (was) {
             stats.reconnects++;
             for (auto& f : ch.conn_cbs) deferred.push_back([f] { f(false); });

@@ -257,19 +257,21 @@ struct FakeServer {
     uint16_t port = 0;
     std::vector<int> conns;
     std::string greeting;
-    FakeServer(EventLoop& l, uint16_t p, std::string hello) : loop(l), port(p), greeting(std::move(hello)) {
+    FakeServer(EventLoop& l, uint16_t p, std::string hello, bool tcp = true)
+        : loop(l), port(p), greeting(std::move(hello)) {
         sockaddr_in a{};
         a.sin_family = AF_INET;
         a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
         a.sin_port = htons(port);
         udp = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK, 0);
         bind(udp, reinterpret_cast<sockaddr*>(&a), sizeof a);
+        loop.add_fd(udp, EPOLLIN, [this](uint32_t) { on_udp(); });
+        if (!tcp) return; // searches answered, connections refused
         lfd = socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK, 0);
         int one = 1;
         setsockopt(lfd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
         bind(lfd, reinterpret_cast<sockaddr*>(&a), sizeof a);
         listen(lfd, 8);
-        loop.add_fd(udp, EPOLLIN, [this](uint32_t) { on_udp(); });
         loop.add_fd(lfd, EPOLLIN, [this](uint32_t) {
             int fd = accept4(lfd, nullptr, nullptr, SOCK_NONBLOCK);
             if (fd < 0) return;
@@ -289,9 +291,11 @@ struct FakeServer {
             close(fd);
         }
         loop.remove_fd(udp);
-        loop.remove_fd(lfd);
         close(udp);
-        close(lfd);
+        if (lfd >= 0) {
+            loop.remove_fd(lfd);
+            close(lfd);
+        }
     }
     void on_udp() {
         uint8_t buf[2048];
@@ -348,6 +352,21 @@ TEST(ClientMisbehavingServer, ASilentServerIsDetectedByTheEchoTimeout) {
     loop.cancel(id);
     EXPECT_GE(client.stats().echo_timeouts, 1u);
     EXPECT_FALSE(ch->connected());
+}
+
+TEST(ClientMisbehavingServer, AServerThatRefusesConnectionsIsRetriedWithBackOff) {
+    EventLoop loop;
+    uint16_t port = free_port();
+    FakeServer fake(loop, port, "", false);
+    ca::ClientConfig cfg = client_config(port);
+    cfg.search_max_s = 0.2;
+    ca::Client client(loop, cfg);
+    auto ch = client.channel("X:pv");
+    loop.call_after(1.0, [&] { loop.stop(); });
+    loop.run();
+    EXPECT_FALSE(ch->connected());
+    EXPECT_GE(client.stats().circuits_opened, 3u);  // it keeps trying ...
+    EXPECT_LE(client.stats().circuits_opened, 15u); // ... at the back-off's pace, not every tick (50)
 }
 
 namespace {
