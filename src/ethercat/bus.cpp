@@ -2,6 +2,8 @@
 
 #include <chrono>
 #include <cstring>
+#include <sys/eventfd.h>
+#include <unistd.h>
 
 namespace beamctl::ethercat {
 
@@ -46,7 +48,24 @@ struct Bus::PublishStage : rt::Stage {
             s.slave_al[i] = m.slave_al_status(i);
             s.slave_online[i] = m.slave_online(i) && s.link_up;
         }
+        bool changed = false;
+        for (std::size_t i = 0; i < b.watches_.size(); ++i) {
+            Watch& w = b.watches_[i];
+            uint64_t v = registry::image_read(m.image(), w.bit_offset, w.bits);
+            if (v != w.last) {
+                w.last = v;
+                ++w.changes;
+                changed = true;
+            }
+            s.changes[i] = w.changes;
+        }
         b.snap_.publish();
+        // Wake the IOC loop once per drain: a non-blocking eventfd write, only when it is not
+        // already awake for an earlier change.
+        if (changed && b.change_fd_ >= 0 && !b.change_pending_.exchange(true, std::memory_order_acq_rel)) {
+            uint64_t one = 1;
+            (void)!::write(b.change_fd_, &one, sizeof one);
+        }
         b.apply_writes(); // for the next cycle's send
     }
 };
@@ -57,9 +76,34 @@ Bus::Bus(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, co
     receive_ = std::make_unique<ReceiveStage>(*this);
     send_ = std::make_unique<SendStage>(*this);
     publish_ = std::make_unique<PublishStage>(*this);
+    change_fd_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
 }
 
-Bus::~Bus() { stop_health(); }
+Bus::~Bus() {
+    stop_health();
+    if (change_fd_ >= 0) ::close(change_fd_);
+}
+
+int Bus::watch(const SignalInfo& s) {
+    if (watches_frozen_) return -1;
+    for (std::size_t i = 0; i < watches_.size(); ++i)
+        if (watches_[i].bit_offset == s.bit_offset && watches_[i].bits == s.bits) return int(i);
+    Watch w;
+    w.bit_offset = s.bit_offset;
+    w.bits = s.bits;
+    w.last = registry::image_read(master_->image(), s.bit_offset, s.bits);
+    watches_.push_back(w);
+    std::size_t n = watches_.size();
+    snap_.init([n](BusSnapshot& b) { b.changes.assign(n, 0); });
+    return int(n - 1);
+}
+
+void Bus::drain_changes() noexcept {
+    uint64_t v = 0;
+    while (::read(change_fd_, &v, sizeof v) > 0) {
+    }
+    change_pending_.store(false, std::memory_order_release);
+}
 
 void Bus::start_health(double period_s) {
     if (health_.joinable()) return;

@@ -23,6 +23,7 @@ struct BusSnapshot {
     bool wkc_ok = false;    // the last WKC was the expected one
     std::vector<uint8_t> slave_al;     // per configured slave: AL status (state | 0x10 error)
     std::vector<uint8_t> slave_online; // per configured slave: answered its last status poll
+    std::vector<uint32_t> changes;     // per watch (Bus::watch): cycles in which the entry changed
 };
 
 struct OutputWrite {
@@ -49,6 +50,19 @@ public:
     bool write(const SignalInfo& s, uint64_t value) noexcept;
     // Non-RT: the latest published snapshot (refreshed if a newer one exists).
     const BusSnapshot& snapshot() noexcept;
+
+    // Change watches (SCAN "I/O Intr" of records on bus entries): the cycle compares each watched
+    // entry with its value of the previous cycle and counts the cycles in which it changed
+    // (BusSnapshot::changes), so a change that reverts before the IOC loop looks is still seen;
+    // and it wakes the IOC loop through change_fd() at most once per time the loop drains it.
+    // watch() is non-RT, after bring_up() and before the cycle starts (-1 after: the caller falls
+    // back to comparing values); same entry, same index.
+    int watch(const SignalInfo& s);
+    void freeze_watches() { watches_frozen_ = true; }
+    std::size_t watch_count() const { return watches_.size(); }
+    // Readable (eventfd) when a watched entry changed; the IOC loop calls drain_changes() then scans.
+    int change_fd() const { return change_fd_; }
+    void drain_changes() noexcept;
     uint64_t writes_dropped() const { return writes_dropped_.load(); }
 
     Master& master() { return *master_; }
@@ -73,6 +87,16 @@ private:
     std::unique_ptr<SendStage> send_;
     std::unique_ptr<PublishStage> publish_;
     CycleStatus last_ = CycleStatus::Ok;
+    struct Watch {
+        uint32_t bit_offset = 0;
+        uint8_t bits = 0;
+        uint64_t last = 0;    // RT: the entry in the previous cycle
+        uint32_t changes = 0; // RT: cycles in which it changed
+    };
+    std::vector<Watch> watches_; // sized before the cycle starts
+    bool watches_frozen_ = false;
+    int change_fd_ = -1;
+    std::atomic<bool> change_pending_{false}; // RT wrote change_fd_ and the loop has not drained it
     std::thread health_;
     std::atomic<bool> health_stop_{false};
 };

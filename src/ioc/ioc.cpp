@@ -1,4 +1,5 @@
 #include "ioc/ioc.hpp"
+
 #include "pv/db_shell.hpp"
 #include "pv/shell_server.hpp"
 
@@ -20,6 +21,7 @@
 #include <csignal>
 #include <cstdio>
 #include <map>
+#include <sys/epoll.h>
 #include <unistd.h>
 
 namespace beamctl::ioc {
@@ -36,10 +38,13 @@ struct SimTimeStage : rt::Stage {
 
 // Device support "beamctl": a record's "@ec0.s3.positionActual01" (or "...Input01.2", a bit) link
 // reads the entry from the bus snapshot of the IOC loop and writes an output through the bus's
-// write queue, as the entry's own PV does. IOC loop thread only.
+// write queue, as the entry's own PV does. For SCAN "I/O Intr" the bus watches the entry in the
+// cycle (`watch` >= 0): the record is processed after any cycle in which it changed, even if it
+// changed back before the IOC loop looked. IOC loop thread only.
 class EcLinkDevice : public pv::LinkDevice {
 public:
-    EcLinkDevice(ethercat::Bus& bus, const ethercat::SignalInfo& sig, int bit) : bus_(bus), sig_(sig), bit_(bit) {}
+    EcLinkDevice(ethercat::Bus& bus, const ethercat::SignalInfo& sig, int bit, int watch)
+        : bus_(bus), sig_(sig), bit_(bit), watch_(watch) {}
     bool read(double& v) override {
         const ethercat::BusSnapshot& s = bus_.snapshot();
         if (!s.link_up || !s.wkc_ok) return false; // no fresh data: LINK/INVALID
@@ -61,6 +66,15 @@ public:
     }
     bool changed() override {
         const ethercat::BusSnapshot& s = bus_.snapshot();
+        if (watch_ >= 0 && std::size_t(watch_) < s.changes.size()) {
+            // the entry changed in some cycle since the last look (a bit record: only if its bit
+            // differs now or the entry changed more than once, i.e. it may have pulsed)
+            uint32_t n = s.changes[std::size_t(watch_)];
+            uint32_t since = n - seen_;
+            seen_ = n;
+            if (since == 0) return false;
+            if (bit_ < 0 || since > 1) return true;
+        }
         double v = value(s);
         bool c = !(v == last_);
         last_ = v;
@@ -76,6 +90,8 @@ private:
     ethercat::Bus& bus_;
     const ethercat::SignalInfo& sig_;
     int bit_;
+    int watch_;         // index of the bus's change watch, -1: compare values at each look
+    uint32_t seen_ = 0; // the watch's change count at the last look
     double last_ = NAN;
 };
 
@@ -414,7 +430,9 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
                 for (auto& e : b.entries)
                     if (e.sig == &si) own_output(e, writer);
             }
-            devices_.push_back(std::make_unique<EcLinkDevice>(*b.bus, si, bit));
+            // an I/O Intr input is watched in the cycle (before the cycle starts; later: by value)
+            int watch = f.dbf == pv::Dbf::InLink && r.scan == 2 ? b.bus->watch(si) : -1;
+            devices_.push_back(std::make_unique<EcLinkDevice>(*b.bus, si, bit, watch));
             return devices_.back().get();
         }
     return fail(SB() << "no signal '" << sig->name << "' on its bus after bring-up");
@@ -558,6 +576,15 @@ int Ioc::run() {
         } catch (const Error& e) {
             throw Error(SB() << cfg_.rcp->where << ": bridges.rcp: " << e.what());
         }
+    }
+    for (auto& b : buses_) { // I/O Intr records: processed as soon as a cycle saw their entry change
+        b.bus->freeze_watches();
+        if (b.bus->watch_count() == 0) continue;
+        ethercat::Bus* bus = b.bus.get();
+        loop.add_fd(bus->change_fd(), EPOLLIN, [this, bus](uint32_t) {
+            bus->drain_changes();
+            db_.scan_io_intr();
+        });
     }
     engine_->start();
     for (auto& b : buses_) b.bus->start_health();

@@ -439,6 +439,7 @@ PutStatus Database::relink(Record& r, const FieldDesc& f, std::string_view text)
     }
     if (RemoteLink* old = l.remote()) old->release();
     l = std::move(fresh);
+    io_intr_stale_ = true; // an I/O Intr record may now have another device
     return PutStatus::Ok;
 }
 
@@ -448,7 +449,10 @@ void Database::add_to_scan(Record& r) {
         v.insert(at, &r);
     };
     double period = scan_period(r.scan);
-    if (r.scan == 2) io_intr_.push_back(&r);
+    if (r.scan == 2) {
+        io_intr_.push_back(IoIntr{&r, {}});
+        io_intr_stale_ = true;
+    }
     if (period > 0) {
         auto it = std::find_if(scans_.begin(), scans_.end(), [&](const ScanList& s) { return s.period_s == period; });
         if (it == scans_.end()) {
@@ -463,18 +467,27 @@ void Database::add_to_scan(Record& r) {
 
 void Database::scan_io_intr() {
     Depth d(*this);
+    if (io_intr_stale_) { // the devices of each record's links, once (not every field every call)
+        for (IoIntr& io : io_intr_) {
+            io.devices.clear();
+            for (const FieldDesc& f : io.rec->type().fields())
+                if (is_link(f.dbf))
+                    if (LinkDevice* dev = field_ref<Link>(*io.rec, f).device) io.devices.push_back(dev);
+        }
+        io_intr_stale_ = false;
+    }
     for (std::size_t i = 0; i < io_intr_.size(); ++i) {
-        Record* r = io_intr_[i];
         bool changed = false;
-        for (const FieldDesc& f : r->type().fields())
-            if (is_link(f.dbf))
-                if (LinkDevice* dev = field_ref<Link>(*r, f).device) changed = dev->changed() || changed;
-        if (changed) process_record(*r);
+        for (LinkDevice* dev : io_intr_[i].devices) changed = dev->changed() || changed;
+        if (changed) process_record(*io_intr_[i].rec);
+        if (io_intr_stale_) break; // processing relinked a record: start again at the next call
     }
 }
 
 void Database::remove_from_scan(Record& r) {
-    io_intr_.erase(std::remove(io_intr_.begin(), io_intr_.end(), &r), io_intr_.end());
+    io_intr_.erase(std::remove_if(io_intr_.begin(), io_intr_.end(), [&](const IoIntr& io) { return io.rec == &r; }),
+                   io_intr_.end());
+    io_intr_stale_ = true;
     for (auto& s : scans_) s.recs.erase(std::remove(s.recs.begin(), s.recs.end(), &r), s.recs.end());
     for (auto& [name, v] : events_) v.erase(std::remove(v.begin(), v.end(), &r), v.end());
 }

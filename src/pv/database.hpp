@@ -219,7 +219,12 @@ private:
     };
     std::vector<Poll> polls_; // records that poll their device (Record::poll_period_s)
     std::vector<Poll> delays_; // call_after: (record, when)
-    std::vector<Record*> io_intr_; // SCAN "I/O Intr" records (all have a bound device link)
+    struct IoIntr {
+        Record* rec;
+        std::vector<LinkDevice*> devices; // of its links, found when io_intr_stale_ is set
+    };
+    std::vector<IoIntr> io_intr_; // SCAN "I/O Intr" records (all have a bound device link)
+    bool io_intr_stale_ = true;    // a link of one of them may have changed (relink, add)
     double now_s_ = 0;         // the last time scan_periodic was given
     std::function<double()> clock_;
     std::unordered_map<std::string, std::vector<Record*>> events_; // SCAN=Event by EVNT, PHAS order
