@@ -208,7 +208,8 @@ void ShellServer::flush(Conn& c) {
                 close_conn(c.fd);
                 return;
             }
-            loop_.modify_fd(c.fd, EPOLLIN | EPOLLOUT);
+            // closing: only the rest of the output matters (no busy loop on unread input)
+            loop_.modify_fd(c.fd, c.closing ? EPOLLOUT : EPOLLIN | EPOLLOUT);
             return;
         }
         close_conn(c.fd); // the client went away
