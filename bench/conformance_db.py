@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Conformance of `beamctl softioc` against EPICS softIoc, seen from a Channel Access client.
 
-Both servers load the same database (bench/db/conformance.db), one after the other, each on its own
+Both servers load the same databases (bench/db/conformance.db, conformance_arrays.db), one after the other, each on its own
 free port; a separate client process (pyepics on its own libca) applies the same sequence of puts
 and records what it sees: value, alarm status/severity and the DBR_CTRL metadata (units,
 precision, display/alarm/control limits, enum strings), the record's STAT/SEVR/UDF fields, and the
@@ -18,6 +18,7 @@ import argparse, ctypes, json, math, os, socket, subprocess, sys, tempfile, time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 DB = os.path.join(HERE, "db", "conformance.db")
+DB_ARRAYS = os.path.join(HERE, "db", "conformance_arrays.db")
 
 PVS = """cf:in cf:c1 cf:c2 cf:c3 cf:co cf:coout cf:co2 cf:co2out cf:co3 cf:co3cnt cf:seq cf:seq1
 cf:seq2 cf:seq3 cf:cp cf:cp2 cf:src cf:ms cf:nms cf:mss cf:msout cf:ao_init cf:ai_init cf:li_init
@@ -63,7 +64,7 @@ def client(out_path):
     def norm(v):
         if isinstance(v, bytes):
             return v.decode(errors="replace")
-        if isinstance(v, (list, tuple)):
+        if isinstance(v, (list, tuple, ctypes.Array)):
             return [norm(x) for x in v]
         if hasattr(v, "tolist"):
             return norm(v.tolist())
@@ -214,6 +215,42 @@ def client(out_path):
     snap("18 put cf:si.PROC=1", ["cf:si"])
     numeric_gets("18 put cf:si.PROC=1", "cf:si")
 
+    # ---- the array and small record types (bench/db/conformance_arrays.db)
+    arr = ["cf:aao", "cf:wf", "cf:aai", "cf:aai_c", "cf:sa"]
+    snap("19 arrays init", arr + ["cf:cmp", "cf:hist", "cf:perm", "cf:state", "cf:pf"])
+    put("cf:aao", [1.5, 2, 3, 4, 5])
+    snap("20 put cf:aao=[1.5,2,3,4,5]", arr)
+    put("cf:sa.PROC", 1)
+    snap("21 put cf:sa.PROC=1", ["cf:sa"])
+    for f_ in ("cf:aao.NORD", "cf:wf.NORD", "cf:aai.NORD", "cf:aai_c.NORD", "cf:sa.NORD"):
+        field("21 put cf:sa.PROC=1", f_)
+    put("cf:sa.INDX", 3)
+    snap("22 put cf:sa.INDX=3", ["cf:sa"])
+    field("22 put cf:sa.INDX=3", "cf:sa.NORD")
+    # without put-callback: softIoc never completes one whose processing reaches a compress that
+    # keeps its value (N to 1 waiting for N: no recGblFwdLink, so no dbNotifyCompletion)
+    for v in (1.0, 3.0, 5.0, 7.0, 9.0):
+        put("cf:x", v, wait=False)
+    cmp_ = ["cf:cmp", "cf:cmplifo", "cf:cmpavg", "cf:hist"]
+    snap("23 put cf:x=1,3,5,7,9", cmp_)
+    for f_ in ("cf:cmp.NUSE", "cf:cmp.OFF", "cf:cmplifo.NUSE", "cf:cmplifo.OFF", "cf:cmpavg.NUSE",
+               "cf:cmpavg.INX", "cf:hist.WDTH", "cf:hist.MCNT", "cf:hist.CSTA"):
+        field("23 put cf:x=1,3,5,7,9", f_)
+    put("cf:cmpwf.PROC", 1)
+    snap("24 put cf:cmpwf.PROC=1", ["cf:cmpwf"])
+    put("cf:hist.CMD", "Clear")
+    put("cf:hist.PROC", 1)
+    snap("25 put cf:hist.CMD=Clear, PROC", ["cf:hist"])
+    put("cf:cmp.RES", 1)
+    snap("26 put cf:cmp.RES=1", ["cf:cmp"])
+    put("cf:perm", 1)
+    put("cf:perm.WFLG", 1)
+    put("cf:state", "moving")
+    put("cf:pf.PROC", 1)
+    snap("27 permissive, state, printf", ["cf:perm", "cf:state", "cf:pf"])
+    for f_ in ("cf:perm.OVAL", "cf:perm.OFLG", "cf:state.OVAL", "cf:pf.LEN"):
+        field("27 permissive, state, printf", f_)
+
     with open(out_path, "w") as f:
         json.dump(obs, f, indent=0)
 
@@ -283,12 +320,12 @@ def main():
     a = ap.parse_args()
     if a.client:
         return client(a.client)
-    bc = observe("beamctl", [a.beamctl, "softioc", "-S", "-d", DB])
+    bc = observe("beamctl", [a.beamctl, "softioc", "-S", "-d", DB, "-d", DB_ARRAYS])
     if not a.softioc:
         for k, v in bc.items():
             print(k, "=", fmt(v))
         return
-    si = observe("softIoc", [a.softioc, "-S", "-d", DB])
+    si = observe("softIoc", [a.softioc, "-S", "-d", DB, "-d", DB_ARRAYS])
     if a.json:
         with open(a.json, "w") as f:
             json.dump({"beamctl": bc, "softIoc": si}, f, indent=0)

@@ -297,6 +297,10 @@ void Database::init_records() {
         throw;
     }
     for (Record* r : batch) {
+        // iocInit's doInitRecord0, before init_record: a record the file left undefined starts
+        // with severity UDFS; one whose VAL the file set starts without alarm, its status still
+        // UDF until processed. A constant link loaded by init() does not change this (as base).
+        if (r->stat == kStatUdf) r->sevr = r->udf ? r->udfs : uint16_t(kNoAlarm);
         try {
             r->init();
         } catch (const Error& e) {
@@ -304,9 +308,6 @@ void Database::init_records() {
         }
         add_to_scan(*r);
         if (r->poll_period_s() > 0) polls_.push_back({r, 0});
-        // iocInit: a record still undefined starts with severity UDFS; one whose value the file
-        // (or a constant link) gave starts without alarm, its status still UDF until processed.
-        if (r->stat == kStatUdf && r->nsev == 0) r->sevr = r->udf ? r->udfs : uint16_t(kNoAlarm);
     }
     if (restore_hook_ && !batch.empty()) restore_hook_(); // autosave: after init, before PINI
     // PINI: YES, then RUN and RUNNING (this IOC runs as soon as it is initialised), each in PHAS

@@ -33,6 +33,13 @@ uint32_t mem_hash(const char* p, std::size_t n) {
     return h;
 }
 
+// get_precision of the array records: PREC for VAL, PREC (0..15) for other float fields, else 0.
+int16_t prec_of(const FieldDesc& f, const FieldDesc* val_fd, int16_t prec) {
+    if (&f == val_fd) return prec;
+    if (f.dbf == Dbf::Float || f.dbf == Dbf::Double) return (prec < 0 || prec > 15) ? 15 : prec;
+    return 0;
+}
+
 const Menu kMenuAaiPost{"aaiPOST", {"Always", "On Change"}};
 
 // ---------------------------------------------------------------- aai, aao and subArray storage
@@ -83,10 +90,7 @@ template <typename Self> struct ArrayBase : Record {
         nord = std::min(n, capacity());
         if (nord != before) post(nord_fd, kDbeValue | kDbeLog);
     }
-    int16_t precision(const FieldDesc& f) const override {
-        if (&f == val_fd) return prec;
-        return Record::precision(f);
-    }
+    int16_t precision(const FieldDesc& f) const override { return prec_of(f, val_fd, prec); }
     void metadata(const FieldDesc& f, Metadata& md) const override {
         Record::metadata(f, md);
         if (&f == val_fd) md.precision = (etype == Dbf::Float || etype == Dbf::Double) ? prec : 0;
@@ -360,10 +364,7 @@ struct CompressRecord : Record {
         if (is(f, "RES") || is(f, "ALG") || is(f, "BALG") || is(f, "N") || is(f, "PBUF")) reset(); // SPC_RESET
         return PutStatus::Ok;
     }
-    int16_t precision(const FieldDesc& f) const override {
-        if (&f == val_fd) return prec;
-        return Record::precision(f);
-    }
+    int16_t precision(const FieldDesc& f) const override { return prec_of(f, val_fd, prec); }
     void metadata(const FieldDesc& f, Metadata& md) const override {
         Record::metadata(f, md);
         if (&f == val_fd) md.precision = prec;
@@ -608,6 +609,10 @@ struct HistogramRecord : Record {
     void metadata(const FieldDesc& f, Metadata& md) const override {
         Record::metadata(f, md);
         if (&f == val_fd) fill_limits(md, hopr, lopr, hopr, lopr);
+    }
+    int16_t precision(const FieldDesc& f) const override { // SDEL: histogramSDELprecision
+        if (is(f, "SDEL")) return 2;
+        return prec_of(f, nullptr, prec);
     }
     ProcessResult process() override {
         pact = 1;

@@ -1,6 +1,8 @@
 // The small record types of EPICS base 7: permissive, state and printf (permissiveRecord.c,
 // stateRecord.c, printfRecord.c and devPrintfSoft.c). printf formats FMT with values read from
-// INP0..INP9 into a long-string VAL (SIZV characters) as base's doPrintf does. The code is ours.
+// INP0..INP9 into a long-string VAL (SIZV characters) as base's doPrintf does; over CA VAL is a
+// DBF_STRING (its first 40 characters, as softIoc serves it), links to char arrays get it whole.
+// The code is ours.
 // Threading: the database thread, as every record.
 #include "pv/record_support.hpp"
 
@@ -36,6 +38,10 @@ struct PermissiveRecord : Record {
         };
         v.insert(v.end(), add.begin(), add.end());
         return v;
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        Record::metadata(f, md);
+        fill_limits(md, 0, 0, 0, 0); // no get_graphic/control_double in permissiveRecord
     }
     ProcessResult process() override {
         pact = 1;
@@ -85,11 +91,10 @@ struct StateRecord : Record {
 constexpr int kPrintfLinks = 10;
 
 struct PrintfRecord : Record {
-    explicit PrintfRecord(const RecordType& t) : Record(t) { std::strcpy(ivls, "LNK"); }
+    explicit PrintfRecord(const RecordType& t) : Record(t), val_buf(kStringSize, 0) { std::strcpy(ivls, "LNK"); }
     uint16_t sizv = 41;
     uint32_t len = 0;
     std::vector<char> val_buf;
-    char val_placeholder = 0;
     char fmt[81] = {};
     char ivls[16] = {};
     Link out;
@@ -97,6 +102,9 @@ struct PrintfRecord : Record {
     char scratch[kStringSize] = {}; // a string read through a link
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* len_fd = type().find("LEN");
+    // VAL whole, as the char array a link to an array field (an lsi/lso/waveform VAL) carries.
+    inline static const FieldDesc kLong{"VAL", Dbf::Char, kArray, 1, nullptr,
+                                        [](Record& r) -> void* { return static_cast<PrintfRecord&>(r).val_buf.data(); }};
     inline static const FieldDesc kScratch{"", Dbf::String, 0, kStringSize, nullptr,
                                            [](Record& r) -> void* { return static_cast<PrintfRecord&>(r).scratch; }};
 
@@ -104,7 +112,8 @@ struct PrintfRecord : Record {
         using R = PrintfRecord;
         auto v = common_fields();
         auto add = {
-            BEAMCTL_FIELD(R, VAL, val_placeholder, Char, kVal | kArray),
+            FieldDesc{"VAL", Dbf::String, kVal, kStringSize, nullptr,
+                      [](Record& r) -> void* { return static_cast<R&>(r).val_buf.data(); }},
             BEAMCTL_FIELD(R, SIZV, sizv, UShort, kInitOnly),
             BEAMCTL_FIELD(R, LEN, len, ULong, kReadOnly),
             BEAMCTL_FIELD(R, OUT, out, OutLink, 0),
@@ -121,18 +130,12 @@ struct PrintfRecord : Record {
     }
     void init() override {
         sizv = std::clamp<uint16_t>(sizv, 16, 0x7fff);
-        val_buf.assign(sizv, 0);
+        val_buf.assign(std::max<std::size_t>(sizv, kStringSize), 0); // VAL is read as a 40-char string
         len = 0;
     }
     Elements elements(const FieldDesc& f) override {
-        if (&f == val_fd) return Elements{Dbf::Char, val_buf.data(), len, sizv, 1};
+        if (&f == &kLong) return Elements{Dbf::Char, val_buf.data(), len, sizv, 1};
         return Record::elements(f);
-    }
-    void set_count(const FieldDesc& f, uint32_t n) override {
-        if (&f != val_fd) return;
-        val_buf[std::min<uint32_t>(n, sizv - 1u)] = 0;
-        val_buf[sizv - 1u] = 0;
-        len = uint32_t(std::strlen(val_buf.data()) + 1);
     }
 
     // A number from link l (a constant: its value, as recGblInitConstantLink); false: no value.
@@ -291,7 +294,7 @@ struct PrintfRecord : Record {
         stamp_time();
         // devPrintfSoft: VAL to OUT (a char array target gets it whole, another field a string).
         if (out.target_field && (out.target_field->flags & kArray)) {
-            write_link(out, *val_fd);
+            write_link(out, kLong);
         } else if (linked(out)) {
             copy_string(scratch, sizeof scratch, std::string_view(val_buf.data(), strnlen(val_buf.data(), sizv)));
             write_link(out, kScratch);

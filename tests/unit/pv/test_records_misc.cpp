@@ -79,13 +79,16 @@ record(printf, "p") {
     field(FMT, "%d|%5.2f|%s|%x|%c|%e|%g|%ld|100%%")
     field(INP0, "l") field(INP1, "d") field(INP2, "s") field(INP3, "255") field(INP4, "65")
     field(INP5, "d") field(INP6, "d") field(INP7, "l")
-    field(SIZV, "100")
+    field(SIZV, "100") field(OUT, "long PP")
 }
+record(lso, "long") { field(SIZV, "100") }
 record(stringin, "dst") { }
 record(printf, "q") { field(FMT, "v=%.1f") field(INP0, "d") field(OUT, "dst PP") }
 )");
     process("p");
-    EXPECT_EQ(get_chars("p"), "-42| 3.14|hello|ff|A|3.141590e+00|3.14159|-42|100%");
+    // over CA VAL is a string (its first 40 characters); OUT to a char array carries all of it
+    EXPECT_EQ(get_chars("long"), "-42| 3.14|hello|ff|A|3.141590e+00|3.14159|-42|100%");
+    EXPECT_EQ(gets("p"), "-42| 3.14|hello|ff|A|3.141590e+00|3.141");
     EXPECT_EQ(getd("p.LEN"), 51); // strlen + 1
     EXPECT_EQ(gets("p.SEVR"), "NO_ALARM");
     process("q");
@@ -100,12 +103,12 @@ record(printf, "star") { field(FMT, "[%*d]") field(INP0, "4") field(INP1, "9") }
 record(printf, "trunc") { field(FMT, "0123456789abcdefghijklmnop") field(SIZV, "16") }
 )");
     process("p");
-    EXPECT_EQ(get_chars("p"), "a=7 b=??"); // INP1 is empty
+    EXPECT_EQ(gets("p"), "a=7 b=??"); // INP1 is empty
     process("bad");
-    EXPECT_EQ(get_chars("bad"), "x%qy");
+    EXPECT_EQ(gets("bad"), "x%qy");
     process("star");
-    EXPECT_EQ(get_chars("star"), "[   9]"); // width from INP0
+    EXPECT_EQ(gets("star"), "[   9]"); // width from INP0
     process("trunc");
-    EXPECT_EQ(get_chars("trunc"), "0123456789abcde"); // SIZV - 1 characters
+    EXPECT_EQ(gets("trunc"), "0123456789abcde"); // SIZV - 1 characters
     EXPECT_EQ(getd("trunc.LEN"), 16);
 }
