@@ -496,8 +496,12 @@ struct Autosave::Impl {
         } else {
             const std::string& s = v.values.empty() ? std::string() : v.values[0];
             Address la;
-            if (a.field->dbf == Dbf::String && s.size() >= std::size_t(kStringSize) &&
-                db.resolve(v.name + "$", la)) {
+            if (a.kind == Address::Kind::LongString) { // saved as "rec.FIELD$": the text whole
+                std::string z = s;
+                z.push_back('\0');
+                st = db.store_value(a, Prim::Char, z.data(), uint32_t(std::min<std::size_t>(z.size(), a.count)));
+            } else if (a.field->dbf == Dbf::String && s.size() >= std::size_t(kStringSize) &&
+                       db.resolve(v.name + "$", la)) {
                 std::string z = s;
                 z.push_back('\0');
                 st = db.store_value(la, Prim::Char, z.data(), uint32_t(std::min<std::size_t>(z.size(), la.count)));

@@ -218,6 +218,37 @@ record(ao, "B") { }
     EXPECT_EQ(getd("B"), 42);
 }
 
+TEST_F(AutosaveTest, LongStringsThroughDollarChannelsAndBadValuesSkipped) {
+    load("record(stringout, \"S\") { }\nrecord(ao, \"N\") { field(VAL, \"3\") }\n");
+    make();
+    const std::string desc(39, 'd');
+    ASSERT_EQ(put_str("S.DESC", desc.c_str()), PutStatus::Ok);
+    as->add_set("l.sav", {"S.DESC$", "S.VAL"}, 5);
+    as->tick(0);
+    EXPECT_NE(slurp(dir.file("l.sav")).find("S.DESC$ " + desc + "\n"), std::string::npos);
+
+    Database fresh;
+    spit(dir.file("r.sav"), "# h\nS.DESC$ " + desc + "\nN.VAL not-a-number\nS.VAL ok\n<END>\n");
+    Autosave r(fresh, [this](const std::string& m) { notes.push_back(m); });
+    r.set_save_dir(dir.path.string());
+    r.add_restore_file("r.sav", 1);
+    fresh.set_restore_hook([&] { r.restore(); });
+    fresh.load(parse_db("record(stringout, \"S\") { }\nrecord(ao, \"N\") { field(VAL, \"3\") }\n", "t.db", {}));
+    fresh.init_records();
+    Address a;
+    char s[40];
+    ASSERT_TRUE(fresh.resolve("S.DESC", a));
+    fresh.get(a, Prim::String, s, 1);
+    EXPECT_EQ(std::string(s), desc);
+    ASSERT_TRUE(fresh.resolve("N", a));
+    double v = 0;
+    fresh.get(a, Prim::Double, &v, 1);
+    EXPECT_EQ(v, 3); // the bad value was skipped, the record keeps its own
+    EXPECT_TRUE(noted("r.sav:3: N.VAL: the value does not fit the field: skipped"))
+        << ::testing::PrintToString(notes);
+    EXPECT_EQ(r.restored(), 2u);
+}
+
 TEST_F(AutosaveTest, RestoresOnceNotAgainWhenRecordsAreAddedLater) {
     spit(dir.file("s.sav"), "# save/restore V5.11\nA.VAL 42\n<END>\n");
     make();
