@@ -23,6 +23,7 @@
 #include "pv/shell_server.hpp"
 #include "pv/db_file.hpp"
 #include "pv/iocsh.hpp"
+#include "pv/sub_routines.hpp"
 #include "config/ioc_config.hpp"
 #include "ethercat/catalog.hpp"
 #include "bridge/rcp/rcp_sim.hpp"
@@ -142,6 +143,7 @@ struct SoftIocStep {
 
 struct SoftIocOptions {
     std::vector<std::string> macros, dbs, exits, acfs, files, include_path;
+    std::vector<std::string> routine_libs; // -P: libraries of sub/aSub routines (as dlload)
     std::string dbd;                                           // -D: accepted, not needed
     bool no_shell = false, old_shell = false, verbose = false; // -S, -s, -v
     std::string autosave_dir;     // --autosave DIR: info-tag defaults (autosave.hpp)
@@ -205,6 +207,7 @@ int run_softioc(const SoftIocOptions& o) {
     if (!o.autosave_dir.empty()) pv::autosave_defaults_before_init(autosave, o.autosave_dir);
     db.set_restore_hook([&autosave] { autosave.restore(); });
 
+    for (const auto& lib : o.routine_libs) pv::RecordRoutines::global().load(lib);
     std::string macros, all_macros; // the -m in effect; every -m joined (for positional .db files)
     for (const auto& m : o.macros) all_macros += (all_macros.empty() ? "" : ",") + m;
     std::vector<std::string> scripts;
@@ -463,7 +466,7 @@ int main(int argc, char** argv) {
         "softioc",
         "Serve EPICS database files over Channel Access, with EPICS softIoc's command line:\n"
         "  beamctl softioc [-D dbd] [-S] [-s] [-v] [-a FILE.acf] [-m MACROS] [-d FILE.db]\n"
-        "                  [-x PREFIX] [-I DIR] [st.cmd | FILE.db ...]\n"
+        "                  [-x PREFIX] [-I DIR] [-P LIB.so] [st.cmd | FILE.db ...]\n"
         "Options act in command-line order: -m sets the macros of the -d and -a after it (each -m\n"
         "replaces the one before). Positional FILE.db / .vdb / .template files are loaded with\n"
         "every -m; other positional files are startup scripts (st.cmd), run in order after the\n"
@@ -484,6 +487,9 @@ int main(int argc, char** argv) {
     take_each(softioc->add_option(
         "-I,--include", soft.include_path,
         "Search path for include \"file\" (and for the template files of substitution files)"));
+    take_each(softioc->add_option(
+        "-P,--plugin", soft.routine_libs,
+        "Load a library of sub/aSub routines (include/beamctl/record_routines.h), as dlload LIB.so"));
     softioc->add_option("-D", soft.dbd, "softIoc.dbd: accepted and ignored (record types are built in)");
     softioc->add_flag("-S", soft.no_shell, "No interactive shell: accepted (beamctl never starts one)");
     softioc->add_flag("-s", soft.old_shell, "Accepted and ignored (as softIoc)");

@@ -141,3 +141,27 @@ def test_an_snam_no_library_provides_stops_the_ioc_with_its_name(ioc, prefix, tm
         release_port(port)
     assert r.returncode != 0
     assert f"record {prefix}s: SNAM 'not_there'" in r.stderr, r.stderr
+
+
+def test_plugin_option_loads_routines_and_an_unknown_snam_lists_them(prefix, tmp_path):
+    if not ROUTINES.exists():
+        pytest.skip(f"{ROUTINES} not built")
+    from conftest import acquire_port, release_port
+    import subprocess
+    (tmp_path / "p.db").write_text('record(sub, "$(P)ok") { field(SNAM, "sub_sum") }\n'
+                                   'record(sub, "$(P)bad") { field(SNAM, "sub_summ") }\n')
+    port = acquire_port()
+    try:
+        r = subprocess.run([str(BEAMCTL), "softioc", "-P", str(ROUTINES), "-m", f"P={prefix}", "-d", "p.db"],
+                           capture_output=True, text=True, timeout=30, cwd=str(tmp_path),
+                           env={"EPICS_CAS_SERVER_PORT": str(port), "PATH": "/usr/bin:/bin"})
+        bad = subprocess.run([str(BEAMCTL), "softioc", "-P", str(tmp_path / "p.db"), "-d", "p.db"],
+                             capture_output=True, text=True, timeout=30, cwd=str(tmp_path),
+                             env={"EPICS_CAS_SERVER_PORT": str(port), "PATH": "/usr/bin:/bin"})
+    finally:
+        release_port(port)
+    assert r.returncode != 0
+    assert f"record {prefix}bad: SNAM 'sub_summ'" in r.stderr, r.stderr
+    assert f"{ROUTINES} (sub_sum sub" in r.stderr, r.stderr  # -P loaded the library
+    assert f"record {prefix}ok" not in r.stderr
+    assert bad.returncode != 0 and f"{tmp_path / 'p.db'}: cannot load" in bad.stderr, bad.stderr
