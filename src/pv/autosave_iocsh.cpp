@@ -40,8 +40,10 @@ void add_autosave_commands(IocShell& sh, Autosave& as, std::function<void(const 
                    });
     for (int pass : {0, 1}) {
         const std::string name = SB() << "set_pass" << pass << "_restoreFile";
-        sh.add_command(name, name + " FILE.sav", [&as, pass, name](const std::vector<std::string>& a, std::ostream&) {
+        sh.add_command(name, name + " FILE.sav", [&as, &sh, pass, name](const std::vector<std::string>& a, std::ostream&) {
             if (arg(a, 1).empty()) throw Error(SB() << name << ": missing the file (usage: " << name << " FILE.sav)");
+            if (sh.initialised())
+                throw Error(SB() << name << " must come before iocInit (files are restored at iocInit)");
             as.add_restore_file(arg(a, 1), pass);
         });
     }

@@ -3,7 +3,9 @@
 synApps st.cmd commands and a .req file), a clean stop saves at once, a truncated save file is
 reported and the IOC starts (with the .savB backup when there is one)."""
 
+import os
 import signal
+import subprocess
 import time
 
 import pytest
@@ -150,6 +152,20 @@ create_monitor_set("extra.req", 1, "P=$(P)")
     assert epics.caget(prefix + "plain", timeout=10) == 3.25
     assert epics.caget(prefix + "plain.EGU", timeout=5) == "mm"
     assert epics.caget(prefix + "seen", timeout=5) == -2
+
+
+def test_restore_file_after_iocinit_is_an_error_with_its_line(tmp_path, prefix):
+    (tmp_path / "x.db").write_text(DB)
+    (tmp_path / "st.cmd").write_text(f'dbLoadRecords("x.db", "P={prefix}")\niocInit\nset_pass1_restoreFile("a.sav")\n')
+    port = acquire_port()
+    try:
+        r = subprocess.run([str(BEAMCTL), "softioc", "st.cmd"], cwd=str(tmp_path), capture_output=True, text=True,
+                           timeout=30, env=dict(os.environ, EPICS_CAS_SERVER_PORT=str(port),
+                                                EPICS_CAS_INTF_ADDR_LIST="127.0.0.1"))
+    finally:
+        release_port(port)
+    assert r.returncode == 1
+    assert "st.cmd:3: set_pass1_restoreFile must come before iocInit" in r.stderr, r.stderr
 
 
 def test_truncated_save_file_is_reported_and_the_ioc_starts(softioc, tmp_path, prefix):

@@ -225,6 +225,9 @@ def test_beamctl_run_shell_and_autosave(tmp_path, prefix):
     with running_ioc(tmp_path, prefix, RUN_IOC, files={"extra.db": EXTRA_DB}) as srv:
         sock = socket_of(srv)
         assert os.path.basename(sock) == prefix.rstrip(":") + ".sock"
+        by_name = subprocess.run([str(BEAMCTL), "shell", prefix.rstrip(":"), "-c", f"dbl {prefix}m0-Stat-OK"],
+                                 capture_output=True, text=True, timeout=60)
+        assert by_name.stdout == prefix + "m0-Stat-OK\n", by_name  # NAME: the default socket of that IOC
         rc, out, _ = shell(sock, f"dbl {prefix}m0-Stat*", f"dbgf {prefix}m0-Stat-OK")
         assert rc == 0
         assert prefix + "m0-Stat-OK" in out.splitlines()
