@@ -10,6 +10,7 @@
 #include <cinttypes>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <string_view>
 #include <vector>
@@ -249,18 +250,26 @@ struct PrintfRecord : Record {
                     } else {
                         flags |= kBadLnk;
                     }
+                } else if ((flags & kLongLong) && std::strchr("diouxX", ch)) {
+                    // 64 bits: read as text (a DBR_STRING of an int64 keeps every digit)
+                    if (!arg_string(inp[link++])) {
+                        flags |= kBadLnk;
+                    } else if (ch == 'd' || ch == 'i') {
+                        print_int("ll", (long long)std::strtoll(scratch, nullptr, 10));
+                    } else {
+                        long long i = std::strtoll(scratch, nullptr, 10);
+                        print_int("ll", (unsigned long long)(i));
+                    }
                 } else if (!arg_number(inp[link++], v)) {
                     flags |= kBadLnk;
                 } else if (ch == 'c' || ch == 'd' || ch == 'i') {
                     if (ch == 'c' || (flags & kChar)) print_int("", int(int8_t(std::isfinite(v) ? int64_t(v) : 0)));
                     else if (flags & kShort) print_int("", int(int16_t(std::isfinite(v) ? int64_t(v) : 0)));
-                    else if (flags & kLongLong) print_int("ll", (long long)(std::isfinite(v) ? int64_t(v) : 0));
                     else print_int("", int(int32_t(std::isfinite(v) ? int64_t(v) : 0)));
                 } else if (ch == 'o' || ch == 'x' || ch == 'X' || ch == 'u') {
                     int64_t i = std::isfinite(v) ? int64_t(v) : 0;
                     if (flags & kChar) print_int("", unsigned(uint8_t(i)));
                     else if (flags & kShort) print_int("", unsigned(uint16_t(i)));
-                    else if (flags & kLongLong) print_int("ll", (unsigned long long)(i));
                     else print_int("", unsigned(uint32_t(i)));
                 } else { // e E f F g G (h: as a float)
                     if (flags & kShort) v = float(v);

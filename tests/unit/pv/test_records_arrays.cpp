@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -292,4 +293,103 @@ record(histogram, "h") { field(SVL, "s") field(NELM, "2") field(ULIM, "2") field
     db.scan_periodic(now);
     EXPECT_EQ(rec.masks.size(), 1u); // nothing new: nothing posted
     db.unsubscribe(rec);
+}
+
+// ---------------------------------------------------------------- base's compressTest.c, ported
+
+namespace {
+struct CompressBase : RecordsArrays {
+    void setup(const char* alg, const char* balg, int nsam, int n, bool pbuf = false) {
+        std::string db = R"(
+record(ai, "ai") {}
+record(waveform, "wf") { field(FTVL, "DOUBLE") field(NELM, "4") }
+record(compress, "comp") { field(INP, ")" + std::string(std::strcmp(alg, "Circular Buffer") == 0 ? "ai" : "wf") +
+                         R"( NPP") field(ALG, ")" + alg + R"(") field(BALG, ")" + balg + R"(") field(NSAM, ")" +
+                         std::to_string(nsam) + R"(") field(N, ")" + std::to_string(n) + R"(") field(PBUF, ")" +
+                         (pbuf ? "YES" : "NO") + "\") }\n";
+        load(db.c_str());
+    }
+    void push(double v) {
+        put("ai", v);
+        process("comp");
+    }
+    void wf(V v) {
+        ASSERT_EQ(put_array("wf", v), PutStatus::Ok);
+        process("comp");
+    }
+    void state(double off, double inx, double nuse) {
+        EXPECT_EQ(getd("comp.OFF"), off);
+        EXPECT_EQ(getd("comp.INX"), inx);
+        EXPECT_EQ(getd("comp.NUSE"), nuse);
+    }
+};
+} // namespace
+
+TEST_F(CompressBase, FifoCircularBufferAsBase) {
+    setup("Circular Buffer", "FIFO Buffer", 4, 1);
+    state(0, 0, 0);
+    push(1.1);
+    state(1, 0, 1);
+    EXPECT_EQ(get_array("comp"), (V{1.1}));
+    push(2.1);
+    push(3.1);
+    push(4.1);
+    state(0, 0, 4);
+    EXPECT_EQ(get_array("comp"), (V{1.1, 2.1, 3.1, 4.1}));
+    push(5.1);
+    state(1, 0, 4);
+    push(6.1);
+    state(2, 0, 4);
+    EXPECT_EQ(get_array("comp"), (V{3.1, 4.1, 5.1, 6.1}));
+    ASSERT_EQ(put("comp.RES", 0), PutStatus::Ok);
+    state(0, 0, 0);
+    EXPECT_EQ(get_array("comp").size(), 0u);
+}
+
+TEST_F(CompressBase, LifoCircularBufferAsBase) {
+    setup("Circular Buffer", "LIFO Buffer", 4, 1);
+    push(1.1);
+    state(3, 0, 1);
+    push(2.1);
+    state(2, 0, 2);
+    EXPECT_EQ(get_array("comp"), (V{2.1, 1.1}));
+    push(3.1);
+    push(4.1);
+    state(0, 0, 4);
+    push(5.1);
+    state(3, 0, 4);
+    push(6.1);
+    state(2, 0, 4);
+    EXPECT_EQ(get_array("comp"), (V{6.1, 5.1, 4.1, 3.1}));
+}
+
+TEST_F(CompressBase, ArrayAverageAsBase) {
+    setup("Average", "FIFO Buffer", 4, 2);
+    wf({1, 2, 3, 4});
+    wf({2, 4, 6, 8});
+    EXPECT_EQ(get_array("comp"), (V{1.5, 3, 4.5, 6}));
+}
+
+TEST_F(CompressBase, NTo1AverageAsBase) {
+    setup("N to 1 Average", "FIFO Buffer", 1, 4);
+    wf({1, 2, 3}); // incomplete: nothing
+    EXPECT_EQ(get_array("comp").size(), 0u);
+    wf({1, 2, 3, 4});
+    EXPECT_EQ(get_array("comp"), (V{2.5}));
+    wf({5}); // a single value: one of the next N scalars, nothing yet
+    EXPECT_EQ(get_array("comp"), (V{2.5}));
+}
+
+TEST_F(CompressBase, NTo2AverageAsBase) {
+    setup("N to 1 Average", "FIFO Buffer", 2, 2);
+    wf({1, 2, 3, 4});
+    EXPECT_EQ(get_array("comp"), (V{1.5, 3.5}));
+}
+
+TEST_F(CompressBase, NTo1AveragePartialAsBase) {
+    setup("N to 1 Average", "FIFO Buffer", 1, 4, true);
+    wf({1, 2, 3});
+    EXPECT_EQ(get_array("comp"), (V{2}));
+    wf({6});
+    EXPECT_EQ(get_array("comp"), (V{6}));
 }

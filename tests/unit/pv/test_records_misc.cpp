@@ -112,3 +112,63 @@ record(printf, "trunc") { field(FMT, "0123456789abcdefghijklmnop") field(SIZV, "
     EXPECT_EQ(gets("trunc"), "0123456789abcde"); // SIZV - 1 characters
     EXPECT_EQ(getd("trunc.LEN"), 16);
 }
+
+// base's printfTest.c: each format with the value it puts, and the string it expects.
+TEST_F(RecordsMisc, PrintfFormatsAsBasesPrintfTest) {
+    load(R"(
+record(printf, "p") { field(SIZV, 45) field(INP0, "i0") field(INP1, "i1") field(INP2, "i2") field(INP3, "i3")
+    field(INP4, "i4") field(INP5, "i5") field(INP6, "i6") field(INP7, "i7") field(INP8, "i8") field(INP9, "i9") }
+record(ai, "i0") { field(FLNK, "p") }
+record(stringin, "i1") { field(FLNK, "p") }
+record(int64in, "i2") { field(FLNK, "p") }
+record(ai, "i3") { field(FLNK, "p") } record(ai, "i4") { field(FLNK, "p") } record(ai, "i5") { field(FLNK, "p") }
+record(ai, "i6") { field(FLNK, "p") } record(ai, "i7") { field(FLNK, "p") } record(ai, "i8") { field(FLNK, "p") }
+record(ai, "i9") { field(FLNK, "p") }
+)");
+    struct Case {
+        const char* fmt;
+        double in0;
+        const char* want;
+    };
+    const Case cases[] = {
+        {"Format test string %%d", 1, "Format test string %d"},
+        {"Format test string %d", 7, "Format test string 7"},
+        {"Format test string %c", 82, "Format test string R"},
+        {"Format test string %i", -27, "Format test string -27"},
+        {"Format test string %o", 06777, "Format test string 6777"},
+        {"Format test string %u", 8009, "Format test string 8009"},
+        {"Format test string %x", 0xfafa, "Format test string fafa"},
+        {"Format test string %X", 0xba, "Format test string BA"},
+        {"Format test string %e", -14, "Format test string -1.400000e+01"},
+        {"Format test string %E", 1992, "Format test string 1.992000E+03"},
+        {"Format test string %f", -0.062, "Format test string -0.062000"},
+        {"Format test string %F", 6729982.999, "Format test string 6729982.999000"},
+        {"Format test string %g", -93e-3, "Format test string -0.093"},
+        {"Format test string %G", 728839938, "Format test string 7.2884E+08"},
+        {"Format test string %+d", 7, "Format test string +7"},
+        {"Format test string %-10d", 18, "Format test string 18        "},
+        {"Format test string % d", 12, "Format test string  12"},
+        {"Format test string %#o", 12, "Format test string 014"},
+        {"Format test string %04i", 3, "Format test string 0003"},
+        {"Format test string %.4f", 71.2, "Format test string 71.2000"},
+        {"Format test string %hx", 0xffbaba, "Format test string baba"},
+        {"Format test string %hhx", 0xffc0c1, "Format test string c1"},
+        {"Format test string %lx", 0x70a1c0c1, "Format test string 70a1c0c1"},
+    };
+    for (const Case& c : cases) {
+        ASSERT_EQ(put_str("p.FMT", c.fmt), PutStatus::Ok);
+        ASSERT_EQ(put("i0", c.in0), PutStatus::Ok);
+        EXPECT_EQ(gets("p"), c.want) << c.fmt;
+    }
+    ASSERT_EQ(put_str("p.FMT", "%d %s %llx"), PutStatus::Ok);
+    ASSERT_EQ(put("i0", 2), PutStatus::Ok);
+    ASSERT_EQ(put_str("i1", "Reperbahn"), PutStatus::Ok);
+    ASSERT_EQ(put_str("i2", "-5043731713933328191"), PutStatus::Ok); // 0xba0110baa0a1c0c1
+    EXPECT_EQ(gets("i2"), "-5043731713933328191");
+    EXPECT_EQ(gets("p"), "2 Reperbahn ba0110baa0a1c0c1");
+    ASSERT_EQ(put_str("p.FMT", "%d %s %i %i %i %i %i %i %i %i"), PutStatus::Ok);
+    ASSERT_EQ(put("i0", 0), PutStatus::Ok);
+    ASSERT_EQ(put_str("i1", "One"), PutStatus::Ok);
+    for (int k = 2; k <= 9; ++k) ASSERT_EQ(put(("i" + std::to_string(k)).c_str(), k), PutStatus::Ok);
+    EXPECT_EQ(gets("p"), "0 One 2 3 4 5 6 7 8 9");
+}
