@@ -165,3 +165,21 @@ def test_plugin_option_loads_routines_and_an_unknown_snam_lists_them(prefix, tmp
     assert f"{ROUTINES} (sub_sum sub" in r.stderr, r.stderr  # -P loaded the library
     assert f"record {prefix}ok" not in r.stderr
     assert bad.returncode != 0 and f"{tmp_path / 'p.db'}: cannot load" in bad.stderr, bad.stderr
+
+
+def test_arrays_through_ca_links_between_two_servers(ioc, prefix):
+    p = prefix
+    b = ioc.start("""record(waveform, "$(P)B:wf") { field(NELM, "6") field(FTVL, "DOUBLE") }""")
+    ioc.start("""
+record(aai, "$(P)A:in") { field(NELM, "6") field(FTVL, "LONG") field(INP, "$(P)B:wf CP") }
+record(compress, "$(P)A:max") { field(INP, "$(P)B:wf CP") field(ALG, "N to 1 High Value") field(N, "3") field(NSAM, "4") }
+record(aao, "$(P)A:out") { field(NELM, "3") field(OUT, "$(P)B:wf CA") }
+""", extra_env={"EPICS_CA_ADDR_LIST": f"127.0.0.1:{b.port}", "EPICS_CA_AUTO_ADDR_LIST": "NO"})
+    assert caput(p + "B:wf", [1, 5, 2, 7, 3, 4]) == 1
+    assert wait_for(lambda: caget(p + "A:in.NORD") == 6, timeout=30)
+    assert as_list(caget(p + "A:in", count=6)) == [1, 5, 2, 7, 3, 4]
+    assert wait_for(lambda: caget(p + "A:max.NUSE") == 2, timeout=30)
+    assert as_list(caget(p + "A:max", count=2)) == [5, 7]
+    assert caput(p + "A:out", [9, 8, 7]) == 1  # written over CA to B
+    assert wait_for(lambda: caget(p + "B:wf.NORD") == 3, timeout=30)
+    assert as_list(caget(p + "B:wf", count=3)) == [9, 8, 7]
