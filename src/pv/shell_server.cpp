@@ -313,11 +313,16 @@ int run_shell_client(const ShellClientOptions& o) {
     if (path.empty()) { // the only IOC of this user, if there is one
         std::vector<std::string> found;
         std::error_code ec;
-        for (auto& e : fs::directory_iterator(shell_socket_dir(), ec))
-            if (e.path().extension() == ".sock") found.push_back(e.path().string());
+        for (auto& e : fs::directory_iterator(shell_socket_dir(), ec)) {
+            if (e.path().extension() != ".sock") continue;
+            int probe = connect_unix(e.path().string()); // left by an IOC that was killed: skip
+            if (probe < 0) continue;
+            ::close(probe);
+            found.push_back(e.path().string());
+        }
         if (found.size() != 1) {
             std::fprintf(stderr, "beamctl shell: %s; name one with --socket PATH or NAME%s\n",
-                         found.empty() ? ("no IOC socket in " + shell_socket_dir()).c_str()
+                         found.empty() ? ("no running IOC has a socket in " + shell_socket_dir()).c_str()
                                        : "more than one IOC runs",
                          found.empty() ? "" : ":");
             for (auto& f : found) std::fprintf(stderr, "  %s\n", f.c_str());
