@@ -24,15 +24,29 @@ public:
             LOG_DEBUG(lg, "record " << rec_.name() << ": " << name_ << (up ? " connected" : " disconnected"));
             if (!up) {
                 have_ = false;
+                have_string_ = false;
                 scan_if_cp(); // the record sees the disconnection (LINK/INVALID), as dbCa
+                return;
             }
+            // An enum is monitored as its state string too, for fields that read it as text (dbCa).
+            if (input_ && ch_->native_type() == pv::Prim::Enum && !str_mon_)
+                str_mon_ = ch_->monitor(pv::kDbeValue | pv::kDbeAlarm, [this](const Result& r) {
+                    if (released_) return;
+                    have_string_ = r.ok() && r.value.count >= 1 && r.value.data.size() >= std::size_t(pv::kStringSize);
+                    if (have_string_) std::memcpy(string_, r.value.data.data(), pv::kStringSize);
+                    string_[pv::kStringSize - 1] = 0;
+                    scan_if_cp(); // the same event's native value came just before
+                }, 14 /* DBR_TIME_STRING */);
+            else if (ch_->native_type() != pv::Prim::Enum)
+                str_mon_.reset();
         });
         if (input_)
             mon_ = ch_->monitor(pv::kDbeValue | pv::kDbeAlarm, [this](const Result& r) {
                 if (released_) return;
                 have_ = r.ok();
                 if (have_) last_ = r.value;
-                scan_if_cp();
+                if (!(str_mon_ && have_ && last_.prim == pv::Prim::Enum)) scan_if_cp(); // else after its string
+
             });
     }
 
@@ -44,6 +58,7 @@ public:
         out.stat = last_.status;
         out.sevr = last_.severity;
         out.time = last_.stamp;
+        out.enum_string = last_.prim == pv::Prim::Enum && have_string_ ? string_ : nullptr;
         return true;
     }
     bool put(pv::Prim t, const void* data, uint32_t n) override {
@@ -57,6 +72,7 @@ public:
     }
     void release() override {
         released_ = true;
+        str_mon_.reset();
         mon_.reset();
         ch_.reset();
     }
@@ -67,6 +83,8 @@ public:
     bool released() const { return released_; }
     void detach() {
         have_ = false;
+        have_string_ = false;
+        str_mon_.reset();
         mon_.reset();
         ch_.reset();
     }
@@ -82,9 +100,10 @@ private:
     uint8_t proc_;
     std::string name_;
     std::shared_ptr<Channel> ch_;
-    std::shared_ptr<Monitor> mon_;
+    std::shared_ptr<Monitor> mon_, str_mon_;
     ca::Value last_;
-    bool have_ = false;
+    char string_[pv::kStringSize] = {};
+    bool have_ = false, have_string_ = false;
     bool released_ = false;
 };
 

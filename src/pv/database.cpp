@@ -888,6 +888,13 @@ bool Database::link_get(Record& r, Link& l, Prim t, void* dest, uint32_t n, uint
         if (RemoteLink* rl = l.remote()) { // CA link: the last value its monitor received
             RemoteLink::Value v;
             if (!rl->value(v)) break;
+            if (t == Prim::String && v.enum_string && n >= 1) { // an enum read as text: its state string
+                std::memset(dest, 0, kStringSize);
+                std::strncpy(static_cast<char*>(dest), v.enum_string, kStringSize - 1);
+                *got = 1;
+                r.inherit_sevr(l.ms, v.stat, v.sevr);
+                return true;
+            }
             const FieldDesc& sf = scratch_field(v.type);
             Elements e{sf.dbf, const_cast<void*>(v.data), v.count, v.count, uint16_t(prim_size(v.type))};
             uint32_t k = std::min(v.count, n);

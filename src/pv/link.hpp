@@ -53,6 +53,7 @@ public:
         const void* data = nullptr; // count elements in host order (a string is char[40])
         uint16_t stat = 0, sevr = 0;
         EpicsTime time;
+        const char* enum_string = nullptr; // an enum's state string (char[40]) when known
     };
     // The last value the link's monitor received; false while disconnected or before the first.
     virtual bool value(Value& out) const = 0;

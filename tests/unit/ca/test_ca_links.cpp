@@ -39,6 +39,7 @@ const char* kDbB = R"(
 record(ao, "B:val") { field(VAL, "1") field(HIGH, "5") field(HSV, "MAJOR") }
 record(ao, "B:sink") {}
 record(calc, "B:count") { field(CALC, "VAL+1") }
+record(bo, "B:sw") { field(ZNAM, "Off") field(ONAM, "On") field(VAL, "1") }
 )";
 
 const char* kDbA = R"(
@@ -46,6 +47,8 @@ record(ai, "A:in") { field(INP, "B:val CP MS") }
 record(ai, "A:plain") { field(INP, "B:val CA NMS") }
 record(ao, "A:out") { field(OUT, "B:sink CA") }
 record(ao, "A:fwd") { field(FLNK, "B:count.PROC CA") }
+record(stringin, "A:swtext") { field(INP, "B:sw CP") }
+record(ai, "A:swnum") { field(INP, "B:sw CP") }
 )";
 
 struct CaLinksTest : ::testing::Test {
@@ -109,7 +112,7 @@ struct CaLinksTest : ::testing::Test {
 } // namespace
 
 TEST_F(CaLinksTest, CpProcessesOnEachChangeWithTheRemoteSeverity) {
-    ASSERT_TRUE(run_until([&] { return links->connected_count() == 4; }));
+    ASSERT_TRUE(run_until([&] { return links->connected_count() == 6; }));
     ASSERT_TRUE(run_until([&] { return get(a, "A:in") == 1; })); // the first update processed it
     put(b, "B:val", 7);                                          // above HIGH: MAJOR
     ASSERT_TRUE(run_until([&] { return get(a, "A:in") == 7; }));
@@ -126,8 +129,21 @@ TEST_F(CaLinksTest, CpProcessesOnEachChangeWithTheRemoteSeverity) {
     EXPECT_EQ(get(a, "A:plain.SEVR"), double(pv::kNoAlarm));
 }
 
+TEST_F(CaLinksTest, AnEnumReadsAsItsStateStringIntoAStringAndAsItsIndexIntoANumber) {
+    auto text = [&] {
+        char s[40] = {};
+        a.get(addr(a, "A:swtext"), pv::Prim::String, s, 1);
+        return std::string(s);
+    };
+    ASSERT_TRUE(run_until([&] { return text() == "On"; })) << text();
+    EXPECT_EQ(get(a, "A:swnum"), 1);
+    put(b, "B:sw", 0);
+    ASSERT_TRUE(run_until([&] { return text() == "Off"; })) << text();
+    ASSERT_TRUE(run_until([&] { return get(a, "A:swnum") == 0; }));
+}
+
 TEST_F(CaLinksTest, OutputAndForwardLinksWriteTheOtherServer) {
-    ASSERT_TRUE(run_until([&] { return links->connected_count() == 4; }));
+    ASSERT_TRUE(run_until([&] { return links->connected_count() == 6; }));
     put(a, "A:out", 3.5); // processes A:out, which writes OUT
     ASSERT_TRUE(run_until([&] { return get(b, "B:sink") == 3.5; }));
     double before = get(b, "B:count");
@@ -136,7 +152,7 @@ TEST_F(CaLinksTest, OutputAndForwardLinksWriteTheOtherServer) {
 }
 
 TEST_F(CaLinksTest, DisconnectionRaisesLinkInvalidAndTheLinkReconnects) {
-    ASSERT_TRUE(run_until([&] { return get(a, "A:in") == 1 && links->connected_count() == 4; }));
+    ASSERT_TRUE(run_until([&] { return get(a, "A:in") == 1 && links->connected_count() == 6; }));
     server.reset();
     ASSERT_TRUE(run_until([&] { return get(a, "A:in.SEVR") == double(pv::kInvalid); })); // CP: processed on disconnection
     EXPECT_EQ(get(a, "A:in.STAT"), double(pv::kStatLink));
