@@ -303,8 +303,12 @@ struct CompressRecord : Record {
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* nuse_fd = type().find("NUSE");
     // The scratch field INP is read into (WPTR): as many elements as the target holds.
-    inline static const FieldDesc kWork{"WPTR", Dbf::Double, kArray, 8, nullptr,
+    // a function-local static: the class is complete in a function body (clang requires it)
+    static const FieldDesc& work_desc() {
+        static const FieldDesc d{"WPTR", Dbf::Double, kArray, 8, nullptr,
                                         [](Record& r) -> void* { return &static_cast<CompressRecord&>(r).work; }};
+        return d;
+    }
     uint32_t work_count = 0;
 
     static std::vector<FieldDesc> fields() {
@@ -347,12 +351,12 @@ struct CompressRecord : Record {
         reset();
     }
     Elements elements(const FieldDesc& f) override {
-        if (&f == &kWork) return Elements{Dbf::Double, work.data(), work_count, uint32_t(work.size()), 8};
+        if (&f == &work_desc()) return Elements{Dbf::Double, work.data(), work_count, uint32_t(work.size()), 8};
         if (&f == val_fd) return Elements{Dbf::Double, buf.data(), nuse, nsam, 8};
         return Record::elements(f);
     }
     void set_count(const FieldDesc& f, uint32_t c) override {
-        if (&f == &kWork) work_count = c;
+        if (&f == &work_desc()) work_count = c;
         if (&f != val_fd) return;
         // A client's put replaces the buffer (base writes it at OFF and advances OFF instead).
         uint32_t before = nuse;
@@ -471,7 +475,7 @@ struct CompressRecord : Record {
                 inpn = int32_t(avail);
             }
             work_count = 0;
-            if (!read_link(inp, kWork) || work_count == 0) {
+            if (!read_link(inp, work_desc()) || work_count == 0) {
                 set_sevr(kStatLink, kInvalid);
             } else if (alg == kAverage) {
                 status = array_average(work.data(), work_count);

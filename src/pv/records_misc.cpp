@@ -104,10 +104,18 @@ struct PrintfRecord : Record {
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* len_fd = type().find("LEN");
     // VAL whole, as the char array a link to an array field (an lsi/lso/waveform VAL) carries.
-    inline static const FieldDesc kLong{"VAL", Dbf::Char, kArray, 1, nullptr,
+    // a function-local static: the class is complete in a function body (clang requires it)
+    static const FieldDesc& long_desc() {
+        static const FieldDesc d{"VAL", Dbf::Char, kArray, 1, nullptr,
                                         [](Record& r) -> void* { return static_cast<PrintfRecord&>(r).val_buf.data(); }};
-    inline static const FieldDesc kScratch{"", Dbf::String, 0, kStringSize, nullptr,
+        return d;
+    }
+    // a function-local static: the class is complete in a function body (clang requires it)
+    static const FieldDesc& scratch_desc() {
+        static const FieldDesc d{"", Dbf::String, 0, kStringSize, nullptr,
                                            [](Record& r) -> void* { return static_cast<PrintfRecord&>(r).scratch; }};
+        return d;
+    }
 
     static std::vector<FieldDesc> fields() {
         using R = PrintfRecord;
@@ -135,7 +143,7 @@ struct PrintfRecord : Record {
         len = 0;
     }
     Elements elements(const FieldDesc& f) override {
-        if (&f == &kLong) return Elements{Dbf::Char, val_buf.data(), len, sizv, 1};
+        if (&f == &long_desc()) return Elements{Dbf::Char, val_buf.data(), len, sizv, 1};
         return Record::elements(f);
     }
 
@@ -154,7 +162,7 @@ struct PrintfRecord : Record {
             return true;
         }
         if (!linked(l)) return false;
-        return read_link(l, kScratch);
+        return read_link(l, scratch_desc());
     }
 
     // doPrintf: literal text copied, each conversion formatted from the next INPn.
@@ -303,10 +311,10 @@ struct PrintfRecord : Record {
         stamp_time();
         // devPrintfSoft: VAL to OUT (a char array target gets it whole, another field a string).
         if (out.target_field && (out.target_field->flags & kArray)) {
-            write_link(out, kLong);
+            write_link(out, long_desc());
         } else if (linked(out)) {
             copy_string(scratch, sizeof scratch, std::string_view(val_buf.data(), strnlen(val_buf.data(), sizv)));
-            write_link(out, kScratch);
+            write_link(out, scratch_desc());
         }
         unsigned m = reset_alarms() | kDbeValue | kDbeLog;
         post(val_fd, m);

@@ -171,8 +171,12 @@ struct ASubRecord : Record {
     beamctl_asub_routine routine = nullptr;
     const FieldDesc* val_fd = type().find("VAL");
     int a_index = type().find("A")->index, vala_index = type().find("VALA")->index;
-    inline static const FieldDesc kSnamField{"", Dbf::String, 0, 41, nullptr,
+    // a function-local static: the class is complete in a function body (clang requires it)
+    static const FieldDesc& snam_field_desc() {
+        static const FieldDesc d{"", Dbf::String, 0, 41, nullptr,
                                              [](Record& r) -> void* { return static_cast<ASubRecord&>(r).snam; }};
+        return d;
+    }
 
     static std::vector<FieldDesc> fields() {
         using R = ASubRecord;
@@ -279,7 +283,7 @@ struct ASubRecord : Record {
     // fetch_values: SUBL (LFLG READ) and the input links; false stops processing before the routine.
     bool fetch() {
         if (lflg == 1 && linked(subl)) {
-            if (!read_link(subl, kSnamField)) return false;
+            if (!read_link(subl, snam_field_desc())) return false;
             if (snam[0] && std::strcmp(snam, onam) != 0) {
                 const RecordRoutines::Routine* r = RecordRoutines::global().find(snam);
                 if (!r || !r->asub) return false;
