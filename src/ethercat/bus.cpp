@@ -48,17 +48,10 @@ struct Bus::PublishStage : rt::Stage {
             s.slave_al[i] = m.slave_al_status(i);
             s.slave_online[i] = m.slave_online(i) && s.link_up;
         }
-        bool changed = false;
-        for (std::size_t i = 0; i < b.watches_.size(); ++i) {
-            Watch& w = b.watches_[i];
-            uint64_t v = registry::image_read(m.image(), w.bit_offset, w.bits);
-            if (v != w.last) {
-                w.last = v;
-                ++w.changes;
-                changed = true;
-            }
-            s.changes[i] = w.changes;
-        }
+        const std::size_t nw = b.watch_offset_.size();
+        bool changed = detect_changes(m.image(), b.watch_offset_.data(), b.watch_bits_.data(), b.watch_last_.data(),
+                                      b.watch_changes_.data(), nw);
+        if (nw) std::memcpy(s.changes.data(), b.watch_changes_.data(), nw * sizeof(uint32_t));
         b.snap_.publish();
         // Wake the IOC loop once per drain: a non-blocking eventfd write, only when it is not
         // already awake for an earlier change.
@@ -69,6 +62,21 @@ struct Bus::PublishStage : rt::Stage {
         b.apply_writes(); // for the next cycle's send
     }
 };
+
+bool detect_changes(const uint8_t* img, const uint32_t* bit_offset, const uint8_t* bits, uint64_t* last,
+                    uint32_t* changes, std::size_t n) noexcept {
+    bool changed = false;
+    for (std::size_t i = 0; i < n; ++i) {
+        uint32_t off = bit_offset[i];
+        uint64_t v = bits[i] == 1 ? uint64_t(img[off >> 3] >> (off & 7) & 1) : registry::image_read(img, off, bits[i]);
+        if (v != last[i]) {
+            last[i] = v;
+            ++changes[i];
+            changed = true;
+        }
+    }
+    return changed;
+}
 
 Bus::Bus(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, const Catalog& catalog)
     : id_(id), link_(std::move(link)) {
@@ -86,14 +94,13 @@ Bus::~Bus() {
 
 int Bus::watch(const SignalInfo& s) {
     if (watches_frozen_) return -1;
-    for (std::size_t i = 0; i < watches_.size(); ++i)
-        if (watches_[i].bit_offset == s.bit_offset && watches_[i].bits == s.bits) return int(i);
-    Watch w;
-    w.bit_offset = s.bit_offset;
-    w.bits = s.bits;
-    w.last = registry::image_read(master_->image(), s.bit_offset, s.bits);
-    watches_.push_back(w);
-    std::size_t n = watches_.size();
+    for (std::size_t i = 0; i < watch_offset_.size(); ++i)
+        if (watch_offset_[i] == s.bit_offset && watch_bits_[i] == s.bits) return int(i);
+    watch_offset_.push_back(s.bit_offset);
+    watch_bits_.push_back(s.bits);
+    watch_last_.push_back(registry::image_read(master_->image(), s.bit_offset, s.bits));
+    watch_changes_.push_back(0);
+    std::size_t n = watch_offset_.size();
     snap_.init([n](BusSnapshot& b) { b.changes.assign(n, 0); });
     return int(n - 1);
 }

@@ -32,6 +32,12 @@ struct OutputWrite {
     uint64_t value = 0;
 };
 
+// RT: compares n watched entries of `image` with their values of the previous cycle (`last`),
+// counts a change for each that differs and returns whether any did. The change watch of a Bus's
+// publish stage (and of bench/bench_io_intr, which measures it alone).
+bool detect_changes(const uint8_t* image, const uint32_t* bit_offset, const uint8_t* bits, uint64_t* last,
+                    uint32_t* changes, std::size_t n) noexcept;
+
 class Bus {
 public:
     // The master code never depends on the simulator: an in-process segment behind `link` is
@@ -59,7 +65,7 @@ public:
     // back to comparing values); same entry, same index.
     int watch(const SignalInfo& s);
     void freeze_watches() { watches_frozen_ = true; }
-    std::size_t watch_count() const { return watches_.size(); }
+    std::size_t watch_count() const { return watch_offset_.size(); }
     // Readable (eventfd) when a watched entry changed; the IOC loop calls drain_changes() then scans.
     int change_fd() const { return change_fd_; }
     void drain_changes() noexcept;
@@ -87,14 +93,12 @@ private:
     std::unique_ptr<SendStage> send_;
     std::unique_ptr<PublishStage> publish_;
     CycleStatus last_ = CycleStatus::Ok;
-    struct Watch {
-        uint32_t bit_offset = 0;
-        uint8_t bits = 0;
-        uint64_t last = 0;    // RT: the entry in the previous cycle
-        uint32_t changes = 0; // RT: cycles in which it changed
-    };
-    std::vector<Watch> watches_; // sized before the cycle starts
-    bool watches_frozen_ = false;
+    // The change watches, one array per field (the cycle walks them in order): where the entry is,
+    // its value in the previous cycle, the cycles in which it changed. Sized before the cycle starts.
+    std::vector<uint32_t> watch_offset_;
+    std::vector<uint8_t> watch_bits_;
+    std::vector<uint64_t> watch_last_;
+    std::vector<uint32_t> watch_changes_;    bool watches_frozen_ = false;
     int change_fd_ = -1;
     std::atomic<bool> change_pending_{false}; // RT wrote change_fd_ and the loop has not drained it
     std::thread health_;
