@@ -1,4 +1,5 @@
 #include "ca/client.hpp"
+#include "ca/net.hpp"
 
 #include "core/error.hpp"
 #include "core/log.hpp"
@@ -89,20 +90,6 @@ sockaddr_in parse_target(const std::string& item, uint16_t def_port, const char*
     }
     a.sin_port = htons(port);
     return a;
-}
-
-std::vector<in_addr> interface_broadcasts() {
-    std::vector<in_addr> out;
-    ifaddrs* ifs = nullptr;
-    if (getifaddrs(&ifs) != 0) return out;
-    for (ifaddrs* i = ifs; i; i = i->ifa_next) {
-        if (!i->ifa_addr || i->ifa_addr->sa_family != AF_INET) continue;
-        if (!(i->ifa_flags & IFF_UP) || !(i->ifa_flags & IFF_BROADCAST) || !i->ifa_broadaddr) continue;
-        if (i->ifa_flags & IFF_LOOPBACK) continue;
-        out.push_back(reinterpret_cast<sockaddr_in*>(i->ifa_broadaddr)->sin_addr);
-    }
-    freeifaddrs(ifs);
-    return out;
 }
 
 std::string ip_port(uint32_t ip, uint16_t port) {

@@ -1,4 +1,5 @@
 #include "ca/server.hpp"
+#include "ca/net.hpp"
 
 #include "ca/search.hpp"
 
@@ -87,20 +88,6 @@ in_addr broadcast_of(in_addr ip) {
         if (a->sin_addr.s_addr != ip.s_addr) continue;
         if ((i->ifa_flags & IFF_BROADCAST) && i->ifa_broadaddr)
             out = reinterpret_cast<sockaddr_in*>(i->ifa_broadaddr)->sin_addr;
-    }
-    freeifaddrs(ifs);
-    return out;
-}
-
-std::vector<in_addr> all_broadcasts() {
-    std::vector<in_addr> out;
-    ifaddrs* ifs = nullptr;
-    if (getifaddrs(&ifs) != 0) return out;
-    for (ifaddrs* i = ifs; i; i = i->ifa_next) {
-        if (!i->ifa_addr || i->ifa_addr->sa_family != AF_INET) continue;
-        if (!(i->ifa_flags & IFF_UP) || !(i->ifa_flags & IFF_BROADCAST) || !i->ifa_broadaddr) continue;
-        if (i->ifa_flags & IFF_LOOPBACK) continue;
-        out.push_back(reinterpret_cast<sockaddr_in*>(i->ifa_broadaddr)->sin_addr);
     }
     freeifaddrs(ifs);
     return out;
@@ -308,7 +295,7 @@ void Server::start() {
     if (cfg_.auto_beacon_addrs) {
         std::vector<in_addr> bcasts;
         if (cfg_.interfaces.empty()) {
-            bcasts = all_broadcasts();
+            bcasts = interface_broadcasts();
         } else {
             for (in_addr ip : cfg_.interfaces) {
                 in_addr b = broadcast_of(ip);

@@ -1,5 +1,7 @@
 #include "pv/iocsh.hpp"
 
+#include "core/glob.hpp"
+
 #include "core/error_list.hpp"
 #include "core/macros.hpp"
 #include "pv/convert.hpp"
@@ -513,7 +515,7 @@ struct IocShell::Impl {
             std::string_view kv(*e);
             std::size_t eq = kv.find('=');
             if (eq == std::string_view::npos) continue;
-            if (c.arg(1).empty() || glob_match(kv.substr(0, eq), c.arg(1))) c.out << kv << "\n";
+            if (c.arg(1).empty() || beamctl::glob_match(c.arg(1), kv.substr(0, eq))) c.out << kv << "\n";
         }
     }
 

@@ -122,7 +122,5 @@ bool print_record(const Database& db, std::string_view name, int level, std::ost
 void print_scan_lists(const Database& db, std::string_view period, std::ostream& os);
 // What a refused put's status means ("the field is read-only", ...).
 const char* put_status_text(PutStatus st);
-// Shell-style wildcard match: '*' any run, '?' one character (epicsStrGlobMatch).
-bool glob_match(std::string_view s, std::string_view pattern);
 
 } // namespace beamctl::pv

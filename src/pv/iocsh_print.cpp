@@ -2,6 +2,7 @@
 #include "pv/iocsh.hpp"
 
 #include "core/error.hpp"
+#include "core/glob.hpp"
 #include "pv/convert.hpp"
 #include "pv/database.hpp"
 
@@ -255,25 +256,6 @@ bool print_field(const Database& db, std::string_view channel, std::ostream& os)
 
 // --- dbl, dbpf, dbpr, scanppl ------------------------------------------------------------------
 
-bool glob_match(std::string_view s, std::string_view pat) {
-    std::size_t si = 0, pi = 0, star = std::string_view::npos, mark = 0;
-    while (si < s.size()) {
-        if (pi < pat.size() && (pat[pi] == '?' || pat[pi] == s[si])) {
-            ++si, ++pi;
-        } else if (pi < pat.size() && pat[pi] == '*') {
-            star = pi++;
-            mark = si;
-        } else if (star != std::string_view::npos) {
-            pi = star + 1;
-            si = ++mark;
-        } else {
-            return false;
-        }
-    }
-    while (pi < pat.size() && pat[pi] == '*') ++pi;
-    return pi == pat.size();
-}
-
 const char* put_status_text(PutStatus st) {
     switch (st) {
     case PutStatus::Ok:
@@ -301,7 +283,7 @@ void print_record_list(const Database& db, std::string_view type, std::string_vi
     std::map<std::string, std::vector<Record*>, std::less<>> by_type;
     for (Record* r : db.records())
         if ((type.empty() || r->type().name() == type) &&
-            (pattern.empty() || glob_match(r->name(), pattern)))
+            (pattern.empty() || beamctl::glob_match(pattern, r->name())))
             by_type[r->type().name()].push_back(r);
     for (const auto& [t, recs] : by_type)
         for (Record* r : recs) {

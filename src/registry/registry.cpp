@@ -1,6 +1,7 @@
 #include "registry/registry.hpp"
 
 #include "core/error.hpp"
+#include "core/glob.hpp"
 
 #include <algorithm>
 #include <iomanip>
@@ -105,30 +106,10 @@ void Registry::set_pv(std::string_view name, std::string pv) {
     if (Signal* s = find_mut(name)) s->pv = std::move(pv);
 }
 
-bool glob_match(std::string_view p, std::string_view t) {
-    std::size_t pi = 0, ti = 0, star = std::string_view::npos, mark = 0;
-    while (ti < t.size()) {
-        if (pi < p.size() && (p[pi] == '?' || p[pi] == t[ti])) {
-            ++pi;
-            ++ti;
-        } else if (pi < p.size() && p[pi] == '*') {
-            star = pi++;
-            mark = ti;
-        } else if (star != std::string_view::npos) {
-            pi = star + 1;
-            ti = ++mark;
-        } else {
-            return false;
-        }
-    }
-    while (pi < p.size() && p[pi] == '*') ++pi;
-    return pi == p.size();
-}
-
 std::vector<const Signal*> Registry::match(std::string_view pattern) const {
     std::vector<const Signal*> v;
     for (const auto& [name, s] : signals_)
-        if (pattern.empty() || glob_match(pattern, name)) v.push_back(&s);
+        if (pattern.empty() || beamctl::glob_match(pattern, name)) v.push_back(&s);
     return v;
 }
 

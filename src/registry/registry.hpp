@@ -81,7 +81,4 @@ private:
     bool frozen_ = false;
 };
 
-// Glob match with `*` (any run) and `?` (one character).
-bool glob_match(std::string_view pattern, std::string_view text);
-
 } // namespace beamctl::registry

@@ -1,6 +1,7 @@
 // Every reader on the one YAML reader: a file holding several errors reports each of them, with
 // file:line:col and the key path, in one pass (the plant file, a catalog device file and a
 // catalog directory, the rcp-sim model, an ECMC axis file).
+#include "../temp_dir.hpp"
 #include "bridge/rcp/model.hpp"
 #include "core/error_list.hpp"
 #include "ethercat/catalog.hpp"
@@ -37,18 +38,7 @@ template <typename F> std::vector<std::string> errors_of(F&& f) {
     return {};
 }
 
-struct TempDir {
-    std::filesystem::path path;
-    TempDir() {
-        char tmpl[] = "/tmp/beamctl_cfg_XXXXXX";
-        path = mkdtemp(tmpl);
-    }
-    ~TempDir() { std::filesystem::remove_all(path); }
-    std::string write(const std::string& name, const std::string& text) const {
-        std::ofstream(path / name) << text;
-        return (path / name).string();
-    }
-};
+using beamctl::test::TempDir;
 
 } // namespace
 

@@ -4,6 +4,7 @@
 // which ends short (move_failed); a real axis never follows a PLC setpoint past its soft limit; the
 // virtual axes' limits follow from the real axes'; the demo mirror's inverse transform agrees with
 // its PLC; configuration errors name what and where.
+#include "../temp_dir.hpp"
 #include "../alloc_counter.hpp"
 #include "config/ioc_config.hpp"
 #include "ioc/ioc.hpp"
@@ -232,18 +233,7 @@ TEST(IocKinematics, TheCycleWithKinematicsChecksAllocatesNothing) {
     EXPECT_TRUE(d.st("SlitVGap").move_failed);
 }
 
-struct TempDir {
-    std::filesystem::path path;
-    TempDir() {
-        char tmpl[] = "/tmp/beamctl_kin_XXXXXX";
-        path = mkdtemp(tmpl);
-    }
-    ~TempDir() { std::filesystem::remove_all(path); }
-    std::string write(const std::string& name, const std::string& text) const {
-        std::ofstream(path / name) << text;
-        return (path / name).string();
-    }
-};
+using beamctl::test::TempDir;
 
 std::string config_error(const std::string& kinematics) {
     TempDir t;

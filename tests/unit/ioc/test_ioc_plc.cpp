@@ -2,6 +2,7 @@
 // cycle order (ECMC acceptance 1), rates and variable scoping (9), mc_* function blocks (3),
 // the demo slit's virtual axes (2), plugins (15), axis PLCs, run-time faults, compile errors
 // against the IOC's buses and axes.
+#include "../temp_dir.hpp"
 #include "../alloc_counter.hpp"
 #include "config/ioc_config.hpp"
 #include "ioc/ioc.hpp"
@@ -21,18 +22,7 @@ namespace {
 
 const std::string kSource = BEAMCTL_SOURCE_DIR;
 
-struct TempDir {
-    std::filesystem::path path;
-    TempDir() {
-        char tmpl[] = "/tmp/beamctl_plc_XXXXXX";
-        path = mkdtemp(tmpl);
-    }
-    ~TempDir() { std::filesystem::remove_all(path); }
-    std::string write(const std::string& name, const std::string& text) const {
-        std::ofstream(path / name) << text;
-        return (path / name).string();
-    }
-};
+using beamctl::test::TempDir;
 
 // A small IOC: two digital terminals wired output 1 -> input 1, and virtual axes.
 std::string ioc_yaml(const std::string& axes, const std::string& plcs, const std::string& extra = "") {

@@ -1,5 +1,6 @@
 // The IOC's signal registry: what the buses, axes and PLCs declare, who writes each output, and
 // a second writer refused at load with the first one named (issue 12, "one writer per output").
+#include "../temp_dir.hpp"
 #include "config/ioc_config.hpp"
 #include "core/error.hpp"
 #include "ioc/ioc.hpp"
@@ -17,18 +18,7 @@ namespace {
 
 const std::string kSource = BEAMCTL_SOURCE_DIR;
 
-struct TempDir {
-    std::filesystem::path path;
-    TempDir() {
-        char tmpl[] = "/tmp/beamctl_signals_XXXXXX";
-        path = mkdtemp(tmpl);
-    }
-    ~TempDir() { std::filesystem::remove_all(path); }
-    std::string write(const std::string& name, const std::string& text) const {
-        std::ofstream(path / name) << text;
-        return (path / name).string();
-    }
-};
+using beamctl::test::TempDir;
 
 // Digital in and out terminals and two general PLCs.
 std::string ioc_yaml(const std::string& plcs, const std::string& extra = "") {

@@ -1,5 +1,6 @@
 // Autosave (pv/autosave.hpp): the .sav format, atomic writes, restore before PINI, the .savB
 // fallback and the save rate, in virtual time.
+#include "../temp_dir.hpp"
 #include "pv/autosave.hpp"
 
 #include "db_fixture.hpp"
@@ -16,18 +17,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        std::string t = (fs::temp_directory_path() / "beamctl_autosave_XXXXXX").string();
-        path = ::mkdtemp(t.data());
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    std::string file(const std::string& n) const { return (path / n).string(); }
-};
+using beamctl::test::TempDir;
 
 std::string slurp(const std::string& p) {
     std::ifstream in(p);

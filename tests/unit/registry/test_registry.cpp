@@ -1,6 +1,7 @@
 // The signal registry: declarations, one writer per output, names with a bit, binding through
 // the owner, listing; and the process-image access every subsystem shares (registry/image.hpp).
 #include "core/error.hpp"
+#include "core/glob.hpp"
 #include "registry/image.hpp"
 #include "registry/registry.hpp"
 
@@ -113,14 +114,14 @@ TEST(Registry, ListingByGlob) {
     EXPECT_EQ(t.find("ax1"), std::string::npos) << t;
 }
 
-TEST(Registry, GlobMatch) {
-    EXPECT_TRUE(glob_match("", ""));
-    EXPECT_TRUE(glob_match("*", "anything"));
-    EXPECT_TRUE(glob_match("a*b*c", "aXXbYYc"));
-    EXPECT_FALSE(glob_match("a*b*c", "aXXbYY"));
-    EXPECT_TRUE(glob_match("a?c", "abc"));
-    EXPECT_FALSE(glob_match("a?c", "ac"));
-    EXPECT_TRUE(glob_match("**.x", "a.b.x"));
+TEST(Glob, StarAndQuestionMark) {
+    EXPECT_TRUE(beamctl::glob_match("", ""));
+    EXPECT_TRUE(beamctl::glob_match("*", "anything"));
+    EXPECT_TRUE(beamctl::glob_match("a*b*c", "aXXbYYc"));
+    EXPECT_FALSE(beamctl::glob_match("a*b*c", "aXXbYY"));
+    EXPECT_TRUE(beamctl::glob_match("a?c", "abc"));
+    EXPECT_FALSE(beamctl::glob_match("a?c", "ac"));
+    EXPECT_TRUE(beamctl::glob_match("**.x", "a.b.x"));
 }
 
 // The one reader/writer of process-image entries: aligned and unaligned, every width, signed.
