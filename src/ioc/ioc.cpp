@@ -95,6 +95,50 @@ private:
     double last_ = NAN;
 };
 
+// ecmccfg's asyn addresses ("asyn(MC_CPU1,0,1)T_SMP_MS=10/TYPE=asynInt32/ec0.s3.positionActual01?",
+// "asynMask(MC_CPU1,0,0x4,1)T_SMP_MS=10/TYPE=asynUInt32Digital/ec0.s1.binaryInput01?") as the
+// signal name and bit they read or write. The port, address, timeout, sample time and type say how
+// ECMC's asyn layer moves the value; here the record reads the bus snapshot, so they are accepted
+// and not used. False with `why` when the text is not such an address or the mask is not one bit.
+bool parse_asyn_address(std::string_view a, std::string& name, int& bit, std::string& why) {
+    bool mask = a.rfind("asynMask(", 0) == 0;
+    if (!mask && a.rfind("asyn(", 0) != 0) return false;
+    std::size_t close = a.find(')');
+    if (close == std::string_view::npos) {
+        why = "no ')' after the asyn port";
+        return false;
+    }
+    if (mask) { // asynMask(PORT,ADDR,MASK[,TIMEOUT])
+        std::string args(a.substr(9, close - 9));
+        std::vector<std::string> v;
+        std::size_t at = 0;
+        for (std::size_t c; (c = args.find(',', at)) != std::string::npos; at = c + 1) v.push_back(args.substr(at, c - at));
+        v.push_back(args.substr(at));
+        if (v.size() < 3) {
+            why = "asynMask(PORT,ADDR,MASK[,TIMEOUT]) needs a MASK";
+            return false;
+        }
+        char* end = nullptr;
+        unsigned long long m = std::strtoull(v[2].c_str(), &end, 0);
+        if (!end || *end || m == 0 || (m & (m - 1)) != 0) {
+            why = SB() << "MASK '" << v[2] << "': only a mask of one bit is supported (a bit of the entry)";
+            return false;
+        }
+        bit = 0;
+        while (!(m >> bit & 1)) ++bit;
+    }
+    std::string_view info = a.substr(close + 1); // T_SMP_MS=10/TYPE=asynInt32/ec0.s3.entry?
+    std::size_t slash = info.rfind('/');
+    std::string_view n = slash == std::string_view::npos ? info : info.substr(slash + 1);
+    while (!n.empty() && (n.back() == '?' || n.back() == '=' || n.back() == ' ')) n.remove_suffix(1);
+    if (n.empty()) {
+        why = "no signal name after the asyn port (T_SMP_MS=10/TYPE=asynInt32/ec0.s3.entry?)";
+        return false;
+    }
+    name = std::string(n);
+    return true;
+}
+
 // A counter as a 32-bit LONG PV value: saturates instead of wrapping.
 double clamp_long(uint64_t v) { return double(std::min<uint64_t>(v, 0x7FFFFFFF)); }
 
@@ -402,9 +446,23 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         if (why) *why = std::move(m);
         return nullptr;
     };
-    const std::string& name = l.s().address;
+    std::string name = l.s().address;
     int bit = -1;
-    const registry::Signal* sig = registry_.find_with_bit(name, bit);
+    const registry::Signal* sig = nullptr;
+    std::string asyn_name, asyn_why;
+    int asyn_bit = -1;
+    if (parse_asyn_address(name, asyn_name, asyn_bit, asyn_why)) { // an ecmccfg record
+        sig = registry_.find_with_bit(asyn_name, bit);
+        if (sig && asyn_bit >= 0) {
+            if (bit >= 0) return fail(SB() << "'" << name << "': a MASK and a bit in the name");
+            bit = asyn_bit;
+        }
+        name = asyn_name;
+    } else if (!asyn_why.empty()) {
+        return fail(SB() << "'" << name << "': " << asyn_why);
+    } else {
+        sig = registry_.find_with_bit(name, bit);
+    }
     if (!sig) {
         // the entries of the same slave, if the name got that far
         std::string slave = name.substr(0, name.rfind('.') + 1), have;

@@ -366,7 +366,7 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
     case Link::Kind::Empty:
     case Link::Kind::Constant: return true;
     case Link::Kind::Hw: {
-        if (r.dtyp != 1 && r.type().find("DTYP") && r.type().find("DTYP")->menu == &kMenuSoftDtyp)
+        if (r.dtyp == 0 && r.type().find("DTYP") && r.type().find("DTYP")->menu == &kMenuSoftDtyp)
             return fail(SB() << "the hardware address '@" << l.s().address << "' needs DTYP \"beamctl\"");
         if (!binder_)
             return fail(SB() << "the hardware address '@" << l.s().address

@@ -30,8 +30,9 @@ const Menu kMenuPostAlways{"waveformPOST", {"Always", "On Change"}};
 const Menu kMenuOmsl{"menuOmsl", {"supervisory", "closed_loop"}};
 const Menu kMenuIvoa{"menuIvoa",
                      {"Continue normally", "Don't drive outputs", "Set output to IVOV"}};
-// "beamctl": links with "@address" reach the engine's signals (an IOC's device support).
-const Menu kMenuSoftDtyp{"DTYP", {"Soft Channel", "beamctl"}};
+// "beamctl": links with "@address" reach the engine's signals (an IOC's device support); the
+// asyn names are ecmccfg's, whose "@asyn(...)...ec0.s3.entry?" addresses mean the same there.
+const Menu kMenuSoftDtyp{"DTYP", {"Soft Channel", "beamctl", "asynInt32", "asynFloat64", "asynUInt32Digital"}};
 const Menu kMenuPriority{"menuPriority", {"LOW", "MEDIUM", "HIGH"}};
 const Menu kMenuOif{"aoOIF", {"Full", "Incremental"}};
 

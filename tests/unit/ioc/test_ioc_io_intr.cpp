@@ -1,7 +1,9 @@
 // SCAN "I/O Intr" on bus entries, in virtual time: the bus watches the entry in the cycle, so a
 // pulse shorter than the IOC loop's look still processes the record, and the cycle wakes the loop
 // (the bus's change_fd) instead of a fixed poll.
+#include "../temp_dir.hpp"
 #include "config/ioc_config.hpp"
+#include "core/error.hpp"
 #include "ioc/ioc.hpp"
 #include "rt/engine.hpp"
 
@@ -16,18 +18,7 @@ using namespace beamctl;
 
 namespace {
 
-struct TempDir {
-    std::filesystem::path path;
-    TempDir() {
-        char tmpl[] = "/tmp/beamctl_iointr_XXXXXX";
-        path = mkdtemp(tmpl);
-    }
-    ~TempDir() { std::filesystem::remove_all(path); }
-    std::string write(const std::string& name, const std::string& text) const {
-        std::ofstream(path / name) << text;
-        return (path / name).string();
-    }
-};
+using beamctl::test::TempDir;
 
 // Output 1 of the EL2008 is wired to input 1 of the EL1008. The PLC sets the output in exactly
 // one scan (the 5th), so the input is high in one cycle only; input 2 never changes.
@@ -104,4 +95,58 @@ TEST(IocIoIntr, APulseBetweenTwoLooksStillProcessesTheRecordAndWakesTheLoop) {
     EXPECT_EQ(value(ioc, "T:Count"), count0 + 1);
     ioc.engine().run_cycles(20);
     EXPECT_FALSE(readable(bus.change_fd())); // no change, no wake-up
+}
+
+// ecmccfg's records: DTYP asynInt32/asynUInt32Digital with "@asyn(...)" / "@asynMask(...)" addresses
+// read and write the same signals as DTYP "beamctl" (a one-bit MASK is a bit of the entry).
+TEST(IocIoIntr, EcmccfgAsynAddressesReachTheSameSignals) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("pulse.plc", "static.n := 0;\n");
+    d.write("io.db", R"db(
+record(bo, "T:Out") {
+  field(DTYP, "asynUInt32Digital")
+  field(OUT, "@asynMask(MC_CPU1,0,0x1,1)T_SMP_MS=10/TYPE=asynUInt32Digital/ec0.s2.binaryOutput01=")
+}
+record(longin, "T:In") {
+  field(DTYP, "asynInt32")
+  field(INP, "@asyn(MC_CPU1,0,1)T_SMP_MS=10/TYPE=asynInt32/ec0.s1.binaryInput01?")
+  field(SCAN, "I/O Intr")
+}
+)db");
+    rt::VirtualClock clock;
+    ioc::Ioc ioc(config::IocConfig::load(d.write("ioc.yaml", kIoc)), clock);
+    ioc.bring_up();
+    EXPECT_EQ(ioc.signals().find("ec0.s2.binaryOutput01")->writer, "record T:Out");
+    ioc.engine().run_cycles(3);
+    pv::Address a;
+    ASSERT_TRUE(ioc.database().resolve("T:Out", a));
+    double one = 1;
+    EXPECT_EQ(ioc.database().put(a, pv::Prim::Double, &one, 1), pv::PutStatus::Ok);
+    ioc.engine().run_cycles(5); // sent, wired back, received
+    ioc.bus(0).drain_changes();
+    ioc.database().scan_io_intr();
+    EXPECT_EQ(value(ioc, "T:In"), 1);
+
+    // a mask of more than one bit, and an asyn address without a signal name, are refused
+    TempDir bad;
+    bad.write("plant.yaml", kPlant);
+    bad.write("pulse.plc", "static.n := 0;\n");
+    bad.write("io.db", R"db(
+record(mbbiDirect, "T:Two") {
+  field(DTYP, "asynUInt32Digital")
+  field(INP, "@asynMask(MC_CPU1,0,0x3,1)T_SMP_MS=10/TYPE=asynUInt32Digital/ec0.s1.binaryInput01?")
+}
+record(longin, "T:None") { field(DTYP, "asynInt32") field(INP, "@asyn(MC_CPU1,0,1)") }
+)db");
+    std::string e;
+    try {
+        ioc::Ioc b(config::IocConfig::load(bad.write("ioc.yaml", kIoc)), clock);
+        b.bring_up();
+    } catch (const Error& x) {
+        e = x.what();
+    }
+    EXPECT_NE(e.find("MASK '0x3': only a mask of one bit is supported"), std::string::npos) << e;
+    EXPECT_NE(e.find("no signal name after the asyn port"), std::string::npos) << e;
+    EXPECT_NE(e.find("io.db:"), std::string::npos) << e;
 }
