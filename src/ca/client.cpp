@@ -241,6 +241,7 @@ struct ClientImpl : std::enable_shared_from_this<ClientImpl> {
     std::vector<std::function<void()>> deferred; // callbacks to run once the state is consistent
     uint32_t next_cid = 1, next_subid = 1, next_ioid = 1;
     EventLoop::TimerId tick_timer = 0, soon_timer = 0;
+    EventLoop::HookId flush_hook = 0;
     double registered_s = -1e9;
     bool shut = false;
     std::vector<uint8_t> rxbuf = std::vector<uint8_t>(64 * 1024);
@@ -271,7 +272,7 @@ struct ClientImpl : std::enable_shared_from_this<ClientImpl> {
         loop.add_fd(udp_fd, EPOLLIN, [this](uint32_t) { on_udp(); });
         tick_timer = loop.call_every(kTick_s, [this] { tick(); });
         std::weak_ptr<ClientImpl> w = weak_from_this();
-        loop.add_after_batch([w] {
+        flush_hook = loop.add_after_batch([w] {
             if (auto s = w.lock()) s->flush_dirty();
         });
         if (cfg.user.empty()) {
@@ -289,6 +290,8 @@ struct ClientImpl : std::enable_shared_from_this<ClientImpl> {
         if (shut) return;
         shut = true;
         if (tick_timer) loop.cancel(tick_timer);
+        if (flush_hook) loop.remove_after_batch(flush_hook);
+        flush_hook = 0;
         if (soon_timer) loop.cancel(soon_timer);
         for (auto& [fd, c] : circs) {
             loop.remove_fd(fd);

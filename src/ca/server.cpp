@@ -157,6 +157,7 @@ Server::Server(EventLoop& loop, pv::Database& db, ServerConfig cfg)
 
 Server::~Server() {
     if (beacon_timer_) loop_.cancel(beacon_timer_);
+    if (after_batch_) loop_.remove_after_batch(after_batch_);
     for (auto& [fd, c] : conns_) {
         loop_.remove_fd(fd);
         ::close(fd);
@@ -310,7 +311,7 @@ void Server::start() {
             beacon_targets_.push_back(t);
         }
     }
-    loop_.add_after_batch([this] {
+    after_batch_ = loop_.add_after_batch([this] {
         std::vector<int> dirty;
         dirty.swap(dirty_);
         for (int fd : dirty) {

@@ -101,6 +101,7 @@ private:
     std::vector<sockaddr_in> beacon_targets_;
     BeaconSchedule beacons_{15.0};
     EventLoop::TimerId beacon_timer_ = 0;
+    EventLoop::HookId after_batch_ = 0; // flushes the circuits written in a batch
     std::unordered_map<int, std::unique_ptr<Conn>> conns_;
     std::vector<int> dirty_;
     std::vector<uint8_t> rxbuf_;

@@ -84,7 +84,16 @@ void EventLoop::cancel(TimerId id) {
     timer_due_.erase(it);
 }
 
-void EventLoop::add_after_batch(std::function<void()> fn) { after_batch_.push_back(std::move(fn)); }
+EventLoop::HookId EventLoop::add_after_batch(std::function<void()> fn) {
+    after_batch_.emplace_back(next_hook_, std::move(fn));
+    return next_hook_++;
+}
+
+void EventLoop::remove_after_batch(HookId id) {
+    // emptied, not erased: a hook may remove another (or itself) while they run
+    for (auto& [hid, fn] : after_batch_)
+        if (hid == id) fn = nullptr;
+}
 
 void EventLoop::post(std::function<void()> fn) {
     {
@@ -141,7 +150,12 @@ void EventLoop::run() {
                 t.fn();
             }
         }
-        for (auto& fn : after_batch_) fn();
+        for (std::size_t i = 0; i < after_batch_.size(); ++i)
+            if (after_batch_[i].second) {
+                auto fn = after_batch_[i].second; // the hook may remove itself while it runs
+                fn();
+            }
+        std::erase_if(after_batch_, [](const auto& h) { return !h.second; });
     }
 }
 

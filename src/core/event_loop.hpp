@@ -33,8 +33,11 @@ public:
     TimerId call_every(double period_s, std::function<void()> fn);
     void cancel(TimerId id);
 
-    // Runs after every batch of handlers and timers, before the loop sleeps again.
-    void add_after_batch(std::function<void()> fn);
+    // Runs after every batch of handlers and timers, before the loop sleeps again, until removed
+    // (an owner that goes before the loop removes its hook in its destructor).
+    using HookId = uint64_t;
+    HookId add_after_batch(std::function<void()> fn);
+    void remove_after_batch(HookId id);
 
     // Thread-safe: runs fn on the loop thread soon.
     void post(std::function<void()> fn);
@@ -59,7 +62,8 @@ private:
     std::multimap<double, Timer> timers_;
     std::unordered_map<TimerId, double> timer_due_;
     TimerId next_timer_ = 1;
-    std::vector<std::function<void()>> after_batch_;
+    std::vector<std::pair<HookId, std::function<void()>>> after_batch_;
+    HookId next_hook_ = 1;
     std::mutex posted_mu_;
     std::vector<std::function<void()>> posted_;
 };
