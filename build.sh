@@ -45,18 +45,19 @@ ca_repeater_link() {
     echo "== /usr/local/bin/caRepeater -> $ROOT/build/release/beamctl (the CA repeater libca starts)"
 }
 
-build() {
+build() { # preset [targets...] (default: everything)
     local preset=${1:-release}
-    echo "== building ($preset)"
+    shift || true
+    echo "== building ($preset${*:+: $*})"
     [ -f "build/$preset/build.ninja" ] || cmake --preset "$preset" >/dev/null
-    cmake --build --preset "$preset" -j "$JOBS"
+    cmake --build --preset "$preset" -j "$JOBS" ${*:+--target "$@"}
 }
 
 unit() {
     echo "== unit tests (release)"
     (cd build/release && ctest --output-on-failure -j "$JOBS")
     if [ "${BEAMCTL_SKIP_SANITIZE:-0}" != 1 ]; then
-        build dev
+        build dev beamctl_unit_tests # only what the sanitized run needs (no app, no benchmarks)
         echo "== unit tests (ASan + UBSan)"
         (cd build/dev && ctest --output-on-failure -j "$JOBS")
     fi
