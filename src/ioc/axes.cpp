@@ -4,6 +4,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "ioc/pv_table.hpp"
 #include "ioc/pv_util.hpp"
 #include "motion/axis_setup.hpp"
 #include "pv/motor_record.hpp"
@@ -135,6 +136,145 @@ std::vector<std::pair<std::string, std::string>> field_init(const std::string& s
     }
     return v;
 }
+// The axis PVs as ecmccfg's ecmcAxis.db names them, on the axis's data items (ECMC's asyn names
+// where ECMC has them: ax<n>.actpos, .status, .control, ...). The commands are writes: EnaCmd,
+// ExeCmd, StpCmd and RstCmd are bits 0-3 of ax<n>.control, as ecmccfg's asynMask records.
+const PvTable& axis_table() {
+    static const PvTable t{"axis", {
+        {"-PosAct", "ai", "actpos", {{"DESC", "Actual position"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
+        {"-VelAct", "ai", "actvel", {{"DESC", "Actual velocity"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)/s"}}},
+        {"-PosSet", "ai", "setpos", {{"DESC", "Setpoint position"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
+        {"-PosErr", "ai", "poserr", {{"DESC", "Following error"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
+        {"-Stat", "longin", "status", {{"DESC", "Status word"}}},
+        {"-ErrId", "longin", "errorid", {{"DESC", "Error id"}, {"HIHI", "1"}, {"HHSV", "MAJOR"}}},
+        {"-WrnId", "longin", "warningid", {{"DESC", "Warning id"}, {"HIHI", "1"}, {"HHSV", "MINOR"}}},
+        {"-SeqState", "longin", "seqstate", {{"DESC", "Homing sequence state"}}},
+        {"-LastIlock", "longin", "lastilock", {{"DESC", "Last interlock"}}},
+        {"-EnaAct", "bi", "status.1", {{"DESC", "Enabled"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}}},
+        {"-Busy", "bi", "status.3", {{"DESC", "Busy"}, {"ZNAM", "Idle"}, {"ONAM", "Busy"}}},
+        {"-AtTarget", "bi", "status.4", {{"DESC", "At target"}, {"ZNAM", "Not at target"}, {"ONAM", "At target"}}},
+        {"-Moving", "bi", "status.5", {{"DESC", "Moving"}, {"ZNAM", "Stopped"}, {"ONAM", "Moving"}}},
+        {"-LimFwd", "bi", "status.6", {{"DESC", "Forward limit switch"}, {"ZNAM", "Limit activated"}, {"ONAM", "Limit OK"}, {"ZSV", "MINOR"}}},
+        {"-LimBwd", "bi", "status.7", {{"DESC", "Backward limit switch"}, {"ZNAM", "Limit activated"}, {"ONAM", "Limit OK"}, {"ZSV", "MINOR"}}},
+        {"-HomeSwitch", "bi", "status.8", {{"DESC", "Home switch"}, {"ZNAM", "Off"}, {"ONAM", "On"}}},
+        {"-Homed", "bi", "status.9", {{"DESC", "Homed"}, {"ZNAM", "Not homed"}, {"ONAM", "Homed"}}},
+        {"-Err", "bi", "errorid", {{"DESC", "Error"}, {"ZNAM", "No error"}, {"ONAM", "Error"}, {"OSV", "MAJOR"}}},
+        // EnaCmd follows the axis when it disables itself (an error): asyn's read-back
+        {"-EnaCmd", "bo", "control.0", {{"DESC", "Enable"}, {"ZNAM", "Disable"}, {"ONAM", "Enable"}}, true},
+        {"-ExeCmd", "bo", "control.1", {{"DESC", "Execute MtnCmd (rising edge)"}, {"ZNAM", "Stop"}, {"ONAM", "Execute"}}},
+        {"-StpCmd", "bo", "control.2", {{"DESC", "Stop"}, {"ZNAM", "0"}, {"ONAM", "Stop"}}},
+        {"-RstCmd", "bo", "control.3", {{"DESC", "Reset errors"}, {"ZNAM", "0"}, {"ONAM", "Reset"}}},
+        {"-TgtPosCmd", "ao", "targpos", {{"DESC", "Target position"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
+        {"-TgtVelCmd", "ao", "targvelo", {{"DESC", "Target velocity"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)/s"}, {"VAL", "$(VELO)"}}},
+        {"-MtnCmd", "longout", "command", {{"DESC", "1 VEL 2 REL 3 ABS 10 HOME"}, {"VAL", "3"}}},
+        {"-MtnCmdData", "longout", "cmddata", {{"DESC", "Homing sequence; 14 = configured"}, {"VAL", "14"}}},
+        {"-MsgTxt", "stringin", "", {{"DESC", "Error message"}}}, // text: set by the axes on an error
+    }};
+    return t;
+}
+
+// One row per encoder: $(P) = "<axis PV>-Enc01", signals "ax<n>.enc01.*".
+const PvTable& encoder_table() {
+    static const PvTable t{"axis encoder", {
+        {"-PosAct", "ai", "actpos", {{"DESC", "Encoder $(N) position"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
+    }};
+    return t;
+}
+
+std::string encoder_key(std::size_t k) { // "enc01"
+    char n[16];
+    std::snprintf(n, sizeof n, "enc%02zu", k + 1);
+    return n;
+}
+
+// The axis's data items as the IOC loop sees them (ECMC's asyn names where ECMC has them), with
+// the PLC variable of the same value: what records read and write through device support.
+// Readbacks come from the axis group's latest snapshot; the command items are the IOC's own
+// (ExeCmd runs `command` with targpos, targvelo and cmddata, as ECMC's control word does).
+enum class Write : uint8_t { None, TargPos, TargVelo, Command, CmdData, Control };
+struct AxisItem {
+    const char* name; // after "ax<n>."
+    const char* plc;  // the PLC variable with this value ("" none); a record may use either name
+    Write write;
+    int control_bit;  // a PLC name that is one bit of `control` (drv.enable = bit 0), else -1
+    double (*get)(const motion::AxisStatus& s, const AxisCommandState& c);
+};
+constexpr AxisItem kAxisItems[] = {
+    {"actpos", "enc.actpos", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return s.act_pos; }},
+    {"actvel", "enc.actvel", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return s.act_vel; }},
+    {"setpos", "traj.setpos", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return s.set_pos; }},
+    {"poserr", "", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return s.pos_err; }},
+    {"status", "", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.stat_word()); }},
+    {"errorid", "error", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.error_id); }},
+    {"warningid", "", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.warning_id); }},
+    {"seqstate", "", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.sequence_state); }},
+    {"lastilock", "", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(uint8_t(s.last_interlock)); }},
+    {"targpos", "traj.targetpos", Write::TargPos, -1, [](const motion::AxisStatus&, const AxisCommandState& c) { return c.targpos; }},
+    {"targvelo", "traj.targetvel", Write::TargVelo, -1, [](const motion::AxisStatus&, const AxisCommandState& c) { return c.targvelo; }},
+    {"command", "traj.command", Write::Command, -1, [](const motion::AxisStatus&, const AxisCommandState& c) { return double(c.command); }},
+    {"cmddata", "traj.cmddata", Write::CmdData, -1, [](const motion::AxisStatus&, const AxisCommandState& c) { return double(c.cmddata); }},
+    // bit 0 enable (the axis's enable command), 1 execute, 2 stop, 3 reset
+    {"control", "", Write::Control, -1, [](const motion::AxisStatus& s, const AxisCommandState& c) {
+         return double((c.control & ~1u) | (s.enable_cmd ? 1u : 0u)); }},
+    // PLC names of bits and flags
+    {"", "drv.enable", Write::Control, 0, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.enable_cmd); }},
+    {"", "traj.execute", Write::Control, 1, [](const motion::AxisStatus&, const AxisCommandState& c) { return double(c.control >> 1 & 1); }},
+    {"", "reset", Write::Control, 3, [](const motion::AxisStatus&, const AxisCommandState& c) { return double(c.control >> 3 & 1); }},
+    {"", "drv.enabled", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.enabled); }},
+    {"", "traj.busy", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.busy); }},
+    {"", "mon.attarget", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.at_target); }},
+    {"", "mon.lowlim", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(!s.limit_bwd); }},
+    {"", "mon.highlim", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(!s.limit_fwd); }},
+    {"", "mon.homesensor", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.home_sensor); }},
+    {"", "enc.homed", Write::None, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.homed); }},
+};
+
+const AxisItem* find_item(std::string_view name) {
+    for (const AxisItem& it : kAxisItems)
+        if ((*it.name && name == it.name) || (*it.plc && name == it.plc)) return &it;
+    return nullptr;
+}
+
+// Device support "beamctl" on an axis data item: "@ax1.actpos", "@ax1.status.1" (a bit),
+// "@ax1.control.0" (EnaCmd), "@ax1.enc01.actpos", or a PLC name ("@ax1.enc.actpos"). Reads the
+// axis group's latest snapshot (the IOC loop's 10 ms look: SCAN "I/O Intr" records are processed
+// when the value differs from the last one read); writes are the axis's commands. IOC loop only.
+class AxisItemDevice : public pv::LinkDevice {
+public:
+    AxisItemDevice(IocAxes& axes, std::size_t i, const AxisItem* item, int enc, int bit, bool binary, std::string name)
+        : axes_(axes), i_(i), item_(item), enc_(enc), bit_(bit), binary_(binary), name_(std::move(name)) {}
+    bool read(double& v) override {
+        v = value();
+        last_ = v;
+        return true;
+    }
+    bool write(double v) override {
+        if (!item_ || item_->write == Write::None || !std::isfinite(v)) return false;
+        return axes_.write_item(i_, int(item_->write), item_->control_bit >= 0 ? item_->control_bit : bit_, v);
+    }
+    bool changed() override {
+        double v = value();
+        bool c = !(v == last_);
+        last_ = v;
+        return c;
+    }
+    std::string describe() const override { return name_; }
+
+private:
+    double value() const {
+        const motion::AxisStatus& s = axes_.status(i_);
+        double v = item_ ? item_->get(s, axes_.command_state(i_)) : (enc_ < s.enc_count ? s.enc_pos[std::size_t(enc_)] : 0.0);
+        if (bit_ >= 0) return double(uint64_t(int64_t(v)) >> bit_ & 1);
+        return binary_ ? double(v != 0) : v;
+    }
+    IocAxes& axes_;
+    std::size_t i_;
+    const AxisItem* item_; // null: encoder enc_'s position
+    int enc_, bit_;
+    bool binary_;
+    std::string name_;
+    double last_ = NAN;
+};
 } // namespace
 
 IocAxes::IocAxes(const std::vector<config::AxisEntry>& entries, const std::string& prefix,
@@ -174,23 +314,35 @@ IocAxes::IocAxes(const std::vector<config::AxisEntry>& entries, const std::strin
             s.direction = v.writable ? registry::Direction::Variable : registry::Direction::Input;
             s.owner_kind = registry::OwnerKind::Axis;
             s.owner = owner;
-            std::string_view n = v.name;
-            if (n == "enc.actpos") s.pv = a.pv + "-PosAct";
-            else if (n == "enc.actvel") s.pv = a.pv + "-VelAct";
-            else if (n == "traj.setpos") s.pv = a.pv + "-PosSet";
-            else if (n == "traj.targetpos") s.pv = a.pv + "-TgtPosCmd";
-            else if (n == "traj.targetvel") s.pv = a.pv + "-TgtVelCmd";
-            else if (n == "traj.busy") s.pv = a.pv + "-Busy";
-            else if (n == "drv.enabled") s.pv = a.pv + "-EnaAct";
-            else if (n == "mon.attarget") s.pv = a.pv + "-AtTarget";
-            else if (n == "mon.lowlim") s.pv = a.pv + "-LimBwd";
-            else if (n == "mon.highlim") s.pv = a.pv + "-LimFwd";
-            else if (n == "error") s.pv = a.pv + "-ErrId";
             signals.declare(std::move(s));
         }
+        // ... and as its PVs and other records do: ax<n>.actpos, .status, .control, ...
+        auto item = [&](std::string name, bool writable) {
+            registry::Signal s;
+            s.name = SB() << "ax" << id << "." << name;
+            s.type = "LREAL";
+            s.direction = writable ? registry::Direction::Variable : registry::Direction::Input;
+            s.owner_kind = registry::OwnerKind::Axis;
+            s.owner = owner;
+            signals.declare(std::move(s));
+        };
+        for (const AxisItem& it : kAxisItems)
+            if (*it.name) item(it.name, it.write != Write::None);
+        for (std::size_t k = 0; k < a.cfg.encoders.size() && k < motion::AxisStatus::kMaxEncoders; ++k)
+            item(encoder_key(k) + ".actpos", false);
+        a.cmd.targvelo = a.params.trajectory.velocity;
         axes_.push_back(std::move(a));
     }
-    for (std::size_t i = 0; i < axes_.size(); ++i) make_pvs(axes_[i], i);
+    for (Axis& a : axes_) {
+        make_pvs(a, signals);
+        // the PLC name of an item is served by the item's PV
+        for (const AxisItem& it : kAxisItems) {
+            if (!*it.name || !*it.plc) continue;
+            std::string p = SB() << "ax" << a.params.id << ".";
+            if (const registry::Signal* s = signals.find(p + it.name); s && !s->pv.empty()) signals.set_pv(p + it.plc, s->pv);
+        }
+    }
+    attach_motor_drivers();
 }
 
 std::string IocAxes::owner(std::size_t i) const {
@@ -203,93 +355,31 @@ int IocAxes::find(const std::string& name) const {
     return -1;
 }
 
-void IocAxes::make_pvs(Axis& a, std::size_t index) {
-    pv::DbFile f;
-    const std::string& p = a.pv;
-    std::string prec = std::to_string(a.cfg.epics.precision), egu = a.cfg.epics.unit;
-    auto ai = [&](const char* s, const char* desc, const std::string& unit) {
-        f.records.push_back(record("ai", p + s, {{"DESC", desc}, {"PREC", prec}, {"EGU", unit}}));
-    };
-    auto li = [&](const char* s, const char* desc) { f.records.push_back(record("longin", p + s, {{"DESC", desc}})); };
-    auto bi = [&](const char* s, const char* desc, const char* z, const char* o) {
-        f.records.push_back(record("bi", p + s, {{"DESC", desc}, {"ZNAM", z}, {"ONAM", o}}));
-    };
-    auto bo = [&](const char* s, const char* desc, const char* z, const char* o) {
-        f.records.push_back(record("bo", p + s, {{"DESC", desc}, {"ZNAM", z}, {"ONAM", o}}));
-    };
-    ai("-PosAct", "Actual position", egu);
-    ai("-VelAct", "Actual velocity", egu + "/s");
-    ai("-PosSet", "Setpoint position", egu);
-    ai("-PosErr", "Following error", egu);
-    li("-Stat", "Status word");
-    f.records.push_back(record("longin", p + "-ErrId", {{"DESC", "Error id"}, {"HIHI", "1"}, {"HHSV", "MAJOR"}}));
-    f.records.push_back(record("longin", p + "-WrnId", {{"DESC", "Warning id"}, {"HIHI", "1"}, {"HHSV", "MINOR"}}));
-    li("-SeqState", "Homing sequence state");
-    li("-LastIlock", "Last interlock");
-    bi("-EnaAct", "Enabled", "Disabled", "Enabled");
-    bi("-Busy", "Busy", "Idle", "Busy");
-    bi("-AtTarget", "At target", "Not at target", "At target");
-    bi("-Moving", "Moving", "Stopped", "Moving");
-    f.records.push_back(record("bi", p + "-LimFwd", {{"DESC", "Forward limit switch"}, {"ZNAM", "Limit activated"}, {"ONAM", "Limit OK"}, {"ZSV", "MINOR"}}));
-    f.records.push_back(record("bi", p + "-LimBwd", {{"DESC", "Backward limit switch"}, {"ZNAM", "Limit activated"}, {"ONAM", "Limit OK"}, {"ZSV", "MINOR"}}));
-    bi("-HomeSwitch", "Home switch", "Off", "On");
-    bi("-Homed", "Homed", "Not homed", "Homed");
-    f.records.push_back(record("bi", p + "-Err", {{"DESC", "Error"}, {"ZNAM", "No error"}, {"ONAM", "Error"}, {"OSV", "MAJOR"}}));
-    bo("-EnaCmd", "Enable", "Disable", "Enable");
-    bo("-ExeCmd", "Execute MtnCmd (rising edge)", "Stop", "Execute");
-    bo("-StpCmd", "Stop", "0", "Stop");
-    bo("-RstCmd", "Reset errors", "0", "Reset");
-    f.records.push_back(record("ao", p + "-TgtPosCmd", {{"DESC", "Target position"}, {"PREC", prec}, {"EGU", egu}}));
-    f.records.push_back(record("ao", p + "-TgtVelCmd", {{"DESC", "Target velocity"}, {"PREC", prec}, {"EGU", egu + "/s"},
-                                                          {"VAL", std::to_string(a.params.trajectory.velocity)}}));
-    f.records.push_back(record("longout", p + "-MtnCmd", {{"DESC", "1 VEL 2 REL 3 ABS 10 HOME"}, {"VAL", "3"}}));
-    f.records.push_back(record("longout", p + "-MtnCmdData", {{"DESC", "Homing sequence; 14 = configured"}, {"VAL", "14"}}));
-    f.records.push_back(record("stringin", p + "-MsgTxt", {{"DESC", "Error message"}}));
+void IocAxes::make_pvs(Axis& a, registry::Registry& signals) {
+    char velo[40];
+    std::snprintf(velo, sizeof velo, "%.12g", a.params.trajectory.velocity);
+    std::string sp = SB() << "ax" << a.params.id << ".";
+    PvInstance in{a.pv, sp, {{"PREC", std::to_string(a.cfg.epics.precision)}, {"EGU", a.cfg.epics.unit}, {"VELO", velo}}};
+    pv::DbFile f = make_records(axis_table(), in, signals);
+    name_pvs(axis_table(), in, signals);
     for (std::size_t k = 0; k < a.cfg.encoders.size() && k < motion::AxisStatus::kMaxEncoders; ++k) {
-        char n[24];
-        std::snprintf(n, sizeof n, "-Enc%02zu-PosAct", k + 1);
-        f.records.push_back(record("ai", p + n, {{"DESC", (SB() << "Encoder " << k + 1 << " position").str()}, {"PREC", prec}, {"EGU", egu}}));
+        char dash[16];
+        std::snprintf(dash, sizeof dash, "-Enc%02zu", k + 1);
+        PvInstance e{a.pv + dash, sp + encoder_key(k) + ".", in.macros};
+        e.macros["N"] = std::to_string(k + 1);
+        pv::merge_db(f, make_records(encoder_table(), e, signals));
+        name_pvs(encoder_table(), e, signals);
     }
     if (a.cfg.epics.motor_record.enable) make_motor_record(a, f);
     db_.load(f);
-    for (std::size_t k = 0; k < a.cfg.encoders.size() && k < motion::AxisStatus::kMaxEncoders; ++k) {
-        char n[24];
-        std::snprintf(n, sizeof n, "-Enc%02zu-PosAct", k + 1);
-        a.enc.push_back(db_.find(p + n));
-        a.enc.back()->val_read_only = true;
-    }
-    if (a.cfg.epics.motor_record.enable)
-        if (pv::MotorRecord* m = pv::MotorRecord::from(db_.find(p))) m->set_driver(std::make_shared<AxisMotorDriver>(*this, index));
-    auto rec = [&](const char* s) { return db_.find(p + s); };
-    a.pos_act = rec("-PosAct");
-    a.vel_act = rec("-VelAct");
-    a.pos_set = rec("-PosSet");
-    a.pos_err = rec("-PosErr");
-    a.stat = rec("-Stat");
-    a.err_id = rec("-ErrId");
-    a.wrn_id = rec("-WrnId");
-    a.seq_state = rec("-SeqState");
-    a.last_ilock = rec("-LastIlock");
-    a.ena_act = rec("-EnaAct");
-    a.busy = rec("-Busy");
-    a.at_target = rec("-AtTarget");
-    a.moving = rec("-Moving");
-    a.lim_fwd = rec("-LimFwd");
-    a.lim_bwd = rec("-LimBwd");
-    a.home_switch = rec("-HomeSwitch");
-    a.homed = rec("-Homed");
-    a.err = rec("-Err");
-    a.ena_cmd = rec("-EnaCmd");
-    a.exe_cmd = rec("-ExeCmd");
-    a.tgt_pos = rec("-TgtPosCmd");
-    a.tgt_vel = rec("-TgtVelCmd");
-    a.mtn_cmd = rec("-MtnCmd");
-    a.mtn_data = rec("-MtnCmdData");
-    a.msg = rec("-MsgTxt");
-    for (pv::Record* r : {a.pos_act, a.vel_act, a.pos_set, a.pos_err, a.stat, a.err_id, a.wrn_id, a.seq_state, a.last_ilock,
-                          a.ena_act, a.busy, a.at_target, a.moving, a.lim_fwd, a.lim_bwd, a.home_switch, a.homed, a.err, a.msg})
-        r->val_read_only = true;
-    hook(index);
+    a.msg = db_.find(a.pv + "-MsgTxt");
+    a.msg->val_read_only = true;
+}
+
+void IocAxes::attach_motor_drivers() {
+    for (std::size_t i = 0; i < axes_.size(); ++i)
+        if (axes_[i].cfg.epics.motor_record.enable)
+            if (pv::MotorRecord* m = pv::MotorRecord::from(db_.find(axes_[i].pv))) m->set_driver(std::make_shared<AxisMotorDriver>(*this, i));
 }
 
 uint64_t IocAxes::send(std::size_t i, motion::AxisCommand c) {
@@ -343,47 +433,79 @@ void IocAxes::make_motor_record(Axis& a, pv::DbFile& f) {
     f.records.push_back(record("motor", a.pv, fields));
 }
 
-// PV writes become axis commands (ECMC control-word semantics).
-void IocAxes::hook(std::size_t i) {
-    Axis& a = axes_[i];
-    auto on_val = [](auto fn) {
-        return [fn](pv::Record& r, const pv::FieldDesc& f) {
-            if (std::string_view(f.name) != "VAL") return pv::PutStatus::Ok;
-            return fn(get_value(r)) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
-        };
-    };
-    a.ena_cmd->put_hook = on_val([this, i](double v) {
-        motion::AxisCommand c{motion::CommandType::Power};
-        c.on = v != 0;
-        return send(i, c) != 0;
-    });
-    a.exe_cmd->put_hook = [this, i](pv::Record& r, const pv::FieldDesc& f) {
-        if (std::string_view(f.name) != "VAL") return pv::PutStatus::Ok;
-        Axis& ax = axes_[i];
-        double v = get_value(r);
-        motion::AxisCommand c;
-        if (v == 0) { // falling edge: stop with the normal deceleration
-            c.type = motion::CommandType::Halt;
-        } else {
-            c.type = command_of(int(get_value(*ax.mtn_cmd)));
-            if (c.type == motion::CommandType::None) return pv::PutStatus::Failed;
-            c.position = get_value(*ax.tgt_pos);
-            c.velocity = get_value(*ax.tgt_vel);
-            if (c.type == motion::CommandType::MoveVelocity && c.position < 0) c.velocity = -std::fabs(c.velocity);
-            c.homing_sequence = int(get_value(*ax.mtn_data));
+std::unique_ptr<pv::LinkDevice> IocAxes::make_device(std::string_view name, int bit, bool output, bool binary, std::string& why) {
+    // "ax<id>.<item>"
+    std::size_t dot = name.find('.');
+    int id = dot != std::string_view::npos && name.size() > 2 ? std::atoi(std::string(name.substr(2, dot - 2)).c_str()) : -1;
+    std::size_t i = 0;
+    while (i < axes_.size() && axes_[i].params.id != id) ++i;
+    if (i == axes_.size()) {
+        why = SB() << "no axis " << id << " for '" << name << "'";
+        return nullptr;
+    }
+    std::string_view rest = name.substr(dot + 1);
+    const AxisItem* item = find_item(rest);
+    int enc = -1;
+    if (!item) {
+        for (std::size_t k = 0; k < axes_[i].cfg.encoders.size() && k < motion::AxisStatus::kMaxEncoders; ++k)
+            if (rest == encoder_key(k) + ".actpos") enc = int(k);
+        if (enc < 0) {
+            why = SB() << "'" << name << "' lives in the cycle only (PLC code reads and writes it); records reach "
+                       << "ax" << id << ".actpos, .actvel, .setpos, .poserr, .status, .errorid, .warningid, "
+                       << ".targpos, .targvelo, .command, .cmddata, .control and the encoders' .encNN.actpos";
+            return nullptr;
         }
-        return send(i, c) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
-    };
-    db_.find(a.pv + "-StpCmd")->put_hook = on_val([this, i](double v) {
-        if (v == 0) return true;
-        motion::AxisCommand c{motion::CommandType::Halt};
-        return send(i, c) != 0;
-    });
-    db_.find(a.pv + "-RstCmd")->put_hook = on_val([this, i](double v) {
-        if (v == 0) return true;
-        motion::AxisCommand c{motion::CommandType::Reset};
-        return send(i, c) != 0;
-    });
+    }
+    if (output && (!item || item->write == Write::None)) {
+        why = SB() << "'" << name << "' is a readback of " << owner(i) << "; an output link cannot write it";
+        return nullptr;
+    }
+    if (output && bit >= 0 && item->write != Write::Control) {
+        why = SB() << "'" << name << "." << bit << "': only the bits of ax" << id << ".control are commands";
+        return nullptr;
+    }
+    std::string full = bit >= 0 ? std::string(SB() << name << "." << bit) : std::string(name);
+    return std::make_unique<AxisItemDevice>(*this, i, item, enc, bit, binary, full);
+}
+
+bool IocAxes::write_item(std::size_t i, int w, int bit, double v) {
+    AxisCommandState& c = axes_.at(i).cmd;
+    switch (Write(w)) {
+    case Write::None: return false;
+    case Write::TargPos: c.targpos = v; return true;
+    case Write::TargVelo: c.targvelo = v; return true;
+    case Write::Command: c.command = int(v); return true;
+    case Write::CmdData: c.cmddata = int(v); return true;
+    case Write::Control: break;
+    }
+    // the control word (ECMC): bit 0 enable, 1 execute (1 runs `command`, 0 halts), 2 stop, 3 reset
+    uint32_t old = c.control | (status(i).enable_cmd ? 1u : 0u);
+    uint32_t word = bit >= 0 ? (v != 0 ? old | 1u << bit : old & ~(1u << bit)) : uint32_t(int64_t(v));
+    uint32_t touched = bit >= 0 ? 1u << bit : (old ^ word) | (word & 0xCu); // stop/reset: every write of 1
+    c.control = word & ~1u;
+    bool ok = true;
+    if (touched & 1u) {
+        motion::AxisCommand p{motion::CommandType::Power};
+        p.on = word & 1u;
+        ok = send(i, p) != 0 && ok;
+    }
+    if (touched & 2u) {
+        motion::AxisCommand m;
+        if (!(word & 2u)) { // execute low: stop with the normal deceleration
+            m.type = motion::CommandType::Halt;
+        } else {
+            m.type = command_of(c.command);
+            if (m.type == motion::CommandType::None) return false;
+            m.position = c.targpos;
+            m.velocity = c.targvelo;
+            if (m.type == motion::CommandType::MoveVelocity && c.targpos < 0) m.velocity = -std::fabs(m.velocity);
+            m.homing_sequence = c.cmddata;
+        }
+        ok = send(i, m) != 0 && ok;
+    }
+    if ((touched & 4u) && (word & 4u)) ok = send(i, motion::AxisCommand{motion::CommandType::Halt}) != 0 && ok;
+    if ((touched & 8u) && (word & 8u)) ok = send(i, motion::AxisCommand{motion::CommandType::Reset}) != 0 && ok;
+    return ok;
 }
 
 void IocAxes::bind(const Resolver& resolve, rt::Engine& engine) {
@@ -394,46 +516,14 @@ void IocAxes::bind(const Resolver& resolve, rt::Engine& engine) {
     engine.add_stage(rt::StageOrder::Axes, *group_);
 }
 
-void IocAxes::publish_one(Axis& a, const motion::AxisStatus& s) {
-    const double values[] = {s.act_pos, s.act_vel, s.set_pos, s.pos_err, double(s.stat_word()), double(s.error_id),
-                             double(s.warning_id), double(s.sequence_state), double(uint8_t(s.last_interlock)),
-                             double(s.enabled), double(s.busy), double(s.at_target), double(s.moving),
-                             double(!s.limit_fwd), double(!s.limit_bwd), double(s.home_sensor), double(s.homed),
-                             double(s.error_id != 0)};
-    pv::Record* recs[] = {a.pos_act, a.vel_act, a.pos_set, a.pos_err, a.stat, a.err_id, a.wrn_id, a.seq_state,
-                          a.last_ilock, a.ena_act, a.busy, a.at_target, a.moving, a.lim_fwd, a.lim_bwd,
-                          a.home_switch, a.homed, a.err};
-    constexpr std::size_t n = sizeof recs / sizeof recs[0];
-    if (a.last.size() != n) a.last.assign(n, NAN);
-    for (std::size_t k = 0; k < n; ++k) {
-        if (values[k] == a.last[k] && !recs[k]->udf) continue;
-        a.last[k] = values[k];
-        set_value(db_, *recs[k], values[k], false);
-    }
-    if (a.enc_last.size() != a.enc.size()) a.enc_last.assign(a.enc.size(), NAN);
-    for (std::size_t k = 0; k < a.enc.size() && int(k) < s.enc_count; ++k) {
-        double v = s.enc_pos[k];
-        if (v == a.enc_last[k] && !a.enc[k]->udf) continue;
-        a.enc_last[k] = v;
-        set_value(db_, *a.enc[k], v, false);
-    }
-    // EnaCmd follows changes the axis makes itself (an error that disables clears it); a
-    // processed record does not call its put hook, so this sends no command.
-    if (s.enable_cmd != a.last_enable_cmd) {
-        a.last_enable_cmd = s.enable_cmd;
-        if (get_value(*a.ena_cmd) != double(s.enable_cmd)) set_value(db_, *a.ena_cmd, double(s.enable_cmd), false);
-    }
-    if (s.error_id != a.last_error) {
-        a.last_error = s.error_id;
-        char text[64] = "";
-        if (s.error_id) std::snprintf(text, sizeof text, "E: %.24s (0x%" PRIx32 ")", motion::error_id::text(s.error_id), s.error_id);
-        text[pv::kStringSize - 1] = 0; // a DBR_STRING holds 39 characters
-        const pv::FieldDesc* f = a.msg->type().find("VAL");
-        pv::Elements e = a.msg->elements(*f);
-        pv::put_element(*a.msg, *f, e, 0, pv::Prim::String, text);
-        a.msg->udf = 0;
-        db_.process(*a.msg);
-    }
+void IocAxes::set_message(Axis& a, const char* text) {
+    char t[pv::kStringSize] = "";
+    std::snprintf(t, sizeof t, "%s", text); // a DBR_STRING holds 39 characters
+    const pv::FieldDesc* f = a.msg->type().find("VAL");
+    pv::Elements e = a.msg->elements(*f);
+    pv::put_element(*a.msg, *f, e, 0, pv::Prim::String, t);
+    a.msg->udf = 0;
+    db_.process(*a.msg);
 }
 
 void IocAxes::set_derived_limits(std::size_t i, double lo, double hi) {
@@ -465,7 +555,15 @@ void IocAxes::set_derived_limits(std::size_t i, double lo, double hi) {
 void IocAxes::publish() {
     if (!group_) return;
     const auto& st = group_->snapshot();
-    for (std::size_t i = 0; i < axes_.size() && i < st.size(); ++i) publish_one(axes_[i], st[i]);
+    // the values are read by the records' device support (scan_io_intr); MsgTxt is text
+    for (std::size_t i = 0; i < axes_.size() && i < st.size(); ++i) {
+        Axis& a = axes_[i];
+        if (st[i].error_id == a.last_error) continue;
+        a.last_error = st[i].error_id;
+        char text[64] = "";
+        if (a.last_error) std::snprintf(text, sizeof text, "E: %.24s (0x%" PRIx32 ")", motion::error_id::text(a.last_error), a.last_error);
+        set_message(a, text);
+    }
     motion::AxisGroup::Result r;
     while (group_->pop_result(r)) {
         if (!r.code) continue;
@@ -493,14 +591,7 @@ void IocAxes::publish() {
         std::snprintf(text, sizeof text, "W: %s %s", real.empty() ? "inverse failed" : real.c_str(),
                       r.tag ? "would pass a limit" : "at a limit: stopped");
         text[pv::kStringSize - 1] = 0;
-        for (std::size_t v : r.tag ? std::vector<std::size_t>{r.axis} : k.spec().virt) {
-            Axis& a = axes_[v];
-            const pv::FieldDesc* f = a.msg->type().find("VAL");
-            pv::Elements e = a.msg->elements(*f);
-            pv::put_element(*a.msg, *f, e, 0, pv::Prim::String, text);
-            a.msg->udf = 0;
-            db_.process(*a.msg);
-        }
+        for (std::size_t v : r.tag ? std::vector<std::size_t>{r.axis} : k.spec().virt) set_message(axes_[v], text);
     }
 }
 

@@ -3,12 +3,14 @@
 // bound to the buses' process images at bring-up and run in the RT cycle by one AxisGroup
 // stage; published into the PVs and commanded from them by the IOC loop.
 //
-// PVs, as ecmccfg's ecmcAxis.db names them ($(P) = the IOC prefix, AX = epics.name):
-//   $(P)AX-PosAct -VelAct -PosSet -PosErr (ai), -Stat -ErrId -WrnId -SeqState -LastIlock
-//   (longin), -EnaAct -Busy -AtTarget -Moving -LimFwd -LimBwd -HomeSwitch -Homed -Err (bi),
-//   -EnaCmd -ExeCmd -StpCmd -RstCmd (bo), -TgtPosCmd -TgtVelCmd (ao), -MtnCmd -MtnCmdData
-//   (longout), -MsgTxt (stringin), -Enc0N-PosAct (ai, every encoder); and the motor record $(P)AX (epics.motorRecord.enable, as
-//   ecmccfg), driven through AxisMotorDriver.
+// PVs, as ecmccfg's ecmcAxis.db names them ($(P) = the IOC prefix, AX = epics.name), made from
+// one declarative table (axes.cpp, axis_table) on the axis's data items ax<n>.actpos, .status,
+// .control, ...: $(P)AX-PosAct -VelAct -PosSet -PosErr (ai), -Stat -ErrId -WrnId -SeqState
+// -LastIlock (longin), -EnaAct -Busy -AtTarget -Moving -LimFwd -LimBwd -HomeSwitch -Homed -Err
+// (bi), -EnaCmd -ExeCmd -StpCmd -RstCmd (bo: bits 0-3 of ax<n>.control), -TgtPosCmd -TgtVelCmd
+// (ao), -MtnCmd -MtnCmdData (longout), -MsgTxt (stringin), -Enc0N-PosAct (ai, every encoder);
+// and the motor record $(P)AX (epics.motorRecord.enable, as ecmccfg), driven through
+// AxisMotorDriver. Any record of a .db file can read and write the same items ("@ax1.actpos").
 // Threading: everything here runs on the IOC loop thread except the AxisGroup's RT stage.
 #pragma once
 
@@ -16,6 +18,7 @@
 #include "motion/axis_config.hpp"
 #include "motion/axis_group.hpp"
 #include "pv/database.hpp"
+#include "pv/link.hpp"
 #include "registry/registry.hpp"
 #include "rt/engine.hpp"
 
@@ -26,6 +29,14 @@
 #include <vector>
 
 namespace beamctl::ioc {
+
+// What the IOC keeps of an axis's commands between puts (ECMC's targpos, targvelo, command,
+// cmddata and control items): ExeCmd runs `command` with them.
+struct AxisCommandState {
+    double targpos = 0, targvelo = 0;
+    int command = 3, cmddata = 14; // absolute move; the configured homing sequence
+    uint32_t control = 0;          // bits as last written: 1 execute, 2 stop, 3 reset (0 is the axis's)
+};
 
 class IocAxes {
 public:
@@ -54,6 +65,14 @@ public:
     const std::string& name(std::size_t i) const { return axes_.at(i).cfg.epics.name; }
     // "axis 1 (SampleX)": how errors and the registry name axis i as an owner or writer.
     std::string owner(std::size_t i) const;
+    // Device support "beamctl" on an axis data item of the registry ("ax1.actpos", "ax1.status"
+    // with bit 1, "ax1.control" bit 0, or a PLC name: "ax1.enc.actpos"): reads the latest snapshot,
+    // writes become commands. `binary`: the record has two states (a non-zero value reads 1).
+    // Null with `why` for an item the IOC loop does not see or cannot write.
+    std::unique_ptr<pv::LinkDevice> make_device(std::string_view name, int bit, bool output, bool binary, std::string& why);
+    // A write of item `w` (bit `bit` of control, -1 the word) of axis i; false if refused.
+    bool write_item(std::size_t i, int w, int bit, double v);
+    const AxisCommandState& command_state(std::size_t i) const { return axes_.at(i).cmd; }
     // IOC loop: the soft limits of axis i's motor record (DLLM/DHLM, dial) become [lo, hi]: a
     // virtual axis's range as its kinematics group derives it. No-op without a motor record.
     void set_derived_limits(std::size_t i, double lo, double hi);
@@ -63,23 +82,14 @@ private:
         motion::AxisConfig cfg;
         motion::AxisParams params;
         std::string pv; // "$(P)AX"
-        pv::Record *pos_act = nullptr, *vel_act = nullptr, *pos_set = nullptr, *pos_err = nullptr,
-                   *stat = nullptr, *err_id = nullptr, *wrn_id = nullptr, *seq_state = nullptr,
-                   *last_ilock = nullptr, *ena_act = nullptr, *busy = nullptr, *at_target = nullptr,
-                   *moving = nullptr, *lim_fwd = nullptr, *lim_bwd = nullptr, *home_switch = nullptr,
-                   *homed = nullptr, *err = nullptr, *ena_cmd = nullptr, *exe_cmd = nullptr,
-                   *tgt_pos = nullptr, *tgt_vel = nullptr, *mtn_cmd = nullptr, *mtn_data = nullptr,
-                   *msg = nullptr;
-        std::vector<pv::Record*> enc; // -Enc01-PosAct ... (every encoder)
-        std::vector<double> enc_last;
-        std::vector<double> last;   // published values, by record order in `published`
+        AxisCommandState cmd;
+        pv::Record* msg = nullptr; // -MsgTxt: the text of the last error or refusal
         uint32_t last_error = ~0u;
-        bool last_enable_cmd = false;
     };
-    void make_pvs(Axis& a, std::size_t index);
+    void make_pvs(Axis& a, registry::Registry& signals);
     void make_motor_record(Axis& a, pv::DbFile& f);
-    void hook(std::size_t index);
-    void publish_one(Axis& a, const motion::AxisStatus& s);
+    void attach_motor_drivers();
+    void set_message(Axis& a, const char* text);
 
     pv::Database& db_;
     std::string prefix_;

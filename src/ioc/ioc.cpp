@@ -474,14 +474,23 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
                          << (have.empty() ? std::string(" (ec<bus>.s<slave>.<entry>[.<bit>]; `beamctl signals` lists them)")
                                           : " (" + slave + "* has: " + have + (shown > 12 ? ", ..." : "") + ")"));
     }
+    bool output = f.dbf == pv::Dbf::OutLink;
+    if (sig->owner_kind == registry::OwnerKind::Axis) { // an axis data item: the snapshot, commands
+        const std::string& t = r.type().name();
+        std::string reason;
+        auto dev = axes_->make_device(sig->name, bit, output, t == "bi" || t == "bo", reason);
+        if (!dev) return fail(reason);
+        devices_.push_back(std::move(dev));
+        return devices_.back().get();
+    }
     if (sig->owner_kind != registry::OwnerKind::Bus)
-        return fail(SB() << "'" << name << "' is a signal of " << sig->owner << "; device support reads and writes bus entries only (for now)");
+        return fail(SB() << "'" << name << "' is a signal of " << sig->owner << "; device support reads and writes bus entries and axis items only (for now)");
     std::string reason;
     if (!registry_.bind(name, reason).bound()) return fail(reason);
     for (auto& b : buses_)
         for (const auto& si : b.bus->master().signals()) {
             if (si.name != sig->name) continue;
-            if (f.dbf == pv::Dbf::OutLink) {
+            if (output) {
                 if (!si.output) return fail(SB() << "'" << sig->name << "' is an input; an output link cannot write it");
                 std::string writer = SB() << "record " << r.name();
                 if (!registry_.claim(sig->name, writer, reason)) return fail(reason);
@@ -596,6 +605,7 @@ void Ioc::publish() {
             }
         }
     }
+    db_.scan_io_intr(); // records on engine signals (axis items, bus entries) that changed since the last look
 }
 
 int Ioc::run() {
@@ -648,10 +658,7 @@ int Ioc::run() {
     for (auto& b : buses_) b.bus->start_health();
     std::string acf = cfg_.acf;
     LoopSignals signals(loop, acf.empty() ? std::function<void()>() : [&] { server.reload_access_security(acf); });
-    loop.call_every(0.01, [this] {
-        publish();
-        db_.scan_io_intr(); // records on engine signals that changed since the last snapshot
-    });
+    loop.call_every(0.01, [this] { publish(); });
     loop.call_every(0.01, [this] { db_.scan_periodic(EventLoop::now_s()); });
     if (autosave_) {
         pv::autosave_defaults_after_init(*autosave_, db_, cfg_.autosave->period_s);

@@ -450,8 +450,11 @@ void Database::add_to_scan(Record& r) {
         v.insert(at, &r);
     };
     double period = scan_period(r.scan);
-    if (r.scan == 2) {
-        io_intr_.push_back(IoIntr{&r, {}});
+    bool readback = false; // asyn's info(asyn:READBACK, "1"): an output follows its device
+    for (const auto& [k, v] : r.infos())
+        if (k == "asyn:READBACK" && v == "1") readback = true;
+    if (r.scan == 2 || readback) {
+        io_intr_.push_back(IoIntr{&r, {}, nullptr, r.scan != 2});
         io_intr_stale_ = true;
     }
     if (period > 0) {
@@ -471,16 +474,35 @@ void Database::scan_io_intr() {
     if (io_intr_stale_) { // the devices of each record's links, once (not every field every call)
         for (IoIntr& io : io_intr_) {
             io.devices.clear();
+            io.readback = nullptr;
             for (const FieldDesc& f : io.rec->type().fields())
                 if (is_link(f.dbf))
-                    if (LinkDevice* dev = field_ref<Link>(*io.rec, f).device) io.devices.push_back(dev);
+                    if (LinkDevice* dev = field_ref<Link>(*io.rec, f).device) {
+                        io.devices.push_back(dev);
+                        if (f.dbf == Dbf::OutLink && is_named(f, "OUT") && io.rec->type().find("VAL")) io.readback = dev;
+                    }
         }
         io_intr_stale_ = false;
     }
     for (std::size_t i = 0; i < io_intr_.size(); ++i) {
         bool changed = false;
         for (LinkDevice* dev : io_intr_[i].devices) changed = dev->changed() || changed;
-        if (changed) process_record(*io_intr_[i].rec);
+        if (!changed) continue;
+        Record& r = *io_intr_[i].rec;
+        double v = 0;
+        if (io_intr_[i].readback && !r.pact && io_intr_[i].readback->read(v)) { // an output follows its signal
+            const FieldDesc& vf = *r.type().find("VAL");
+            Elements e = r.elements(vf);
+            double cur = 0;
+            get_element(r, vf, e, 0, Prim::Double, &cur);
+            put_element(r, vf, e, 0, Prim::Double, &v);
+            r.udf = 0;
+            if (io_intr_[i].passive) { // read-back only: clients see the new value, nothing is written
+                if (cur != v) post(r, &vf, kDbeValue | kDbeLog);
+                continue;
+            }
+        }
+        if (!io_intr_[i].passive) process_record(r);
         if (io_intr_stale_) break; // processing relinked a record: start again at the next call
     }
 }

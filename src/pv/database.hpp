@@ -222,8 +222,11 @@ private:
     struct IoIntr {
         Record* rec;
         std::vector<LinkDevice*> devices; // of its links, found when io_intr_stale_ is set
+        LinkDevice* readback = nullptr;   // an output record's OUT device: VAL follows it (asyn)
+        bool passive = false;             // info(asyn:READBACK, "1") on a non-I/O Intr output: VAL
+                                          // follows the device without processing (no write back)
     };
-    std::vector<IoIntr> io_intr_; // SCAN "I/O Intr" records (all have a bound device link)
+    std::vector<IoIntr> io_intr_; // SCAN "I/O Intr" records (all have a bound device link), read-backs
     bool io_intr_stale_ = true;    // a link of one of them may have changed (relink, add)
     double now_s_ = 0;         // the last time scan_periodic was given
     std::function<double()> clock_;
