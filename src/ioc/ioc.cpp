@@ -483,8 +483,15 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         devices_.push_back(std::move(dev));
         return devices_.back().get();
     }
+    if (sig->owner_kind == registry::OwnerKind::Plc) { // a PLC's enable, error, counts
+        std::string reason;
+        auto dev = plcs_->make_device(sig->name, bit, output, reason);
+        if (!dev) return fail(reason);
+        devices_.push_back(std::move(dev));
+        return devices_.back().get();
+    }
     if (sig->owner_kind != registry::OwnerKind::Bus)
-        return fail(SB() << "'" << name << "' is a signal of " << sig->owner << "; device support reads and writes bus entries and axis items only (for now)");
+        return fail(SB() << "'" << name << "' is a signal of " << sig->owner << "; device support reads and writes bus entries, axis and PLC items");
     std::string reason;
     if (!registry_.bind(name, reason).bound()) return fail(reason);
     for (auto& b : buses_)

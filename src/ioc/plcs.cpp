@@ -1,5 +1,6 @@
 #include "ioc/plcs.hpp"
 
+#include "ioc/pv_table.hpp"
 #include "ioc/pv_util.hpp"
 
 #include "core/error.hpp"
@@ -99,18 +100,17 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
     for (std::size_t i = 0; i < sources_.size(); ++i) {
         const plc::PlcSource& s = sources_[i];
         std::string owner = check.prefix(i);
-        std::string pv = s.axis_plc ? std::string() : cfg.prefix + "PLC" + two_digits(s.id);
-        for (const char* v : {"enable", "error", "scantime", "firstscan", "dbg"}) {
+        owners_.push_back(owner);
+        // the PLC code's variables, and the IOC's counts of its scans and faults
+        for (const char* v : {"enable", "error", "scantime", "firstscan", "dbg", "scans", "faults"}) {
             registry::Signal sig;
             sig.name = owner + "." + v;
             sig.type = "LREAL";
-            bool rw = std::string_view(v) != "scantime" && std::string_view(v) != "firstscan";
+            std::string_view n = v;
+            bool rw = n == "enable" || n == "error" || n == "dbg";
             sig.direction = rw ? registry::Direction::Variable : registry::Direction::Input;
             sig.owner_kind = registry::OwnerKind::Plc;
             sig.owner = owner;
-            if (!pv.empty() && std::string_view(v) == "enable") sig.pv = pv + "-EnaCmd";
-            if (!pv.empty() && std::string_view(v) == "scantime") sig.pv = pv + "-ScanTime";
-            if (!pv.empty() && std::string_view(v) == "error") sig.pv = pv + "-Err";
             signals.declare(std::move(sig));
         }
         for (const std::string& entry : check.written_entries(i)) {
@@ -118,7 +118,7 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
             if (!signals.claim(entry, owner, why)) throw Error(SB() << s.file << ": " << owner << " cannot write: " << why);
         }
     }
-    make_pvs(cfg.prefix, db);
+    make_pvs(cfg.prefix, signals);
 }
 
 IocPlcs::~IocPlcs() {
@@ -144,44 +144,120 @@ plc::PlcRuntime::Options IocPlcs::check_options() const {
     return o;
 }
 
-void IocPlcs::make_pvs(const std::string& prefix, pv::Database& db) {
+// A general PLC's PVs, as ecmccfg names them ($(P) = "<prefix>PLCnn"), on its plc<n>.* items.
+static const PvTable& plc_table() {
+    static const PvTable t{"plc", {
+        {"-EnaCmd", "bo", "enable", {{"DESC", "$(DESC)"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}, {"VAL", "$(ENABLE)"}}, true},
+        {"-EnaAct", "bi", "enable", {{"DESC", "PLC running"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}}},
+        {"-ScanTime", "ai", "scantime", {{"DESC", "Scan period"}, {"EGU", "s"}, {"PREC", "4"}}},
+        {"-Err", "longin", "error", {{"DESC", "Run-time fault (0 none)"}, {"HIGH", "1"}, {"HSV", "MAJOR"}}},
+        {"-Faults", "longin", "faults", {{"DESC", "Scans that faulted"}}},
+        {"-Scans", "longin", "scans", {{"DESC", "Scans run"}}},
+    }};
+    return t;
+}
+
+void IocPlcs::make_pvs(const std::string& prefix, registry::Registry& signals) {
     pv::DbFile f;
-    std::vector<std::pair<std::size_t, std::string>> names;
     for (std::size_t i = 0; i < sources_.size(); ++i) {
         const auto& s = sources_[i];
         if (s.axis_plc) continue;
-        std::string p = prefix + "PLC" + two_digits(s.id);
         std::string desc = SB() << "plc" << s.id << " " << std::filesystem::path(s.file).filename().string();
-        desc = desc.substr(0, 40);
-        f.records.push_back(record("bo", p + "-EnaCmd", {{"DESC", desc}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}, {"VAL", s.enable ? "1" : "0"}}));
-        f.records.push_back(record("bi", p + "-EnaAct", {{"DESC", "PLC running"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}}));
-        f.records.push_back(record("ai", p + "-ScanTime", {{"DESC", "Scan period"}, {"EGU", "s"}, {"PREC", "4"}}));
-        f.records.push_back(record("longin", p + "-Err", {{"DESC", "Run-time fault (0 none)"}, {"HIGH", "1"}, {"HSV", "MAJOR"}}));
-        f.records.push_back(record("longin", p + "-Faults", {{"DESC", "Scans that faulted"}}));
-        f.records.push_back(record("longin", p + "-Scans", {{"DESC", "Scans run"}}));
-        names.emplace_back(i, p);
+        PvInstance in{prefix + "PLC" + two_digits(s.id), owners_[i] + ".",
+                      {{"DESC", desc.substr(0, 40)}, {"ENABLE", s.enable ? "1" : "0"}}};
+        pv::merge_db(f, make_records(plc_table(), in, signals));
+        name_pvs(plc_table(), in, signals);
     }
-    db.load(f);
-    for (auto& [i, p] : names) {
-        Pvs v;
-        v.index = i;
-        v.ena_cmd = db.find(p + "-EnaCmd");
-        v.ena_act = db.find(p + "-EnaAct");
-        v.scan_time = db.find(p + "-ScanTime");
-        v.err = db.find(p + "-Err");
-        v.faults = db.find(p + "-Faults");
-        v.scans = db.find(p + "-Scans");
-        std::size_t index = i;
-        v.ena_cmd->put_hook = [this, index](pv::Record& r, const pv::FieldDesc& fd) {
-            if (std::string_view(fd.name) != "VAL") return pv::PutStatus::Ok;
-            if (!runtime_) return pv::PutStatus::Failed;
-            runtime_->request_enable(index, get_value(r) != 0);
-            return pv::PutStatus::Ok;
-        };
-        pvs_.push_back(v);
-    }
+    db_.load(f);
     seen_faults_.assign(sources_.size(), 0);
     last_fault_.assign(sources_.size(), std::string());
+}
+
+namespace {
+// Device support "beamctl" on a PLC's items ("@plc0.enable", "@plc0.scans"): reads the runtime's
+// status in the IOC loop; a write of plc<n>.enable starts or stops the PLC. IOC loop only.
+class PlcItemDevice : public pv::LinkDevice {
+public:
+    enum class Item { Enable, Error, ScanTime, Scans, Faults };
+    PlcItemDevice(IocPlcs& plcs, std::size_t i, Item item, std::string name)
+        : plcs_(plcs), i_(i), item_(item), name_(std::move(name)) {}
+    bool read(double& v) override {
+        if (!value(v)) return false;
+        last_ = v;
+        return true;
+    }
+    bool write(double v) override {
+        plc::PlcRuntime* rt = plcs_.runtime();
+        if (item_ != Item::Enable || !rt) return false;
+        rt->request_enable(i_, v != 0);
+        return true;
+    }
+    bool changed() override {
+        double v = NAN;
+        value(v);
+        bool c = !(v == last_);
+        last_ = v;
+        // a PLC that ran and stopped again between two looks (enabled, one scan, enable := 0)
+        // reads disabled both times: its scan count says it ran
+        if (item_ == Item::Enable && plcs_.runtime()) {
+            uint64_t scans = plcs_.runtime()->status(i_).scans;
+            if (scans != last_scans_ && v == 0) c = true;
+            last_scans_ = scans;
+        }
+        return c;
+    }
+    std::string describe() const override { return name_; }
+
+private:
+    bool value(double& v) const {
+        plc::PlcRuntime* rt = plcs_.runtime();
+        if (!rt) return false;
+        plc::PlcRuntime::Status s = rt->status(i_);
+        switch (item_) {
+        case Item::Enable: v = s.enabled; break;
+        case Item::Error: v = s.error; break;
+        case Item::ScanTime: v = s.scantime_s; break;
+        case Item::Scans: v = double(s.scans); break;
+        case Item::Faults: v = double(s.faults); break;
+        }
+        return true;
+    }
+    IocPlcs& plcs_;
+    std::size_t i_;
+    Item item_;
+    std::string name_;
+    double last_ = NAN;
+    uint64_t last_scans_ = 0;
+};
+} // namespace
+
+std::unique_ptr<pv::LinkDevice> IocPlcs::make_device(std::string_view name, int bit, bool output, std::string& why) {
+    for (std::size_t i = 0; i < owners_.size(); ++i) {
+        const std::string& o = owners_[i];
+        if (name.size() <= o.size() + 1 || name.compare(0, o.size(), o) != 0 || name[o.size()] != '.') continue;
+        std::string_view item = name.substr(o.size() + 1);
+        using Item = PlcItemDevice::Item;
+        static const std::pair<const char*, Item> items[] = {{"enable", Item::Enable}, {"error", Item::Error},
+                                                             {"scantime", Item::ScanTime}, {"scans", Item::Scans},
+                                                             {"faults", Item::Faults}};
+        for (const auto& [n, it] : items) {
+            if (item != n) continue;
+            if (bit >= 0) {
+                why = SB() << "'" << name << "' is a number; it has no bit " << bit;
+                return nullptr;
+            }
+            if (output && it != Item::Enable) {
+                why = SB() << "'" << name << "' is a readback of " << o << "; an output link can write " << o << ".enable only";
+                return nullptr;
+            }
+            return std::make_unique<PlcItemDevice>(*this, i, it, std::string(name));
+        }
+        why = SB() << "'" << name << "' lives in the cycle only (PLC code reads and writes it); records reach " << o
+                   << ".enable, .error, .scantime, .scans and .faults";
+        return nullptr;
+    }
+    why = SB() << "no PLC for '" << name << "'";
+    return nullptr;
 }
 
 void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok) {
@@ -208,7 +284,6 @@ void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<reg
         if (int rc = p->rt_enter()) throw Error(SB() << p->path() << ": rt_enter() failed with " << rc);
     engine.add_stage(rt::StageOrder::GeneralPlcs, *runtime_);
     if (group) group->set_hook(runtime_.get());
-    for (const auto& v : pvs_) set_value(db_, *v.scan_time, runtime_->status(v.index).scantime_s, false);
 }
 
 void IocPlcs::publish() {
@@ -216,20 +291,7 @@ void IocPlcs::publish() {
     std::string line;
     while (runtime_->pop_output(line)) std::fputs(line.c_str(), stdout);
     std::fflush(stdout);
-    auto upd = [&](pv::Record* r, double v) {
-        if (get_value(*r) != v || r->udf) set_value(db_, *r, v, false);
-    };
-    for (auto& v : pvs_) {
-        plc::PlcRuntime::Status s = runtime_->status(v.index);
-        upd(v.ena_act, s.enabled);
-        upd(v.err, s.error);
-        upd(v.faults, double(s.faults));
-        upd(v.scans, double(s.scans));
-        if (int(s.enabled) != v.last_enabled) { // follows what the PLC itself does (enable := 0)
-            v.last_enabled = s.enabled;
-            if (get_value(*v.ena_cmd) != double(s.enabled)) set_value(db_, *v.ena_cmd, s.enabled, false);
-        }
-    }
+    // the values are read by the PVs' device support (scan_io_intr)
     // A fault is logged with its place when it differs from the last one logged (a PLC that
     // faults every scan logs once); the place is looked up only when the fault count moved.
     for (std::size_t i = 0; i < sources_.size(); ++i) {

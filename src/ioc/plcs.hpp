@@ -3,8 +3,9 @@
 // configured buses and axes (errors with file:line:col, all at once), and again at bring-up
 // against the real addresses; then run by a plc::PlcRuntime in the RT cycle.
 //
-// PVs ($(P) = the IOC prefix, nn = the PLC id as two digits, as ecmccfg):
-//   $(P)PLCnn-EnaCmd (bo, writable: plc<n>.enable), -EnaAct (bi), -ScanTime (ai, s),
+// PVs ($(P) = the IOC prefix, nn = the PLC id as two digits, as ecmccfg), from one table
+// (plcs.cpp, plc_table) on the PLC's items plc<n>.enable, .error, .scantime, .scans, .faults:
+//   $(P)PLCnn-EnaCmd (bo, writes plc<n>.enable; follows it), -EnaAct (bi), -ScanTime (ai, s),
 //   -Err (longin: the latched run-time fault, 0 none), -Faults (longin), -Scans (longin)
 // println/print output goes to the IOC's standard output ("plc0: text"); faults are logged with
 // their location.
@@ -17,6 +18,7 @@
 #include "plc/plugin.hpp"
 #include "plc/runtime.hpp"
 #include "pv/database.hpp"
+#include "pv/link.hpp"
 #include "registry/registry.hpp"
 #include "rt/engine.hpp"
 
@@ -49,15 +51,12 @@ public:
     std::size_t size() const { return sources_.size(); }
     plc::PlcRuntime* runtime() { return runtime_.get(); }
     const std::vector<plc::PlcSource>& sources() const { return sources_; }
+    // Device support "beamctl" on a PLC item ("plc0.enable", "plc0.scans", ...): reads the
+    // runtime's status; a write of <plc>.enable starts or stops it. Null with `why` otherwise.
+    std::unique_ptr<pv::LinkDevice> make_device(std::string_view name, int bit, bool output, std::string& why);
 
 private:
-    struct Pvs {
-        pv::Record *ena_cmd = nullptr, *ena_act = nullptr, *scan_time = nullptr, *err = nullptr,
-                   *faults = nullptr, *scans = nullptr;
-        std::size_t index = 0; // in the runtime
-        int last_enabled = -1;
-    };
-    void make_pvs(const std::string& prefix, pv::Database& db);
+    void make_pvs(const std::string& prefix, registry::Registry& signals);
 
     double cycle_s_;
     const registry::Registry& signals_;
@@ -65,7 +64,7 @@ private:
     std::vector<std::unique_ptr<plc::Plugin>> plugins_;
     std::vector<plc::PlcSource> sources_;
     std::unique_ptr<plc::PlcRuntime> runtime_;
-    std::vector<Pvs> pvs_;
+    std::vector<std::string> owners_; // "plc0", "ax1.plc": the prefix of each PLC's items
     pv::Database& db_;
     std::vector<std::uint64_t> seen_faults_; // fault counts already looked at, per PLC
     std::vector<std::string> last_fault_;    // the last fault logged, per PLC

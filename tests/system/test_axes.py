@@ -8,6 +8,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+import epics
 from epics import ca
 
 from conftest import BEAMCTL, connect, require_binary, running_ioc, wait_for
@@ -147,3 +148,78 @@ def test_axis_file_errors_are_reported_by_check(tmp_path):
     r = subprocess.run([str(BEAMCTL), "check", str(cfg)], capture_output=True, text=True, timeout=30)
     assert r.returncode == 0, r.stderr
     assert "X-PosAct" in subprocess.run([str(BEAMCTL), "db", str(cfg)], capture_output=True, text=True, timeout=30).stdout
+
+
+# Records of the IOC's own .db file on the axis's items (issue 12): what ecmccfg's ecmcAxis.db
+# writes for PosAct (asynFloat64 on ax1.actpos, I/O Intr), a target and execute of a user's own,
+# and a bi on the error id. pyepics sees them follow the axis.
+AXIS_DB = r"""
+record(ai, "$(P)Pos") {
+  field(DTYP, "asynFloat64")
+  field(INP, "@asyn(MC_CPU1,0,1)T_SMP_MS=10/TYPE=asynFloat64/ax1.actpos?")
+  field(SCAN, "I/O Intr")
+  field(PREC, "3")
+}
+record(ao, "$(P)GoTo") {
+  field(DTYP, "beamctl")
+  field(OUT, "@ax1.targpos")
+  field(FLNK, "$(P)Go")
+}
+record(bo, "$(P)Go") {
+  field(DTYP, "beamctl")
+  field(OUT, "@ax1.control.1")
+  field(VAL, "1")
+}
+record(bi, "$(P)InError") {
+  field(DTYP, "beamctl")
+  field(INP, "@ax1.errorid")
+  field(SCAN, "I/O Intr")
+  field(ZNAM, "OK")
+  field(ONAM, "ERROR")
+}
+"""
+
+
+def test_records_of_a_db_file_read_and_command_the_axis_items(tmp_path, prefix):
+    text = IOC + "db:\n  - {{file: axis.db, macros: {{P: \"{prefix}\"}}}}\n"
+    files = {"stepper.yaml": DATA / "stepper.yaml", "plant.yaml": DATA / "plant.yaml", "axis.db": AXIS_DB}
+    with running_ioc(tmp_path, prefix, text, files):
+        a = prefix + "X-"
+        seen = []
+        pos = epics.PV(prefix + "Pos", callback=lambda value=None, **kw: seen.append(value))
+        assert pos.wait_for_connection(5)
+        put(prefix + "GoTo", 2.0)  # disabled: the axis refuses it with an error
+        assert wait_for(lambda: get(prefix + "InError") == 1, timeout=5)
+        assert get(a + "ErrId") == 0x14316
+        put(a + "RstCmd", 1)
+        assert wait_for(lambda: get(prefix + "InError") == 0, timeout=5)
+        enable(a)
+        put(prefix + "GoTo", 6.0)
+        assert wait_for(lambda: get(a + "Busy") == 1, timeout=5)
+        assert wait_for(lambda: get(a + "Busy") == 0 and get(a + "AtTarget") == 1, timeout=10)
+        assert get(prefix + "Pos") == pytest.approx(get(a + "PosAct"), abs=1e-9)
+        assert get(prefix + "Pos") == pytest.approx(6.0, abs=0.01)
+        assert wait_for(lambda: len(seen) > 5, timeout=5)  # a monitor update per change on the way
+        assert seen[-1] == pytest.approx(6.0, abs=0.01)
+        pos.disconnect()
+
+
+def test_enacmd_follows_an_axis_that_something_else_disables(tmp_path, prefix):
+    # a PLC, off at start, that disables the axis once and itself
+    text = IOC + "plcs:\n  - {{id: 0, file: off.plc, enable: false}}\n"
+    files = {"stepper.yaml": DATA / "stepper.yaml", "plant.yaml": DATA / "plant.yaml",
+             "off.plc": "ax1.drv.enable := 0;\nplc0.enable := 0;\n"}
+    with running_ioc(tmp_path, prefix, text, files):
+        a = prefix + "X-"
+        seen = []
+        ena = epics.PV(a + "EnaCmd", callback=lambda value=None, **kw: seen.append(value))
+        assert ena.wait_for_connection(5)
+        enable(a)
+        assert ena.get() == 1
+        put(prefix + "PLC00-EnaCmd", 1)
+        assert wait_for(lambda: get(a + "EnaAct") == 0, timeout=5)
+        assert wait_for(lambda: ena.get() == 0, timeout=5)  # the command PV reads what the axis does
+        assert wait_for(lambda: seen and seen[-1] == 0, timeout=5)  # and says so to monitors
+        assert wait_for(lambda: get(prefix + "PLC00-EnaCmd") == 0, timeout=5)  # so does the PLC's
+        assert get(a + "EnaAct") == 0  # and nothing enabled it again
+        ena.disconnect()

@@ -263,6 +263,71 @@ TEST(IocPlc, RunTimeFaultLatches) {
     EXPECT_EQ(v.plcs().status(0).error, 0);
 }
 
+// The PLC's PVs are table records on its items (plc0.enable, .scans, ...); EnaCmd follows the PLC
+// when its code disables itself, and a .db record reads and writes the same items.
+TEST(IocPlc, PvsAndRecordsOnThePlcItems) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("main.plc", "static.n := static.n + 1;\nif (static.n == 50 or ec0.s1.binaryInput01) { plc0.enable := 0; };\n");
+    d.write("x.db", "record(longin, \"T:Scans\") {\n  field(DTYP, \"beamctl\")\n  field(INP, \"@plc0.scans\")\n"
+                    "  field(SCAN, \"I/O Intr\")\n}\n"
+                    "record(bo, \"T:Run\") {\n  field(DTYP, \"beamctl\")\n  field(OUT, \"@plc0.enable\")\n}\n"
+                    "record(bo, \"T:Stop\") {\n  field(DTYP, \"beamctl\")\n  field(OUT, \"@ec0.s2.binaryOutput01\")\n}\n");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("", "plcs:\n  - {id: 0, file: main.plc}\n", "db:\n  - {file: x.db}\n")));
+    pv::Database& db = v.ioc->database();
+    auto get = [&](const char* n) {
+        pv::Address a;
+        EXPECT_TRUE(db.resolve(n, a)) << n;
+        double x = 0;
+        db.get(a, pv::Prim::Double, &x, 1);
+        return x;
+    };
+    EXPECT_EQ(v.ioc->signals().find("plc0.enable")->pv, "T:PLC00-EnaCmd");
+    EXPECT_EQ(v.ioc->signals().find("plc0.scans")->pv, "T:PLC00-Scans");
+    v.cycles(20);
+    v.ioc->publish();
+    EXPECT_EQ(get("T:PLC00-EnaCmd"), 1);
+    EXPECT_EQ(get("T:PLC00-EnaAct"), 1);
+    EXPECT_EQ(get("T:PLC00-Scans"), 20);
+    EXPECT_EQ(get("T:Scans"), 20);
+    EXPECT_NEAR(get("T:PLC00-ScanTime"), 0.001, 1e-12);
+    v.cycles(40); // scan 50 disables the PLC
+    v.ioc->publish();
+    EXPECT_EQ(get("T:PLC00-EnaAct"), 0);
+    EXPECT_EQ(get("T:PLC00-EnaCmd"), 0); // followed, without enabling it again
+    EXPECT_EQ(get("T:Scans"), 50);
+    v.cycles(10);
+    v.ioc->publish();
+    EXPECT_EQ(get("T:Scans"), 50);
+    double one = 1;
+    pv::Address run;
+    ASSERT_TRUE(db.resolve("T:Run", run));
+    ASSERT_EQ(db.put(run, pv::Prim::Double, &one, 1), pv::PutStatus::Ok);
+    v.cycles(10);
+    v.ioc->publish();
+    EXPECT_EQ(get("T:PLC00-EnaAct"), 1); // runs on
+    EXPECT_EQ(get("T:PLC00-EnaCmd"), 1);
+    EXPECT_GT(get("T:Scans"), 51);
+    // a PLC that runs one scan and stops itself between two looks: EnaCmd still follows it
+    double zero = 0;
+    ASSERT_EQ(db.put(run, pv::Prim::Double, &zero, 1), pv::PutStatus::Ok);
+    pv::Address stop;
+    ASSERT_TRUE(db.resolve("T:Stop", stop));
+    ASSERT_EQ(db.put(stop, pv::Prim::Double, &one, 1), pv::PutStatus::Ok); // wired to binaryInput01
+    v.cycles(10);
+    v.ioc->publish();
+    EXPECT_EQ(get("T:PLC00-EnaCmd"), 0);
+    double scans = get("T:Scans");
+    pv::Address cmd;
+    ASSERT_TRUE(db.resolve("T:PLC00-EnaCmd", cmd));
+    ASSERT_EQ(db.put(cmd, pv::Prim::Double, &one, 1), pv::PutStatus::Ok);
+    v.cycles(10); // one scan: binaryInput01 is on, enable := 0
+    v.ioc->publish();
+    EXPECT_EQ(get("T:Scans"), scans + 1);
+    EXPECT_EQ(get("T:PLC00-EnaAct"), 0);
+    EXPECT_EQ(get("T:PLC00-EnaCmd"), 0);
+}
+
 // Acceptance 15 (PLC part): a plugin's functions and constants are callable from PLC code, and
 // its realtime() runs each cycle.
 TEST(IocPlc, PluginFunctions) {
