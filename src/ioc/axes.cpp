@@ -300,7 +300,7 @@ IocAxes::IocAxes(const std::vector<config::AxisEntry>& entries, const std::strin
         for (const auto& r : motion::axis_signal_refs(a.cfg)) {
             if (r.slave < 0) throw Error(SB() << at(r.where) << ": '" << r.text << "': the simulation slave (s-1) is not supported");
             const registry::Signal* sig = signals.find(signal_name(r));
-            if (!sig)
+            if (!sig || sig->loop_only)
                 throw Error(SB() << at(r.where) << ": no signal '" << signal_name(r) << "' on the configured buses (from '" << r.text << "')");
             std::string why;
             if (sig->direction == registry::Direction::Output && !signals.claim(sig->name, owner, why))

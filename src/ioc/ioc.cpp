@@ -3,6 +3,7 @@
 #include "pv/db_shell.hpp"
 #include "pv/shell_server.hpp"
 
+#include "ioc/bus_pvs.hpp"
 #include "ioc/pv_util.hpp"
 #include "motion/axis_setup.hpp"
 
@@ -233,6 +234,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
         buses_.push_back(std::move(b));
     }
     declare_bus_signals();
+    declare_engine_items(registry_);
     for (std::size_t i = 0; i < buses_.size(); ++i) make_bus_pvs(buses_[i], cfg_.buses[i]);
     axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, registry_, db_);
     std::vector<motion::AxisConfig> axis_configs;
@@ -259,6 +261,9 @@ void Ioc::declare_bus_signals() {
             registry_.declare(std::move(s));
         };
         declare(bus + ".masterstatus", "UDINT", false);
+        std::vector<int> positions;
+        for (const auto& sc : bc.slaves) positions.push_back(sc.position);
+        declare_bus_items(registry_, bc.id, positions); // ec0.ok, ec0.s3.slavestatus, ...: the IOC loop's
         for (const auto& sc : bc.slaves) {
             std::string pre = SB() << bus << ".s" << sc.position << ".";
             declare(pre + "ONE", "UDINT", false);
@@ -295,41 +300,17 @@ Ioc::~Ioc() {
 
 void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
     std::string m = SB() << cfg_.prefix << "m" << bc.id;
-    pv::DbFile f;
-    auto bi = [&](const std::string& n, const char* desc, const char* z, const char* o, bool zero_alarm) {
-        std::vector<std::pair<std::string, std::string>> fl = {{"DESC", desc}, {"ZNAM", z}, {"ONAM", o}};
-        if (zero_alarm) fl.push_back({"ZSV", "MAJOR"});
-        f.records.push_back(record("bi", n, fl));
-    };
-    auto li = [&](const std::string& n, const char* desc) { f.records.push_back(record("longin", n, {{"DESC", desc}})); };
-    bi(m + "-Stat-OK", "Bus OK: all slaves OP, WKC complete", "NOT_OK", "OK", true);
-    bi(m + "-LinkUp", "Cyclic frames come back", "DOWN", "UP", true);
-    li(m + "-SlvCntr", "Slaves configured on the bus");
-    li(m + "-Dom-WC", "Working counter of the last cycle");
-    li(m + "-Dom-WC-Exp", "Expected working counter");
-    bi(m + "-Dom-WC-Complete", "Working counter complete", "INCOMPLETE", "COMPLETE", true);
-    li(m + "-MissedFrames", "Cyclic frames that did not come back");
-    li(m + "-LateFrames", "Cyclic frames back after the time-out");
-    li(m + "-WkcErrors", "Cycles with a wrong working counter");
-    f.records.push_back(record("ai", m + "-ThdLatMax", {{"DESC", "RT wake-up latency max"}, {"EGU", "us"}, {"PREC", "1"}}));
-    f.records.push_back(record("ai", m + "-ThdExeMax", {{"DESC", "RT cycle execution time max"}, {"EGU", "us"}, {"PREC", "1"}}));
-    f.records.push_back(record("ai", m + "-ThdLatMean", {{"DESC", "RT wake-up latency mean"}, {"EGU", "us"}, {"PREC", "1"}}));
-    std::string nb = std::to_string(rt::kLatencyBuckets);
-    f.records.push_back(record("waveform", m + "-ThdLatHist", {{"DESC", "RT wake-up latency: cycles per bucket"}, {"FTVL", "LONG"}, {"NELM", nb}}));
-    f.records.push_back(record("waveform", m + "-ThdLatHistEdges",
-                               {{"DESC", "Lower edges of the ThdLatHist buckets"}, {"FTVL", "DOUBLE"}, {"NELM", nb}, {"EGU", "us"}}));
-    li(m + "-ThdCycles", "RT cycles measured since the reset");
-    li(m + "-ThdMissedCycles", "RT cycle slots missed since the reset");
-    f.records.push_back(record("bo", m + "-ThdStat-Reset",
-                               {{"DESC", "Clear RT max times, counters, histogram"}, {"ZNAM", "Done"}, {"ONAM", "Reset"}}));
+    PvInstance bus{m, "", {{"BUS", SB() << "ec" << bc.id << "."}, {"NB", std::to_string(rt::kLatencyBuckets)}}};
+    pv::DbFile f = make_records(bus_table(), bus, registry_);
+    name_pvs(bus_table(), bus, registry_);
     for (const auto& s : bc.slaves) {
         char sp[16];
         std::snprintf(sp, sizeof sp, "s%03d", s.position);
         std::string p = m + sp;
-        bi(p + "-Online", "Slave answers", "OFFLINE", "ONLINE", true);
-        bi(p + "-Operational", "Slave in OP", "NOT_OP", "OP", true);
         const ethercat::DeviceDesc* d = catalog_.find(s.type);
-        f.records.push_back(record("stringin", p + "-HWType", {{"VAL", s.type}, {"DESC", d->name.substr(0, 40)}}));
+        PvInstance slave{p, SB() << "ec" << bc.id << ".s" << s.position << ".", {{"TYPE", s.type}, {"NAME", d->name.substr(0, 40)}}};
+        pv::merge_db(f, make_records(slave_table(), slave, registry_));
+        name_pvs(slave_table(), slave, registry_);
         // Process-data entries of the default PDO assignment.
         for (const auto& sm : d->sms) {
             if (sm.type != ethercat::SmType::Outputs && sm.type != ethercat::SmType::Inputs) continue;
@@ -363,35 +344,8 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
         }
     }
     db_.load(f);
-    auto find = [&](const std::string& n) { return db_.find(n); };
-    b.stat_ok = find(m + "-Stat-OK");
-    b.link_up = find(m + "-LinkUp");
-    b.slave_count = find(m + "-SlvCntr");
-    b.wc = find(m + "-Dom-WC");
-    b.wc_expected = find(m + "-Dom-WC-Exp");
-    b.wc_complete = find(m + "-Dom-WC-Complete");
-    b.missed = find(m + "-MissedFrames");
-    b.late = find(m + "-LateFrames");
-    b.wkc_errors = find(m + "-WkcErrors");
-    b.lat_max = find(m + "-ThdLatMax");
-    b.exe_max = find(m + "-ThdExeMax");
-    b.lat_mean = find(m + "-ThdLatMean");
-    b.lat_hist = find(m + "-ThdLatHist");
-    b.lat_edges = find(m + "-ThdLatHistEdges");
-    b.stat_cycles = find(m + "-ThdCycles");
-    b.missed_cycles = find(m + "-ThdMissedCycles");
-    b.stat_reset = find(m + "-ThdStat-Reset");
-    rt::Engine* engine = engine_.get();
-    b.stat_reset->put_hook = [engine](pv::Record& r, const pv::FieldDesc& fd) {
-        // A put of 1 asks the RT thread for a reset; publish() puts 0 back once it is done.
-        if (std::string_view(fd.name) == "VAL" && get_value(r) != 0) engine->request_reset();
-        return pv::PutStatus::Ok;
-    };
-    for (const auto& s : bc.slaves) {
-        char sp[16];
-        std::snprintf(sp, sizeof sp, "s%03d", s.position);
-        b.slave_status.emplace_back(find(m + sp + "-Online"), find(m + sp + "-Operational"));
-    }
+    b.lat_hist = db_.find(m + "-ThdLatHist");
+    b.lat_edges = db_.find(m + "-ThdLatHistEdges");
 }
 
 void Ioc::make_entry_pvs(BusRt& b) {
@@ -475,6 +429,20 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
                                           : " (" + slave + "* has: " + have + (shown > 12 ? ", ..." : "") + ")"));
     }
     bool output = f.dbf == pv::Dbf::OutLink;
+    if (sig->loop_only) { // a bus's counters or the engine's statistics
+        ethercat::Bus* bus = nullptr;
+        std::vector<int> positions;
+        for (std::size_t i = 0; i < buses_.size(); ++i)
+            if (sig->owner == std::string(SB() << "ec" << buses_[i].bus->id())) {
+                bus = buses_[i].bus.get();
+                for (const auto& sc : cfg_.buses[i].slaves) positions.push_back(sc.position);
+            }
+        std::string reason;
+        auto dev = make_bus_item_device(sig->name, bit, output, bus, positions, *engine_, engine_stats_, reason);
+        if (!dev) return fail(reason);
+        devices_.push_back(std::move(dev));
+        return devices_.back().get();
+    }
     if (sig->owner_kind == registry::OwnerKind::Axis) { // an axis data item: the snapshot, commands
         const std::string& t = r.type().name();
         std::string reason;
@@ -516,7 +484,6 @@ void Ioc::bring_up() {
     for (auto& b : buses_) {
         b.bus->bring_up();
         make_entry_pvs(b);
-        set_value(db_, *b.slave_count, double(b.bus->master().slaves().size()), false);
     }
     axes_->bind(
         [this](const motion::SignalRef& r) {
@@ -564,31 +531,12 @@ void Ioc::publish() {
     axes_->publish();
     kinematics_->publish();
     plcs_->publish();
-    rt::EngineStats es = engine_->stats();
+    engine_stats_ = engine_->stats(); // read by the engine items' device support
+    const rt::EngineStats& es = engine_stats_;
     for (auto& b : buses_) {
         const ethercat::BusSnapshot& s = b.bus->snapshot();
         bool ok = s.link_up && s.wkc_ok;
-        auto upd = [&](pv::Record* r, double v) {
-            double cur = 0;
-            pv::Address a;
-            a.rec = r;
-            a.field = r->type().find("VAL");
-            db_.get(a, pv::Prim::Double, &cur, 1);
-            if (cur != v || r->udf) set_value(db_, *r, v, false);
-        };
-        upd(b.stat_ok, ok ? 1 : 0);
-        upd(b.link_up, s.link_up ? 1 : 0);
-        upd(b.wc, s.wkc);
-        upd(b.wc_expected, s.expected_wkc);
-        upd(b.wc_complete, s.wkc_ok ? 1 : 0);
-        upd(b.missed, double(s.frames_lost));
-        upd(b.late, double(s.frames_late));
-        upd(b.wkc_errors, double(s.wkc_errors));
-        upd(b.lat_max, double(es.latency_max_ns) / 1000.0);
-        upd(b.exe_max, double(es.exec_max_ns) / 1000.0);
-        upd(b.lat_mean, es.latency_mean_ns() / 1000.0);
-        upd(b.stat_cycles, clamp_long(es.latency_samples));
-        upd(b.missed_cycles, clamp_long(es.missed));
+        // the status PVs read their items (scan_io_intr below); the histogram is an array
         double hist[rt::kLatencyBuckets], edges[rt::kLatencyBuckets];
         for (std::size_t i = 0; i < rt::kLatencyBuckets; ++i) {
             hist[i] = clamp_long(es.latency_hist[i]);
@@ -596,12 +544,6 @@ void Ioc::publish() {
         }
         set_array_if_changed(db_, *b.lat_hist, hist, rt::kLatencyBuckets);
         set_array_if_changed(db_, *b.lat_edges, edges, rt::kLatencyBuckets);
-        if (get_value(*b.stat_reset) != 0 && es.resets >= engine_->resets_requested()) set_value(db_, *b.stat_reset, 0, false);
-        for (std::size_t i = 0; i < b.slave_status.size() && i < s.slave_al.size(); ++i) {
-            bool online = s.slave_online[i];
-            upd(b.slave_status[i].first, online ? 1 : 0);
-            upd(b.slave_status[i].second, online && s.slave_al[i] == 8 ? 1 : 0);
-        }
         for (auto& e : b.entries) {
             if (e.output && !e.owned) continue;
             double v = registry::raw_to_double(ethercat::Bus::get(s.image, *e.sig), e.sig->entry());

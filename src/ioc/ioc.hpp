@@ -79,13 +79,7 @@ private:
         std::unique_ptr<ethercat::Bus> bus;
         std::unique_ptr<rt::Stage> sim_stage;
         std::vector<EntryPv> entries;
-        pv::Record *stat_ok = nullptr, *link_up = nullptr, *slave_count = nullptr, *wc = nullptr,
-                   *wc_expected = nullptr, *wc_complete = nullptr, *missed = nullptr, *late = nullptr,
-                   *wkc_errors = nullptr, *lat_max = nullptr, *exe_max = nullptr;
-        // Engine statistics (the engine's, served under every bus like ecmc's thread PVs).
-        pv::Record *lat_mean = nullptr, *lat_hist = nullptr, *lat_edges = nullptr, *stat_cycles = nullptr,
-                   *missed_cycles = nullptr, *stat_reset = nullptr;
-        std::vector<std::pair<pv::Record*, pv::Record*>> slave_status; // Online, Operational
+        pv::Record *lat_hist = nullptr, *lat_edges = nullptr; // arrays the IOC publishes
     };
     void declare_bus_signals();
     void make_bus_pvs(BusRt& b, const config::BusConfig& bc);
@@ -97,6 +91,7 @@ private:
     pv::Database db_;
     std::unique_ptr<ca::CaLinks> ca_links_; // CA links of db_ to other servers (run() connects them)
     std::unique_ptr<rt::Engine> engine_;
+    rt::EngineStats engine_stats_; // as publish() last read them (the engine items' devices)
     std::vector<BusRt> buses_;
     registry::Registry registry_;
     std::unique_ptr<IocAxes> axes_;

@@ -134,7 +134,7 @@ plc::PlcRuntime::Options IocPlcs::check_options() const {
     const registry::Registry* reg = &signals_;
     o.ec = [reg](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
         const registry::Signal* s = reg->find(name);
-        if (!s || s->owner_kind != registry::OwnerKind::Bus) {
+        if (!s || s->owner_kind != registry::OwnerKind::Bus || s->loop_only) {
             why = SB() << "no process-data entry '" << name << "' on the configured buses";
             return std::nullopt;
         }
@@ -266,7 +266,7 @@ void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<reg
     o.cycle_s = cycle_s_;
     o.ec = [this](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
         const registry::Signal* s = signals_.find(name);
-        if (!s || s->owner_kind != registry::OwnerKind::Bus) {
+        if (!s || s->owner_kind != registry::OwnerKind::Bus || s->loop_only) {
             why = SB() << "no process-data entry '" << name << "' on the configured buses";
             return std::nullopt;
         }

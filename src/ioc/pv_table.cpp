@@ -27,7 +27,7 @@ std::vector<std::pair<std::string, std::string>> row_fields(const PvRow& r, cons
     if (*r.signal) {
         bool out = is_output_type(r.type);
         f.emplace_back("DTYP", "beamctl");
-        f.emplace_back(out ? "OUT" : "INP", "@" + signal_prefix + r.signal);
+        f.emplace_back(out ? "OUT" : "INP", "@" + signal_prefix + expand_macros(r.signal, macros, MacroEscapes::unescape));
         if (!out && !has_field(r, "SCAN")) f.emplace_back("SCAN", "I/O Intr");
     }
     for (const auto& [k, v] : r.fields) f.emplace_back(k, expand_macros(v, macros, MacroEscapes::unescape));
@@ -41,7 +41,7 @@ pv::DbFile make_records(const PvTable& t, const PvInstance& in, const registry::
     for (const PvRow& row : t.rows) {
         if (*row.signal) {
             int bit = -1;
-            std::string name = in.signal_prefix + row.signal;
+            std::string name = in.signal_prefix + expand_macros(row.signal, in.macros, MacroEscapes::unescape);
             if (!signals.find_with_bit(name, bit))
                 throw Error(SB() << "PV table '" << t.name << "', row " << row.suffix << ": no signal '" << name << "'");
         }
@@ -59,7 +59,7 @@ pv::DbFile make_records(const PvTable& t, const PvInstance& in, const registry::
 void name_pvs(const PvTable& t, const PvInstance& in, registry::Registry& signals) {
     for (const PvRow& row : t.rows) {
         if (!*row.signal) continue;
-        std::string name = in.signal_prefix + row.signal;
+        std::string name = in.signal_prefix + expand_macros(row.signal, in.macros, MacroEscapes::unescape);
         const registry::Signal* s = signals.find(name); // a bit ("status.1") is not the signal's PV
         if (s && s->pv.empty()) signals.set_pv(name, in.pv_prefix + row.suffix);
     }

@@ -27,6 +27,7 @@ struct PvRow {
     const char* suffix; // after the instance's PV prefix: "-PosAct"
     const char* type;   // record type: "ai"
     const char* signal; // after the instance's signal prefix: "actpos", "status.1" (a bit); "": none
+                        // (may name the instance's macros: "$(BUS)ok")
     std::vector<std::pair<const char*, const char*>> fields; // DESC, EGU, ... ($(NAME) of the instance)
     bool readback = false; // an output that follows its signal when the owner changes it:
                            // info(asyn:READBACK, "1"), as asyn's output records

@@ -24,6 +24,7 @@ const char* owner_kind_name(OwnerKind k) {
     case OwnerKind::Plc: return "plc";
     case OwnerKind::Bridge: return "bridge";
     case OwnerKind::Record: return "record";
+    case OwnerKind::Engine: return "engine";
     }
     return "?";
 }

@@ -23,7 +23,7 @@ enum class Direction : uint8_t {
     Output,   // sent by its owner every cycle (a bus output): exactly one writer
     Variable, // a cell others may write between cycles (an axis command, a PLC's enable)
 };
-enum class OwnerKind : uint8_t { Bus, Axis, Plc, Bridge, Record };
+enum class OwnerKind : uint8_t { Bus, Axis, Plc, Bridge, Record, Engine };
 
 const char* direction_name(Direction d);
 const char* owner_kind_name(OwnerKind k);
@@ -36,6 +36,8 @@ struct Signal {
     std::string owner;  // "ec0", "axis 1 (SampleX)", "plc0"
     std::string writer; // Output: who writes it ("axis 1 (SampleX)", "plc0", "record X"); empty: its PV (CA)
     std::string pv;     // the PV that serves it ("" if none)
+    bool loop_only = false; // a value of the IOC loop (a bus's frame counters, the engine's
+                            // statistics): records read it; the cycle (PLC code, axes) cannot
 };
 
 class Registry {

@@ -270,3 +270,75 @@ TEST(PvTable, RowsBecomeDeviceRecordsWithTheInstanceMacros) {
         EXPECT_STREQ(e.what(), "PV table 'bad', row -X: no signal 'ax3.nothing'");
     }
 }
+
+// The bus and engine status PVs are table records on IOC-loop items (ec0.ok, ec0.s2.slavestatus,
+// ecmc.thread.*), which records of a .db file read too; the cycle (PLC code) cannot use them.
+TEST(BusItems, StatusPvsAndRecordsReadTheBusAndEngineItems) {
+    Rig r(R"(
+record(bi, "T:Ok") {
+  field(DTYP, "asynInt32")
+  field(INP, "@asyn(MC_CPU1,0,1)T_SMP_MS=10/TYPE=asynInt32/ec0.ok?")
+  field(SCAN, "I/O Intr")
+}
+record(bi, "T:DriveOp") {
+  field(DTYP, "beamctl")
+  field(INP, "@ec0.s2.slavestatus.1")
+  field(SCAN, "I/O Intr")
+}
+record(longin, "T:Cycles") {
+  field(DTYP, "beamctl")
+  field(INP, "@ecmc.thread.cycles")
+  field(SCAN, "I/O Intr")
+}
+)");
+    const registry::Registry& s = r.ioc->signals();
+    EXPECT_EQ(s.find("ec0.ok")->pv, "T:m0-Stat-OK");
+    EXPECT_EQ(s.find("ec0.slavecounter")->pv, "T:m0-SlvCntr");
+    EXPECT_EQ(s.find("ecmc.thread.reset")->owner_kind, registry::OwnerKind::Engine);
+    EXPECT_TRUE(s.find("ec0.s2.slavestatus")->loop_only);
+    r.step(20);
+    EXPECT_EQ(r.get("T:m0-Stat-OK"), 1);
+    EXPECT_EQ(r.get("T:Ok"), 1);
+    EXPECT_EQ(r.get("T:m0-SlvCntr"), 3);
+    EXPECT_EQ(r.get("T:m0-Dom-WC-Complete"), 1);
+    EXPECT_EQ(r.get("T:m0-Dom-WC"), r.get("T:m0-Dom-WC-Exp"));
+    EXPECT_EQ(r.get("T:m0s002-Online"), 1);
+    EXPECT_EQ(r.get("T:m0s002-Operational"), 1);
+    EXPECT_EQ(r.get("T:DriveOp"), 1);
+    EXPECT_GT(r.get("T:Cycles"), 0); // virtual time: cycles are counted, latencies are 0
+    EXPECT_EQ(r.get("T:Cycles"), r.get("T:m0-ThdCycles"));
+    // ThdStat-Reset: a put of 1 clears the counts in the next cycle and reads 0 once done
+    pv::Address reset;
+    ASSERT_TRUE(r.ioc->database().resolve("T:m0-ThdStat-Reset", reset));
+    double one = 1;
+    ASSERT_EQ(r.ioc->database().put(reset, pv::Prim::Double, &one, 1), pv::PutStatus::Ok);
+    EXPECT_EQ(r.get("T:m0-ThdStat-Reset"), 1);
+    r.step(3);
+    EXPECT_EQ(r.get("T:m0-ThdStat-Reset"), 0);
+    EXPECT_LE(r.get("T:m0-ThdCycles"), 3);
+}
+
+TEST(BusItems, TheCycleCannotUseThemAndOutputsCannotWriteThem) {
+    TempDir d;
+    d.write("a.plc", "static.x := ec0.ok;\n");
+    d.write("x.db", "record(bo, \"T:A\") {\n  field(DTYP, \"beamctl\")\n  field(OUT, \"@ec0.linkup\")\n}\n"
+                    "record(longin, \"T:B\") {\n  field(DTYP, \"beamctl\")\n  field(INP, \"@ec0.wkcerrors.2\")\n}\n");
+    std::string yaml = ioc_yaml(d.file("x.db"));
+    std::string e;
+    rt::VirtualClock clock;
+    try {
+        ioc::Ioc ioc(config::IocConfig::load(d.write("ioc.yaml", yaml + "plcs:\n  - {id: 0, file: a.plc}\n")), clock);
+    } catch (const Error& err) {
+        e = err.what();
+    }
+    EXPECT_NE(e.find("no process-data entry 'ec0.ok' on the configured buses"), std::string::npos) << e;
+    try {
+        Rig bad(std::string("record(bo, \"T:A\") {\n  field(DTYP, \"beamctl\")\n  field(OUT, \"@ec0.linkup\")\n}\n"
+                            "record(longin, \"T:B\") {\n  field(DTYP, \"beamctl\")\n  field(INP, \"@ec0.wkcerrors.2\")\n}\n"));
+        e.clear();
+    } catch (const Error& err) {
+        e = err.what();
+    }
+    EXPECT_NE(e.find("'ec0.linkup' is a status of the IOC; an output link cannot write it"), std::string::npos) << e;
+    EXPECT_NE(e.find("'ec0.wkcerrors' is a number; it has no bit 2"), std::string::npos) << e;
+}
