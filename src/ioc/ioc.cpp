@@ -18,6 +18,7 @@
 #include "pv/db_file.hpp"
 
 #include <algorithm>
+#include <deque>
 #include <cinttypes>
 #include <csignal>
 #include <cstdio>
@@ -67,6 +68,13 @@ public:
     }
     bool changed() override {
         const ethercat::BusSnapshot& s = bus_.snapshot();
+        bool ok = s.link_up && s.wkc_ok;
+        if (ok != last_ok_) { // the bus went down (the record shows LINK/INVALID) or came back
+            last_ok_ = ok;
+            if (watch_ >= 0 && std::size_t(watch_) < s.changes.size()) seen_ = s.changes[std::size_t(watch_)];
+            last_ = value(s);
+            return true;
+        }
         if (watch_ >= 0 && std::size_t(watch_) < s.changes.size()) {
             // the entry changed in some cycle since the last look (a bit record: only if its bit
             // differs now or the entry changed more than once, i.e. it may have pulsed)
@@ -94,6 +102,20 @@ private:
     int watch_;         // index of the bus's change watch, -1: compare values at each look
     uint32_t seen_ = 0; // the watch's change count at the last look
     double last_ = NAN;
+    bool last_ok_ = false; // the bus's data was valid at the last look
+};
+
+// An entry PV whose entry the slave's PDO assignment does not have: reads and writes fail
+// (LINK/INVALID), instead of keeping the IOC from starting.
+class MissingEntryDevice : public pv::LinkDevice {
+public:
+    explicit MissingEntryDevice(std::string name) : name_(std::move(name)) {}
+    bool read(double&) override { return false; }
+    bool write(double) override { return false; }
+    std::string describe() const override { return name_ + " (not in the slave's PDO assignment)"; }
+
+private:
+    std::string name_;
 };
 
 // ecmccfg's asyn addresses ("asyn(MC_CPU1,0,1)T_SMP_MS=10/TYPE=asynInt32/ec0.s3.positionActual01?",
@@ -311,7 +333,12 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
         PvInstance slave{p, SB() << "ec" << bc.id << ".s" << s.position << ".", {{"TYPE", s.type}, {"NAME", d->name.substr(0, 40)}}};
         pv::merge_db(f, make_records(slave_table(), slave, registry_));
         name_pvs(slave_table(), slave, registry_);
-        // Process-data entries of the default PDO assignment.
+        // Process-data entries of the default PDO assignment: a table made from the catalog,
+        // one row per entry (inputs read with I/O Intr, outputs written; an output follows the
+        // image, which shows what its writer sends when an axis, a PLC or a record drives it).
+        std::deque<std::string> text; // the rows' strings
+        auto keep = [&](std::string x) { return text.emplace_back(std::move(x)).c_str(); };
+        PvTable entries{"bus entries", {}};
         for (const auto& sm : d->sms) {
             if (sm.type != ethercat::SmType::Outputs && sm.type != ethercat::SmType::Inputs) continue;
             bool out = sm.type == ethercat::SmType::Outputs;
@@ -321,74 +348,29 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
                     if (pd.index != pdo) continue;
                     for (const auto& e : pd.entries) {
                         if (e.name.empty() || e.index == 0) continue;
-                        std::string name = p + "-" + entry_pv_suffix(e.name);
-                        std::string type;
                         bool analog = e.name.rfind("analog", 0) == 0 || e.bits > 32 || e.datatype == "REAL" || e.datatype == "LREAL";
-                        if (e.bits == 1) type = out ? "bo" : "bi";
-                        else if (analog) type = out ? "ao" : "ai";
-                        else type = out ? "longout" : "longin";
-                        std::string desc = SB() << s.type << " " << e.name;
-                        std::vector<std::pair<std::string, std::string>> fl = {{"DESC", desc.substr(0, 40)}};
-                        if (e.bits == 1) {
-                            fl.push_back({"ZNAM", "0"});
-                            fl.push_back({"ONAM", "1"});
-                        }
-                        f.records.push_back(record(type, name, fl));
-                        auto& r = f.records.back();
-                        std::string sig = SB() << "ec" << bc.id << ".s" << s.position << "." << e.name;
-                        r.infos.push_back(pv::DbInfo{"ecmc:signal", sig, r.loc});
-                        registry_.set_pv(sig, name);
+                        const char* type = e.bits == 1 ? (out ? "bo" : "bi") : analog ? (out ? "ao" : "ai") : (out ? "longout" : "longin");
+                        PvRow row{keep("-" + entry_pv_suffix(e.name)), type, keep(e.name),
+                                  {{"DESC", keep((s.type + " " + e.name).substr(0, 40))}}, out};
+                        if (e.bits == 1) row.fields.insert(row.fields.end(), {{"ZNAM", "0"}, {"ONAM", "1"}});
+                        entries.rows.push_back(std::move(row));
                     }
                 }
             }
         }
+        pv::merge_db(f, make_records(entries, slave, registry_));
+        name_pvs(entries, slave, registry_);
+        for (const PvRow& row : entries.rows) entry_pvs_[p + row.suffix] = slave.signal_prefix + row.signal;
     }
     db_.load(f);
     b.lat_hist = db_.find(m + "-ThdLatHist");
     b.lat_edges = db_.find(m + "-ThdLatHistEdges");
 }
 
-void Ioc::make_entry_pvs(BusRt& b) {
-    // Binds every entry PV to the master's signal of the same name (after bring-up).
-    ethercat::Bus& bus = *b.bus;
-    std::string m = SB() << cfg_.prefix << "m" << bus.id();
-    for (const auto& sig : bus.master().signals()) {
-        if (sig.slave < 0) continue; // the master's own signals (ec0.masterstatus) have bus PVs
-        // "ec0.s3.binaryInput01" -> "<prefix>m0s003-BI01"
-        std::size_t s_at = sig.name.find(".s");
-        std::size_t dot = sig.name.find('.', s_at + 2);
-        char sp[16];
-        std::snprintf(sp, sizeof sp, "s%03d", sig.slave);
-        std::string name = m + sp + "-" + entry_pv_suffix(sig.name.substr(dot + 1));
-        pv::Record* rec = db_.find(name);
-        if (!rec) continue; // an entry outside the default assignment: no PV (yet)
-        EntryPv e{rec, &sig, sig.output};
-        const registry::Signal* reg = registry_.find(sig.name);
-        if (sig.output && reg && !reg->writer.empty()) {
-            own_output(e, reg->writer); // an axis or a PLC writes it every cycle
-        } else if (sig.output) {
-            ethercat::Bus* busp = &bus;
-            const ethercat::SignalInfo* sg = &sig;
-            rec->put_hook = [busp, sg](pv::Record& r, const pv::FieldDesc& f) {
-                if (std::string_view(f.name) != "VAL") return pv::PutStatus::Ok;
-                double v = 0;
-                pv::Elements el = r.elements(f);
-                pv::get_element(r, f, el, 0, pv::Prim::Double, &v);
-                return busp->write(*sg, registry::double_to_raw(v, sg->bits)) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
-            };
-        } else {
-            rec->val_read_only = true;
-        }
-        b.entries.push_back(e);
-    }
-}
-
 // One writer per output: CA may only read it, the PV shows what is sent on the bus, and DESC
 // names the owner.
 void Ioc::own_output(EntryPv& e, const std::string& owner) {
-    e.owned = true;
     e.rec->val_read_only = true;
-    e.rec->put_hook = nullptr;
     std::string desc = ("set by " + owner).substr(0, 39);
     const pv::FieldDesc* fd = e.rec->type().find("DESC");
     pv::Elements el = e.rec->elements(*fd);
@@ -461,12 +443,25 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
     if (sig->owner_kind != registry::OwnerKind::Bus)
         return fail(SB() << "'" << name << "' is a signal of " << sig->owner << "; device support reads and writes bus entries, axis and PLC items");
     std::string reason;
-    if (!registry_.bind(name, reason).bound()) return fail(reason);
+    auto entry = entry_pvs_.find(r.name());
+    bool entry_pv = entry != entry_pvs_.end() && entry->second == sig->name; // the entry's own PV
+    if (!registry_.bind(name, reason).bound()) {
+        if (!entry_pv) return fail(reason);
+        // a slave whose PDO assignment lacks an entry of the catalog's: its PV reads LINK/INVALID
+        LOG_WARN(lg, r.name() << ": " << reason);
+        devices_.push_back(std::make_unique<MissingEntryDevice>(sig->name));
+        return devices_.back().get();
+    }
     for (auto& b : buses_)
         for (const auto& si : b.bus->master().signals()) {
             if (si.name != sig->name) continue;
-            if (output) {
-                if (!si.output) return fail(SB() << "'" << sig->name << "' is an input; an output link cannot write it");
+            if (output && !si.output) return fail(SB() << "'" << sig->name << "' is an input; an output link cannot write it");
+            if (entry_pv && !output) r.val_read_only = true; // an input's PV: the bus writes it
+            if (output && entry_pv) {
+                // the entry's PV writes it while nobody else does (its writer: "CA (its PV)")
+                b.entries.push_back(EntryPv{&r, &si});
+                if (!sig->writer.empty()) own_output(b.entries.back(), sig->writer);
+            } else if (output) {
                 std::string writer = SB() << "record " << r.name();
                 if (!registry_.claim(sig->name, writer, reason)) return fail(reason);
                 for (auto& e : b.entries)
@@ -483,7 +478,6 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
 void Ioc::bring_up() {
     for (auto& b : buses_) {
         b.bus->bring_up();
-        make_entry_pvs(b);
     }
     axes_->bind(
         [this](const motion::SignalRef& r) {
@@ -544,15 +538,6 @@ void Ioc::publish() {
         }
         set_array_if_changed(db_, *b.lat_hist, hist, rt::kLatencyBuckets);
         set_array_if_changed(db_, *b.lat_edges, edges, rt::kLatencyBuckets);
-        for (auto& e : b.entries) {
-            if (e.output && !e.owned) continue;
-            double v = registry::raw_to_double(ethercat::Bus::get(s.image, *e.sig), e.sig->entry());
-            bool bad = !ok;
-            if (v != e.last || bad != (e.rec->sevr == pv::kInvalid)) {
-                e.last = v;
-                set_value(db_, *e.rec, v, bad);
-            }
-        }
     }
     db_.scan_io_intr(); // records on engine signals (axis items, bus entries) that changed since the last look
 }

@@ -21,6 +21,7 @@
 #include "registry/registry.hpp"
 #include "rt/engine.hpp"
 
+#include <map>
 #include <memory>
 #include <set>
 #include <string>
@@ -63,12 +64,9 @@ public:
     void shutdown(LoopSignals* signals = nullptr);
 
 private:
-    struct EntryPv {
+    struct EntryPv { // an output entry's own PV (read-only once an axis, a PLC or a record writes it)
         pv::Record* rec;
         const ethercat::SignalInfo* sig;
-        bool output;
-        double last = NAN;
-        bool owned = false; // an output an axis or PLC writes: read-only, shows the image
     };
     void own_output(EntryPv& e, const std::string& owner);
     pv::LinkDevice* bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why);
@@ -83,7 +81,7 @@ private:
     };
     void declare_bus_signals();
     void make_bus_pvs(BusRt& b, const config::BusConfig& bc);
-    void make_entry_pvs(BusRt& b);
+    std::map<std::string, std::string, std::less<>> entry_pvs_; // entry PV name -> its signal
 
     config::IocConfig cfg_;
     rt::Clock& clock_;

@@ -498,7 +498,10 @@ void Database::scan_io_intr() {
             put_element(r, vf, e, 0, Prim::Double, &v);
             r.udf = 0;
             if (io_intr_[i].passive) { // read-back only: clients see the new value, nothing is written
-                if (cur != v) post(r, &vf, kDbeValue | kDbeLog);
+                if (cur == v && r.stat != kStatUdf) continue;
+                r.stamp_time();
+                unsigned m = (cur != v ? kDbeValue | kDbeLog : 0u) | r.reset_alarms(); // no alarm pending: UDF clears
+                if (m) post(r, &vf, m);
                 continue;
             }
         }

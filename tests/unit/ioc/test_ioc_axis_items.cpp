@@ -342,3 +342,36 @@ TEST(BusItems, TheCycleCannotUseThemAndOutputsCannotWriteThem) {
     EXPECT_NE(e.find("'ec0.linkup' is a status of the IOC; an output link cannot write it"), std::string::npos) << e;
     EXPECT_NE(e.find("'ec0.wkcerrors' is a number; it has no bit 2"), std::string::npos) << e;
 }
+
+// The entry PVs are table records too: an input reads its entry with I/O Intr and shows
+// LINK/INVALID while the bus's data is not valid; a free output's PV writes its entry; an output
+// an axis drives is read-only and follows what the axis sends.
+TEST(BusItems, EntryPvsReadWriteAndShowTheBusState) {
+    Rig r("");
+    pv::Database& db = r.ioc->database();
+    pv::Record* in = db.find("T:m0s001-BI01");
+    ASSERT_NE(in, nullptr);
+    EXPECT_EQ(in->scan, 2);
+    EXPECT_TRUE(in->val_read_only);
+    r.step(10);
+    EXPECT_EQ(in->sevr, pv::kNoAlarm);
+    EXPECT_EQ(r.get("T:m0s001-BI01"), 1); // forward limit OK (the switch input is 1 = not on it)
+    // the drive's control word: driven by the axis, read-only, shows the image
+    pv::Record* ctrl = db.find("T:m0s002-driveControl01");
+    ASSERT_NE(ctrl, nullptr);
+    EXPECT_TRUE(ctrl->val_read_only);
+    r.put("T:X-EnaCmd", 1);
+    ASSERT_TRUE(r.until([&] { return r.get("T:X-EnaAct") == 1; }));
+    EXPECT_NE(int(r.get("T:m0s002-driveControl01")) & 1, 0); // the enable bit the axis sends
+    EXPECT_EQ(ctrl->sevr, pv::kNoAlarm);                      // not UDF: it was read back
+    // a free output (the encoder control word): its PV writes it
+    pv::Record* enc = db.find("T:m0s002-encoderControl01");
+    ASSERT_NE(enc, nullptr);
+    EXPECT_FALSE(enc->val_read_only);
+    // unplugging the input terminal: WKC incomplete, the inputs' PVs go INVALID
+    r.ioc->segment(0)->unplug(1);
+    r.step(20);
+    EXPECT_EQ(r.get("T:m0-Stat-OK"), 0);
+    EXPECT_EQ(in->sevr, pv::kInvalid);
+    EXPECT_EQ(in->stat, pv::kStatLink);
+}

@@ -76,7 +76,8 @@ TEST(IocIoIntr, APulseBetweenTwoLooksStillProcessesTheRecordAndWakesTheLoop) {
     ioc::Ioc ioc(config::IocConfig::load(d.write("ioc.yaml", kIoc)), clock);
     ioc.bring_up();
     ethercat::Bus& bus = ioc.bus(0);
-    EXPECT_EQ(bus.watch_count(), 2u); // both I/O Intr inputs, watched in the cycle
+    EXPECT_EQ(bus.watch_count(), 8u); // every input of the EL1008 (its entry PVs are I/O Intr; the
+                                      // records here share the watches of inputs 1 and 2)
     ioc.engine().run_cycles(3);
     bus.drain_changes();
     ioc.database().scan_io_intr();
