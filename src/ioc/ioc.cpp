@@ -66,6 +66,12 @@ public:
     std::string describe() const override {
         return bit_ >= 0 ? std::string(SB() << sig_.name << "." << bit_) : sig_.name;
     }
+    // Called when the record's link is replaced or the record removed (gives back the output).
+    std::function<void()> on_release;
+    void release() override {
+        if (on_release) on_release();
+        on_release = nullptr;
+    }
     bool changed() override {
         const ethercat::BusSnapshot& s = bus_.snapshot();
         bool ok = s.link_up && s.wkc_ok;
@@ -370,11 +376,23 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
 // One writer per output: CA may only read it, the PV shows what is sent on the bus, and DESC
 // names the owner.
 void Ioc::own_output(EntryPv& e, const std::string& owner) {
+    if (!e.rec->val_read_only) e.desc = e.rec->desc;
     e.rec->val_read_only = true;
-    std::string desc = ("set by " + owner).substr(0, 39);
-    const pv::FieldDesc* fd = e.rec->type().find("DESC");
-    pv::Elements el = e.rec->elements(*fd);
-    pv::put_element(*e.rec, *fd, el, 0, pv::Prim::String, desc.c_str());
+    set_desc(*e.rec, ("set by " + owner).substr(0, 39));
+}
+
+// The writer let go of it (its record was relinked or removed): the PV writes it again.
+void Ioc::free_output(EntryPv& e) {
+    if (!e.rec->val_read_only) return;
+    e.rec->val_read_only = false;
+    set_desc(*e.rec, e.desc);
+}
+
+void Ioc::set_desc(pv::Record& r, const std::string& text) {
+    const pv::FieldDesc* fd = r.type().find("DESC");
+    pv::Elements el = r.elements(*fd);
+    pv::put_element(r, *fd, el, 0, pv::Prim::String, text.c_str());
+    r.post(fd, pv::kDbeValue | pv::kDbeLog);
 }
 
 pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) {
@@ -461,15 +479,24 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
                 // the entry's PV writes it while nobody else does (its writer: "CA (its PV)")
                 b.entries.push_back(EntryPv{&r, &si});
                 if (!sig->writer.empty()) own_output(b.entries.back(), sig->writer);
-            } else if (output) {
-                std::string writer = SB() << "record " << r.name();
+            }
+            std::string writer;
+            if (output && !entry_pv) { // this record becomes the output's one writer
+                writer = SB() << "record " << r.name();
                 if (!registry_.claim(sig->name, writer, reason)) return fail(reason);
                 for (auto& e : b.entries)
                     if (e.sig == &si) own_output(e, writer);
             }
             // an I/O Intr input is watched in the cycle (before the cycle starts; later: by value)
             int watch = f.dbf == pv::Dbf::InLink && r.scan == 2 ? b.bus->watch(si) : -1;
-            devices_.push_back(std::make_unique<EcLinkDevice>(*b.bus, si, bit, watch));
+            auto dev = std::make_unique<EcLinkDevice>(*b.bus, si, bit, watch);
+            if (!writer.empty()) // relinked or removed: the output is free again, its PV writable
+                dev->on_release = [this, &b, &si, writer, name = sig->name] {
+                    registry_.release(name, writer);
+                    for (auto& e : b.entries)
+                        if (e.sig == &si) free_output(e);
+                };
+            devices_.push_back(std::move(dev));
             return devices_.back().get();
         }
     return fail(SB() << "no signal '" << sig->name << "' on its bus after bring-up");

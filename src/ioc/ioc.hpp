@@ -67,8 +67,11 @@ private:
     struct EntryPv { // an output entry's own PV (read-only once an axis, a PLC or a record writes it)
         pv::Record* rec;
         const ethercat::SignalInfo* sig;
+        std::string desc; // its DESC while CA writes it
     };
     void own_output(EntryPv& e, const std::string& owner);
+    void free_output(EntryPv& e);
+    static void set_desc(pv::Record& r, const std::string& text);
     pv::LinkDevice* bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why);
     std::vector<std::unique_ptr<pv::LinkDevice>> devices_; // device support of "@..." links
     struct BusRt {

@@ -272,9 +272,12 @@ void Database::remove(std::string_view name) {
             ++w;
         }
     }
-    for (const FieldDesc& f : r->type().fields()) // its CA links stop
-        if (is_link(f.dbf))
-            if (RemoteLink* rl = field_ref<Link>(*r, f).remote()) rl->release();
+    for (const FieldDesc& f : r->type().fields()) // its CA links stop, its devices give back outputs
+        if (is_link(f.dbf)) {
+            Link& l = field_ref<Link>(*r, f);
+            if (RemoteLink* rl = l.remote()) rl->release();
+            else if (l.kind == Link::Kind::Hw && l.device) l.device->release();
+        }
     if (r->pn_ && --r->pn_->pending == 0 && r->pn_->started) finish_notify(r->pn_);
     for (Record* o : order_) {
         if (o->pn_ && o->pn_->origin == r) o->pn_->origin = nullptr;
@@ -434,6 +437,8 @@ PutStatus Database::relink(Record& r, const FieldDesc& f, std::string_view text)
         }
     Link& l = field_ref<Link>(r, f);
     if (fresh.spec) fresh.spec->loc = l.s().loc;
+    // a hardware link gives back its output first, so that the new link may claim it again
+    if (l.kind == Link::Kind::Hw && l.device) l.device->release();
     if (!resolve_link(r, f, fresh, nullptr)) {
         if (!l.remote()) resolve_link(r, f, l, nullptr); // the old link stays, with its watch
         return PutStatus::BadValue;

@@ -39,6 +39,9 @@ public:
     virtual std::string describe() const = 0; // for dbpr/introspection
     // SCAN "I/O Intr": true when the value differs from the one the record last read.
     virtual bool changed() { return false; }
+    // The link was replaced (a put to INP/OUT) or its record removed: give back what binding took
+    // (an output's one-writer claim). No more calls follow.
+    virtual void release() {}
 };
 
 // A Channel Access link to a record of another server (EPICS dbCa): made by the database's
@@ -63,7 +66,7 @@ public:
     // The remote field's native type once known (Double before).
     virtual Prim type() const = 0;
     // The link was replaced or its record removed: no more callbacks into the database.
-    virtual void release() = 0;
+    void release() override = 0;
     // LinkDevice, for code that sees any device: a scalar double in and out.
     bool read(double&) override { return false; }
     bool write(double v) override { return put(Prim::Double, &v, 1); }

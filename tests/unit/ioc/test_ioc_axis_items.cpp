@@ -375,3 +375,40 @@ TEST(BusItems, EntryPvsReadWriteAndShowTheBusState) {
     EXPECT_EQ(in->sevr, pv::kInvalid);
     EXPECT_EQ(in->stat, pv::kStatLink);
 }
+
+// One writer per output at run time: a record relinked to another output (a put to OUT, as dbpf
+// does) gives the first one back, whose own PV is writable again with its DESC; removing nothing
+// else.
+TEST(BusItems, ARelinkedOutputRecordGivesItsOutputBack) {
+    Rig r(R"(
+record(longout, "T:Out") {
+  field(DTYP, "beamctl")
+  field(OUT, "@ec0.s2.encoderControl01")
+}
+)");
+    pv::Database& db = r.ioc->database();
+    const registry::Registry& s = r.ioc->signals();
+    pv::Record* pv1 = db.find("T:m0s002-encoderControl01");
+    ASSERT_NE(pv1, nullptr);
+    EXPECT_EQ(s.find("ec0.s2.encoderControl01")->writer, "record T:Out");
+    EXPECT_TRUE(pv1->val_read_only);
+    EXPECT_STREQ(pv1->desc, "set by record T:Out");
+    // relink it to the drive's velocity setpoint: refused (the axis drives it), nothing changes
+    pv::Address out;
+    ASSERT_TRUE(db.resolve("T:Out.OUT", out));
+    char text[40] = "@ec0.s2.velocitySetpoint01";
+    EXPECT_NE(db.put(out, pv::Prim::String, text, 1), pv::PutStatus::Ok);
+    EXPECT_EQ(s.find("ec0.s2.encoderControl01")->writer, "record T:Out");
+    EXPECT_TRUE(pv1->val_read_only);
+    // relink it to an empty link: the output is free, its PV writes it again
+    char empty[40] = "";
+    ASSERT_EQ(db.put(out, pv::Prim::String, empty, 1), pv::PutStatus::Ok);
+    EXPECT_EQ(s.find("ec0.s2.encoderControl01")->writer, "");
+    EXPECT_FALSE(pv1->val_read_only);
+    EXPECT_STREQ(pv1->desc, "EL7041 encoderControl01");
+    // and back: claimed again
+    char again[40] = "@ec0.s2.encoderControl01";
+    ASSERT_EQ(db.put(out, pv::Prim::String, again, 1), pv::PutStatus::Ok);
+    EXPECT_EQ(s.find("ec0.s2.encoderControl01")->writer, "record T:Out");
+    EXPECT_TRUE(pv1->val_read_only);
+}
