@@ -33,20 +33,6 @@ constexpr uint32_t kLoopbackIp = 0x7F000001;
 constexpr double kTick_s = 0.02;          // search and echo bookkeeping period
 constexpr double kRegister_s = 30.0;      // repeater registration refresh
 
-const char* env(const char* name) {
-    const char* v = std::getenv(name);
-    return v && *v ? v : nullptr;
-}
-
-uint16_t env_port(const char* name, uint16_t def) {
-    const char* v = env(name);
-    if (!v) return def;
-    char* end;
-    long p = std::strtol(v, &end, 10);
-    if (*end || p <= 0 || p > 65535) throw Error(SB() << name << "='" << v << "' is not a port number");
-    return uint16_t(p);
-}
-
 double env_seconds(const char* name, double def) {
     const char* v = env(name);
     if (!v) return def;

@@ -1,5 +1,9 @@
 #include "ca/net.hpp"
 
+#include "core/error.hpp"
+
+#include <cstdlib>
+
 #include <ifaddrs.h>
 #include <net/if.h>
 
@@ -17,6 +21,20 @@ std::vector<in_addr> interface_broadcasts() {
     }
     freeifaddrs(ifs);
     return out;
+}
+
+const char* env(const char* name) {
+    const char* v = std::getenv(name);
+    return v && *v ? v : nullptr;
+}
+
+uint16_t env_port(const char* name, uint16_t def) {
+    const char* v = env(name);
+    if (!v) return def;
+    char* end;
+    long p = std::strtol(v, &end, 10);
+    if (*end || p <= 0 || p > 65535) throw Error(SB() << name << "='" << v << "' is not a port number");
+    return uint16_t(p);
 }
 
 } // namespace beamctl::ca

@@ -27,20 +27,6 @@ log::Logger lg("ca.server");
 
 constexpr std::size_t kStopReadingAt = 8u << 20; // output bytes at which a client's input pauses
 
-const char* env(const char* name) {
-    const char* v = std::getenv(name);
-    return v && *v ? v : nullptr;
-}
-
-uint16_t env_port(const char* name, uint16_t def) {
-    const char* v = env(name);
-    if (!v) return def;
-    char* end;
-    long p = std::strtol(v, &end, 10);
-    if (*end || p <= 0 || p > 65535) throw Error(SB() << name << "='" << v << "' is not a port number");
-    return uint16_t(p);
-}
-
 std::vector<std::string> split_ws(const char* s) {
     std::vector<std::string> out;
     std::istringstream is(s ? s : "");
