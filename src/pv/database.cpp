@@ -73,7 +73,7 @@ Prim transfer_prim(Dbf to, Dbf from) {
 
 // The type a link's value comes in: its target field's, a CA link's remote native type.
 Dbf source_dbf(const Link& l) {
-    if (l.target_field) return l.target_field->dbf;
+    if (l.target_field()) return l.target_field()->dbf;
     if (RemoteLink* rl = l.remote()) {
         switch (rl->type()) {
         case Prim::String: return Dbf::String;
@@ -276,7 +276,7 @@ void Database::remove(std::string_view name) {
         if (is_link(f.dbf)) {
             Link& l = field_ref<Link>(*r, f);
             if (RemoteLink* rl = l.remote()) rl->release();
-            else if (l.kind == Link::Kind::Hw && l.device) l.device->release();
+            else if (l.kind == Link::Kind::Hw && l.device()) l.device()->release();
         }
     if (r->pn_ && --r->pn_->pending == 0 && r->pn_->started) finish_notify(r->pn_);
     for (Record* o : order_) {
@@ -284,7 +284,7 @@ void Database::remove(std::string_view name) {
         for (const FieldDesc& f : o->type().fields())
             if (is_link(f.dbf)) {
                 Link& l = field_ref<Link>(*o, f);
-                if (l.target == r) l.target = nullptr, l.target_field = nullptr;
+                if (l.target() == r) l.set_target(nullptr, nullptr);
             }
     }
     records_.erase(it);
@@ -347,7 +347,7 @@ void Database::resolve_links(const std::vector<Record*>& batch) {
         if (r->scan != 2 || std::find(bad.begin(), bad.end(), r) != bad.end()) continue;
         bool device = false;
         for (const FieldDesc& f : r->type().fields())
-            if (is_link(f.dbf) && field_ref<Link>(*r, f).kind == Link::Kind::Hw && field_ref<Link>(*r, f).device)
+            if (is_link(f.dbf) && field_ref<Link>(*r, f).kind == Link::Kind::Hw && field_ref<Link>(*r, f).device())
                 device = true;
         if (!device)
             errs.add(SB() << "record " << r->name() << ": SCAN \"I/O Intr\" needs device support with "
@@ -362,9 +362,8 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
         if (why) *why = std::move(m);
         return false;
     };
-    l.target = nullptr;
-    l.target_field = nullptr;
-    l.device = nullptr;
+    l.set_target(nullptr, nullptr);
+    l.set_device(nullptr);
     switch (l.kind) {
     case Link::Kind::Empty:
     case Link::Kind::Constant: return true;
@@ -376,7 +375,7 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
                              << "' needs device support (DTYP), and this database has none");
         LinkDevice* d = binder_(r, f, l, why);
         if (!d) return false;
-        l.device = d;
+        l.set_device(d);
         return true;
     }
     case Link::Kind::Db: break;
@@ -394,7 +393,7 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
                              << "its PROC field (\"" << spec.record << ".PROC CA\")");
         RemoteLink* rl = remote_binder_(r, f, l, why);
         if (!rl) return false;
-        l.device = rl;
+        l.set_device(rl);
         return true;
     }
     std::string_view fname = spec.field.empty() ? std::string_view("VAL") : std::string_view(spec.field);
@@ -412,8 +411,7 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
                              << (t->val_read_only && is_val(*tf) ? " is set by the system (one writer per output)"
                                                                   : " is read-only"));
     }
-    l.target = t;
-    l.target_field = tf;
+    l.set_target(t, tf);
     if (f.dbf == Dbf::InLink && (l.proc == Link::kCp || l.proc == Link::kCpp)) {
         auto w = std::make_unique<CpLinkWatch>(*this, r, f, l.proc == Link::kCpp);
         w->addr.rec = t;
@@ -438,7 +436,7 @@ PutStatus Database::relink(Record& r, const FieldDesc& f, std::string_view text)
     Link& l = field_ref<Link>(r, f);
     if (fresh.spec) fresh.spec->loc = l.s().loc;
     // a hardware link gives back its output first, so that the new link may claim it again
-    if (l.kind == Link::Kind::Hw && l.device) l.device->release();
+    if (l.kind == Link::Kind::Hw && l.device()) l.device()->release();
     if (!resolve_link(r, f, fresh, nullptr)) {
         if (!l.remote()) resolve_link(r, f, l, nullptr); // the old link stays, with its watch
         return PutStatus::BadValue;
@@ -482,7 +480,7 @@ void Database::scan_io_intr() {
             io.readback = nullptr;
             for (const FieldDesc& f : io.rec->type().fields())
                 if (is_link(f.dbf))
-                    if (LinkDevice* dev = field_ref<Link>(*io.rec, f).device) {
+                    if (LinkDevice* dev = field_ref<Link>(*io.rec, f).device()) {
                         io.devices.push_back(dev);
                         if (f.dbf == Dbf::OutLink && is_named(f, "OUT") && io.rec->type().find("VAL")) io.readback = dev;
                     }
@@ -894,10 +892,10 @@ void Database::link_forward(Record& r, Link& l) {
         if (!rl->put(Prim::Short, &one, 1)) stats_.link_errors++;
         return;
     }
-    if (l.kind != Link::Kind::Db || !l.target) return;
+    if (l.kind != Link::Kind::Db || !l.target()) return;
     PutNotify* outer = notify_;
     if (r.pn_) notify_ = r.pn_; // an asynchronous record's forward link belongs to its put-callback
-    if (l.target->scan == 0 || is_named(*l.target_field, "PROC")) process_record(*l.target);
+    if (l.target()->scan == 0 || is_named(*l.target_field(), "PROC")) process_record(*l.target());
     notify_ = outer;
 }
 
@@ -908,7 +906,7 @@ bool Database::link_get(Record& r, Link& l, Prim t, void* dest, uint32_t n, uint
     case Link::Kind::Constant: return true;
     case Link::Kind::Hw: {
         double v = 0;
-        if (!l.device || !l.device->read(v)) break;
+        if (!l.device() || !l.device()->read(v)) break;
         Elements e{Dbf::Double, &v, 1, 1, 8};
         get_element(r, kScratchDouble, e, 0, t, dest);
         *got = 1;
@@ -933,14 +931,14 @@ bool Database::link_get(Record& r, Link& l, Prim t, void* dest, uint32_t n, uint
             r.inherit_sevr(l.ms, v.stat, v.sevr);
             return true;
         }
-        if (!l.target) break;
-        Record& tr = *l.target;
+        if (!l.target()) break;
+        Record& tr = *l.target();
         if (l.proc == Link::kPp && tr.scan == 0 && &tr != &r) process_record(tr);
         Address a;
         a.rec = &tr;
-        a.field = l.target_field;
-        a.native = native_prim(l.target_field->dbf);
-        a.count = (l.target_field->flags & kArray) ? tr.elements(*l.target_field).capacity : 1;
+        a.field = l.target_field();
+        a.native = native_prim(l.target_field()->dbf);
+        a.count = (l.target_field()->flags & kArray) ? tr.elements(*l.target_field()).capacity : 1;
         uint32_t c = get(a, t, dest, n);
         *got = std::min(c, n);
         r.inherit_sevr(l.ms, tr.stat, tr.sevr);
@@ -959,7 +957,7 @@ bool Database::link_put(Record& r, Link& l, Prim t, const void* src, uint32_t n)
     case Link::Kind::Hw: {
         double v = 0;
         Elements e{Dbf::Double, &v, 1, 1, 8};
-        if (l.device && put_element(r, kScratchDouble, e, 0, t, src) && l.device->write(v)) return true;
+        if (l.device() && put_element(r, kScratchDouble, e, 0, t, src) && l.device()->write(v)) return true;
         break;
     }
     case Link::Kind::Db: {
@@ -967,9 +965,9 @@ bool Database::link_put(Record& r, Link& l, Prim t, const void* src, uint32_t n)
             if (rl->put(t, src, n)) return true;
             break;
         }
-        if (!l.target) break;
-        Record& tr = *l.target;
-        const FieldDesc& tf = *l.target_field;
+        if (!l.target()) break;
+        Record& tr = *l.target();
+        const FieldDesc& tf = *l.target_field();
         Address a;
         a.rec = &tr;
         a.field = &tf;

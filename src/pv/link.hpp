@@ -85,6 +85,10 @@ struct LinkSpec {
     std::string record, field;
     // Hw: the address after '@'
     std::string address;
+    // resolved at init: the target of a Db link, the device of a Hw (or CA) link
+    Record* target = nullptr;
+    const FieldDesc* target_field = nullptr;
+    LinkDevice* device = nullptr;
 };
 
 struct Link {
@@ -95,11 +99,21 @@ struct Link {
     Kind kind = Kind::Empty;
     uint8_t proc = kNpp;
     uint8_t ms = kNms;
-    // resolved at init: the target of a Db link, the device of a Hw link
-    Record* target = nullptr;
-    const FieldDesc* target_field = nullptr;
-    LinkDevice* device = nullptr;
-    std::unique_ptr<LinkSpec> spec; // null while the link is empty
+    // What the link was written as and what it resolved to; null while the link is empty (most of
+    // a record's link fields: 16 bytes each then).
+    std::unique_ptr<LinkSpec> spec;
+
+    // Resolved at init: the target of a Db link, the device of a Hw link (null when empty).
+    Record* target() const { return spec ? spec->target : nullptr; }
+    const FieldDesc* target_field() const { return spec ? spec->target_field : nullptr; }
+    LinkDevice* device() const { return spec ? spec->device : nullptr; }
+    // Sets them (an empty link has nothing to set: a no-op).
+    void set_target(Record* r, const FieldDesc* f) {
+        if (spec) spec->target = r, spec->target_field = f;
+    }
+    void set_device(LinkDevice* d) {
+        if (spec) spec->device = d;
+    }
 
     // The link as written (an empty spec for an empty link).
     const LinkSpec& s() const {
@@ -111,7 +125,7 @@ struct Link {
     bool is_db() const { return kind == Kind::Db; }
     // The CA link of a Db link to another server (nullptr for any other link).
     RemoteLink* remote() const {
-        return kind == Kind::Db && !target && device ? static_cast<RemoteLink*>(device) : nullptr;
+        return kind == Kind::Db && spec && !spec->target && spec->device ? static_cast<RemoteLink*>(spec->device) : nullptr;
     }
     // Link text with its modifiers as EPICS prints them ("rec.VAL PP MS").
     std::string canonical() const;

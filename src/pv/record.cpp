@@ -223,8 +223,8 @@ void Record::call_after(double seconds) {
 
 void Record::stamp_time() {
     if (tse == -2) return;
-    if (tsel.kind == Link::Kind::Db && tsel.target) {
-        time = tsel.target->time;
+    if (tsel.kind == Link::Kind::Db && tsel.target()) {
+        time = tsel.target()->time;
         return;
     }
     time = EpicsTime::now();

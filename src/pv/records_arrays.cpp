@@ -462,9 +462,9 @@ struct CompressRecord : Record {
         int status = 0;
         uint32_t avail = 0; // dbGetNelements: what INP's target holds
         RemoteLink::Value rv;
-        if (inp.kind == Link::Kind::Hw && inp.device) avail = 1;
-        else if (inp.is_db() && inp.target)
-            avail = (inp.target_field->flags & kArray) ? inp.target->elements(*inp.target_field).capacity : 1;
+        if (inp.kind == Link::Kind::Hw && inp.device()) avail = 1;
+        else if (inp.is_db() && inp.target())
+            avail = (inp.target_field()->flags & kArray) ? inp.target()->elements(*inp.target_field()).capacity : 1;
         else if (RemoteLink* rl = inp.remote(); rl && rl->value(rv)) avail = std::max<uint32_t>(rv.count, 1);
         if (avail == 0) {
             set_sevr(kStatLink, kInvalid);

@@ -310,7 +310,7 @@ struct PrintfRecord : Record {
         udf = 0;
         stamp_time();
         // devPrintfSoft: VAL to OUT (a char array target gets it whole, another field a string).
-        if (out.target_field && (out.target_field->flags & kArray)) {
+        if (out.target_field() && (out.target_field()->flags & kArray)) {
             write_link(out, long_desc());
         } else if (linked(out)) {
             copy_string(scratch, sizeof scratch, std::string_view(val_buf.data(), strnlen(val_buf.data(), sizv)));

@@ -431,13 +431,13 @@ template <typename Self> struct LongStringBase : Record {
         return len > 1;
     }
     bool read_string(Link& l) {
-        if (l.target_field && (l.target_field->flags & kArray)) return read_link(l, *val_fd);
+        if (l.target_field() && (l.target_field()->flags & kArray)) return read_link(l, *val_fd);
         if (!read_link(l, kScratch)) return false;
         set_value(std::string_view(scratch, strnlen(scratch, sizeof scratch)));
         return true;
     }
     bool write_string(Link& l) {
-        if (l.target_field && (l.target_field->flags & kArray)) return write_link(l, *val_fd);
+        if (l.target_field() && (l.target_field()->flags & kArray)) return write_link(l, *val_fd);
         copy_string(scratch, sizeof scratch, std::string_view(val_buf.data(), strnlen(val_buf.data(), sizv)));
         return write_link(l, kScratch);
     }
