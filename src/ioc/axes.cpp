@@ -262,7 +262,7 @@ public:
 
 private:
     double value() const {
-        const motion::AxisStatus& s = axes_.status(i_);
+        const motion::AxisStatus& s = axes_.looked(i_);
         double v = item_ ? item_->get(s, axes_.command_state(i_)) : (enc_ < s.enc_count ? s.enc_pos[std::size_t(enc_)] : 0.0);
         if (bit_ >= 0) return double(uint64_t(int64_t(v)) >> bit_ & 1);
         return binary_ ? double(v != 0) : v;
@@ -555,7 +555,7 @@ void IocAxes::set_derived_limits(std::size_t i, double lo, double hi) {
 void IocAxes::publish() {
     if (!group_) return;
     const auto& st = group_->snapshot();
-    // the values are read by the records' device support (scan_io_intr); MsgTxt is text
+    look_ = st; // the records' device support reads this look (scan_io_intr); MsgTxt is text
     for (std::size_t i = 0; i < axes_.size() && i < st.size(); ++i) {
         Axis& a = axes_[i];
         if (st[i].error_id == a.last_error) continue;

@@ -73,6 +73,9 @@ public:
     // A write of item `w` (bit `bit` of control, -1 the word) of axis i; false if refused.
     bool write_item(std::size_t i, int w, int bit, double v);
     const AxisCommandState& command_state(std::size_t i) const { return axes_.at(i).cmd; }
+    // Axis i's status as the IOC loop's last look (publish) took it: what the records read, one
+    // snapshot for all of them (status() takes the newest each call).
+    const motion::AxisStatus& looked(std::size_t i) const { return i < look_.size() ? look_[i] : idle_; }
     // IOC loop: the soft limits of axis i's motor record (DLLM/DHLM, dial) become [lo, hi]: a
     // virtual axis's range as its kinematics group derives it. No-op without a motor record.
     void set_derived_limits(std::size_t i, double lo, double hi);
@@ -97,6 +100,7 @@ private:
     std::unique_ptr<motion::AxisGroup> group_;
     uint64_t next_tag_ = 1;
     motion::AxisStatus idle_; // status before bring-up
+    std::vector<motion::AxisStatus> look_; // the snapshot of the last publish()
 };
 
 } // namespace beamctl::ioc

@@ -1,6 +1,7 @@
 #include "ioc/bus_pvs.hpp"
 
 #include "core/error.hpp"
+#include "ioc/pv_util.hpp"
 
 #include <cmath>
 
@@ -66,9 +67,6 @@ void declare(registry::Registry& r, std::string name, registry::OwnerKind kind, 
     s.loop_only = true;
     r.declare(std::move(s));
 }
-
-// A counter as a 32-bit LONG PV value: saturates instead of wrapping.
-double clamp_long(uint64_t v) { return double(std::min<uint64_t>(v, 0x7FFFFFFF)); }
 
 class BusItemDevice : public pv::LinkDevice {
 public:

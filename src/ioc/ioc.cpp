@@ -168,8 +168,6 @@ bool parse_asyn_address(std::string_view a, std::string& name, int& bit, std::st
     return true;
 }
 
-// A counter as a 32-bit LONG PV value: saturates instead of wrapping.
-double clamp_long(uint64_t v) { return double(std::min<uint64_t>(v, 0x7FFFFFFF)); }
 
 // Sets an array record's elements (and NORD) and processes it, if they differ from `v`.
 void set_array_if_changed(pv::Database& db, pv::Record& r, const double* v, uint32_t n) {
@@ -555,8 +553,6 @@ void Ioc::publish() {
     engine_stats_ = engine_->stats(); // read by the engine items' device support
     const rt::EngineStats& es = engine_stats_;
     for (auto& b : buses_) {
-        const ethercat::BusSnapshot& s = b.bus->snapshot();
-        bool ok = s.link_up && s.wkc_ok;
         // the status PVs read their items (scan_io_intr below); the histogram is an array
         double hist[rt::kLatencyBuckets], edges[rt::kLatencyBuckets];
         for (std::size_t i = 0; i < rt::kLatencyBuckets; ++i) {

@@ -20,17 +20,19 @@ bool has_field(const PvRow& r, std::string_view name) {
     return false;
 }
 
-// The fields a row's record gets: device support for a row with a signal, then the row's own.
+// The fields a row's record gets: device support for a row with a signal, then the row's own,
+// with the instance's macros expanded (`macros` null: as written, for to_db_text).
 std::vector<std::pair<std::string, std::string>> row_fields(const PvRow& r, const std::string& signal_prefix,
-                                                            const MacroMap& macros) {
+                                                            const MacroMap* macros) {
+    auto text = [&](const char* v) { return macros ? expand_macros(v, *macros, MacroEscapes::unescape) : std::string(v); };
     std::vector<std::pair<std::string, std::string>> f;
     if (*r.signal) {
         bool out = is_output_type(r.type);
         f.emplace_back("DTYP", "beamctl");
-        f.emplace_back(out ? "OUT" : "INP", "@" + signal_prefix + expand_macros(r.signal, macros, MacroEscapes::unescape));
+        f.emplace_back(out ? "OUT" : "INP", "@" + signal_prefix + text(r.signal));
         if (!out && !has_field(r, "SCAN")) f.emplace_back("SCAN", "I/O Intr");
     }
-    for (const auto& [k, v] : r.fields) f.emplace_back(k, expand_macros(v, macros, MacroEscapes::unescape));
+    for (const auto& [k, v] : r.fields) f.emplace_back(k, text(v));
     return f;
 }
 
@@ -49,7 +51,7 @@ pv::DbFile make_records(const PvTable& t, const PvInstance& in, const registry::
         r.type = row.type;
         r.name = in.pv_prefix + row.suffix;
         r.loc = SourceLoc{std::string("<table ") + t.name + ">", 1, 1};
-        for (auto& [k, v] : row_fields(row, in.signal_prefix, in.macros)) r.fields.push_back(pv::DbField{k, v, r.loc});
+        for (auto& [k, v] : row_fields(row, in.signal_prefix, &in.macros)) r.fields.push_back(pv::DbField{k, v, r.loc});
         if (row.readback) r.infos.push_back(pv::DbInfo{"asyn:READBACK", "1", r.loc});
         file.records.push_back(std::move(r));
     }
@@ -67,17 +69,9 @@ void name_pvs(const PvTable& t, const PvInstance& in, registry::Registry& signal
 
 std::string to_db_text(const PvTable& t) {
     std::ostringstream os;
-    MacroMap keep; // $(PREC) etc. stay as written
     for (const PvRow& row : t.rows) {
         os << "record(" << row.type << ", \"$(P)" << row.suffix << "\") {\n";
-        std::vector<std::pair<std::string, std::string>> f;
-        if (*row.signal) {
-            bool out = is_output_type(row.type);
-            f.emplace_back("DTYP", "beamctl");
-            f.emplace_back(out ? "OUT" : "INP", std::string("@$(S)") + row.signal);
-            if (!out && !has_field(row, "SCAN")) f.emplace_back("SCAN", "I/O Intr");
-        }
-        for (const auto& [k, v] : row.fields) f.emplace_back(k, v);
+        auto f = row_fields(row, "$(S)", nullptr);
         for (const auto& [k, v] : f) os << "  field(" << k << ", \"" << v << "\")\n";
         if (row.readback) os << "  info(asyn:READBACK, \"1\")\n";
         os << "}\n";

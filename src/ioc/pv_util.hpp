@@ -5,6 +5,7 @@
 #include "pv/database.hpp"
 #include "pv/db_file.hpp"
 
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
@@ -31,6 +32,9 @@ inline void set_value(pv::Database& db, pv::Record& r, double v, bool comm_alarm
     if (comm_alarm) r.set_sevr(pv::kStatComm, pv::kInvalid);
     db.process(r);
 }
+
+// A counter as a 32-bit LONG PV value: saturates instead of wrapping.
+inline double clamp_long(uint64_t v) { return double(v < 0x7FFFFFFFu ? v : 0x7FFFFFFFu); }
 
 // A record's VAL as a double.
 inline double get_value(const pv::Record& r) {
