@@ -231,7 +231,7 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
         if (e.type == Dbf::String) {
             copy_string(d, kStringSize, std::string_view(src, strnlen(src, e.stride)));
         } else if (is_link(e.type)) {
-            copy_string(d, kStringSize, reinterpret_cast<const Link*>(src)->canonical());
+            copy_string(d, kStringSize, link_text(r, *reinterpret_cast<const Link*>(src)));
         } else if (e.type == Dbf::Enum || e.type == Dbf::Menu) {
             uint16_t v = *reinterpret_cast<const uint16_t*>(src);
             const char* strs[kEnumStates] = {};
@@ -385,7 +385,7 @@ std::string format_field(Record& r, const FieldDesc& f) {
     switch (f.dbf) {
     case Dbf::InLink:
     case Dbf::OutLink:
-    case Dbf::FwdLink: return reinterpret_cast<const Link*>(p)->canonical();
+    case Dbf::FwdLink: return link_text(r, *reinterpret_cast<const Link*>(p));
     case Dbf::String: return std::string(p, strnlen(p, f.size));
     case Dbf::Menu: {
         uint16_t v = *reinterpret_cast<const uint16_t*>(p);

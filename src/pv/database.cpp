@@ -5,6 +5,7 @@
 #include "pv/convert.hpp"
 
 #include <algorithm>
+#include <malloc.h>
 #include <cstdio>
 #include <cstring>
 
@@ -54,7 +55,9 @@ Database::Database() = default;
 
 Database::~Database() {
     for (auto& w : cp_watches_) unsubscribe(*w);
+    cp_watches_.clear();
     for (auto* r : order_) r->db_ = nullptr;
+    for (auto* r : order_) delete r;
 }
 
 namespace {
@@ -142,12 +145,50 @@ void Database::apply_field(Record& rec, const DbField& f, const std::string& fil
     if (fd->flags & kArray)
         throw Error(SB() << f.loc.str() << ": field " << f.name << " of record " << rec.name()
                          << " is an array; initial array values are not supported");
+    if (is_link(fd->dbf) && !rec.initialised_) return defer_link(rec, *fd, f);
     std::string err;
     if (!parse_field(rec, *fd, f.value, &err))
         throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": " << err);
     if (is_link(fd->dbf))
-        if (auto& spec = field_ref<Link>(rec, *fd).spec) spec->loc = f.loc;
+        if (auto& st = field_ref<Link>(rec, *fd).state; st && st->spec) st->spec->loc = f.loc;
     if (is_val(*fd)) rec.udf = 0; // a VAL given in the file defines the value
+}
+
+void Database::defer_link(Record& rec, const FieldDesc& fd, const DbField& f) {
+    Link probe; // syntax errors are load errors, with the field's file:line:col
+    std::string why;
+    if (!parse_link(f.value, fd.dbf, probe, &why))
+        throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": field " << fd.name << ": " << why);
+    Link& l = field_ref<Link>(rec, fd);
+    l = Link{};
+    l.kind = probe.kind;
+    l.proc = probe.proc;
+    l.ms = probe.ms;
+    if (probe.kind == Link::Kind::Empty) return;
+    if (pending_files_.empty() || pending_files_.back() != f.loc.file) pending_files_.push_back(f.loc.file);
+    pending_links_.push_back({uint32_t(pending_text_.size()), uint32_t(f.value.size()),
+                              uint32_t(pending_files_.size() - 1), f.loc.line, f.loc.col});
+    pending_text_ += f.value;
+    l.pending = uint32_t(pending_links_.size());
+}
+
+Link Database::pending_link(const Link& l, Dbf type) const {
+    Link fresh;
+    const PendingLink& p = pending_links_.at(l.pending - 1);
+    if (!parse_link(std::string_view(pending_text_).substr(p.offset, p.size), type, fresh, nullptr))
+        throw Error("internal: a deferred link no longer parses"); // it parsed when deferred
+    return fresh;
+}
+
+SourceLoc Database::pending_loc(const Link& l) const {
+    const PendingLink& p = pending_links_.at(l.pending - 1);
+    return SourceLoc{pending_files_[p.file], p.line, p.col};
+}
+
+std::string link_text(const Record& r, const Link& l) {
+    if (l.pending && !l.state) // still waiting for init_records (read before iocInit)
+        return r.database() ? r.database()->pending_link(l, Dbf::InLink).canonical() : std::string();
+    return l.canonical();
 }
 
 void Database::load(const DbFile& file, const RecordTypes& types) {
@@ -227,8 +268,8 @@ Record& Database::add(std::unique_ptr<Record> rec) {
     std::string name(rec->name());
     if (find(name)) throw Error(SB() << "record " << name << " already exists");
     rec->db_ = this;
-    Record* raw = rec.get();
-    records_.emplace(name, std::move(rec));
+    Record* raw = rec.release(); // owned through order_
+    records_.insert(raw);
     order_.push_back(raw);
     uninitialised_.push_back(raw);
     return *raw;
@@ -243,9 +284,8 @@ void Database::add_alias(std::string_view record, std::string_view alias) {
 }
 
 void Database::remove(std::string_view name) {
-    auto it = records_.find(name);
-    if (it == records_.end()) return;
-    Record* r = it->second.get();
+    Record* r = records_.find(name);
+    if (!r) return;
     auto observers = r->observers_; // observers unregister themselves while being told
     for (auto* o : observers) o->on_record_removed(*r);
     r->subs_.clear();
@@ -284,15 +324,24 @@ void Database::remove(std::string_view name) {
         for (const FieldDesc& f : o->type().fields())
             if (is_link(f.dbf)) {
                 Link& l = field_ref<Link>(*o, f);
-                if (l.target() == r) l.set_target(nullptr, nullptr);
+                if (l.target() == r) {
+                    l.restore_spec(); // the text stays what it was
+                    l.set_target(nullptr, nullptr);
+                }
             }
     }
-    records_.erase(it);
+    records_.erase(r->name());
+    delete r;
 }
 
 void Database::init_records() {
     std::vector<Record*> batch;
     batch.swap(uninitialised_);
+    // The parsed files are freed by now, as small chunks the allocator keeps apart (fast bins);
+    // what init allocates next (a link's state, a compiled CALC) would land in them scattered
+    // over that whole region and keep it resident. Merged and given back first, the new
+    // allocations are carved in order from one free region instead (glibc malloc_trim).
+    if (batch.size() >= 1000) ::malloc_trim(0);
     try {
         resolve_links(batch);
     } catch (...) {
@@ -309,6 +358,7 @@ void Database::init_records() {
         } catch (const Error& e) {
             throw Error(SB() << "record " << r->name() << ": " << e.what());
         }
+        r->initialised_ = true;
         add_to_scan(*r);
         if (r->poll_period_s() > 0) polls_.push_back({r, 0});
     }
@@ -336,13 +386,23 @@ void Database::resolve_links(const std::vector<Record*>& batch) {
         for (const FieldDesc& f : r->type().fields()) {
             if (!is_link(f.dbf)) continue;
             Link& l = field_ref<Link>(*r, f);
+            Link deferred;
+            if (l.pending) { // its text waited here since load: parse it now, in resolution order
+                deferred.pending = l.pending;
+                l = pending_link(l, f.dbf);
+            }
             std::string why;
             if (resolve_link(*r, f, l, &why)) continue;
             bad.push_back(r);
             std::string msg = SB() << "record " << r->name() << " field " << f.name << " \"" << l.s().text << "\": " << why;
-            if (!l.s().loc.file.empty()) errs.add(l.s().loc, msg);
+            SourceLoc loc = deferred.pending ? pending_loc(deferred) : l.s().loc;
+            if (!loc.file.empty()) errs.add(loc, msg);
             else errs.add(msg);
         }
+    // every deferred link of the batch is parsed now (the batch is all records not initialised)
+    std::string().swap(pending_text_);
+    std::vector<PendingLink>().swap(pending_links_);
+    std::vector<std::string>().swap(pending_files_);
     for (Record* r : batch) {
         if (r->scan != 2 || std::find(bad.begin(), bad.end(), r) != bad.end()) continue;
         bool device = false;
@@ -362,6 +422,7 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
         if (why) *why = std::move(m);
         return false;
     };
+    l.restore_spec(); // resolved before: its text was rebuilt from the target
     l.set_target(nullptr, nullptr);
     l.set_device(nullptr);
     switch (l.kind) {
@@ -420,6 +481,7 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
         subscribe(*w);
         cp_watches_.push_back(std::move(w));
     }
+    l.forget_spec(); // resolved here: the text is rebuilt from the target when asked for
     return true;
 }
 
@@ -434,7 +496,7 @@ PutStatus Database::relink(Record& r, const FieldDesc& f, std::string_view text)
             break;
         }
     Link& l = field_ref<Link>(r, f);
-    if (fresh.spec) fresh.spec->loc = l.s().loc;
+    if (fresh.state && fresh.state->spec) fresh.state->spec->loc = l.s().loc;
     // a hardware link gives back its output first, so that the new link may claim it again
     if (l.kind == Link::Kind::Hw && l.device()) l.device()->release();
     if (!resolve_link(r, f, fresh, nullptr)) {
@@ -522,8 +584,7 @@ void Database::remove_from_scan(Record& r) {
 }
 
 Record* Database::find(std::string_view name) const {
-    auto it = records_.find(name);
-    if (it != records_.end()) return it->second.get();
+    if (Record* r = records_.find(name)) return r;
     auto a = aliases_.find(name);
     return a == aliases_.end() ? nullptr : a->second;
 }

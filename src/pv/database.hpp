@@ -5,6 +5,7 @@
 
 #include "pv/db_file.hpp"
 #include "pv/record.hpp"
+#include "pv/record_index.hpp"
 
 #include <deque>
 #include <functional>
@@ -181,6 +182,14 @@ private:
     // Stores a value into a field (conversion, special(), put_hook, UDF, monitors); no processing.
     PutStatus store(const Address& a, Prim t, const void* data, uint32_t n);
     void apply_field(Record& rec, const DbField& f, const std::string& file);
+    friend std::string link_text(const Record& r, const Link& l);
+    // A link field of a record not yet initialised, set from a .db file: its text waits in
+    // pending_text_ (one buffer, not a heap string per link) and is parsed again and resolved by
+    // init_records, so that loading a large database leaves no freed per-link garbage between
+    // its records (resident memory stays what the records use).
+    void defer_link(Record& rec, const FieldDesc& fd, const DbField& f);
+    Link pending_link(const Link& l, Dbf type) const; // parses the text deferred for l
+    SourceLoc pending_loc(const Link& l) const;
     // dbProcess: disable check, process(), forward link, put-callback bookkeeping.
     void process_record(Record& r);
     bool disabled(Record& r);
@@ -203,7 +212,7 @@ private:
         using is_transparent = void;
         std::size_t operator()(std::string_view s) const { return std::hash<std::string_view>{}(s); }
     };
-    std::unordered_map<std::string, std::unique_ptr<Record>, Hash, std::equal_to<>> records_;
+    RecordIndex records_; // by name; the records are owned through order_ (deleted by remove and ~Database)
     std::unordered_map<std::string, Record*, Hash, std::equal_to<>> aliases_;
     std::vector<Record*> order_;
     std::vector<Record*> uninitialised_;
@@ -238,6 +247,14 @@ private:
     LinkBinder binder_;
     RemoteBinder remote_binder_;
     std::function<void()> restore_hook_; // set_restore_hook
+    struct PendingLink {
+        uint32_t offset, size; // in pending_text_
+        uint32_t file;         // in pending_files_
+        int line, col;
+    };
+    std::string pending_text_;
+    std::vector<PendingLink> pending_links_;
+    std::vector<std::string> pending_files_;
     DatabaseStats stats_;
 };
 

@@ -1,6 +1,7 @@
 #include "pv/link.hpp"
 
 #include "pv/convert.hpp"
+#include "pv/record.hpp"
 
 #include <cctype>
 #include <cstring>
@@ -74,10 +75,10 @@ bool json_constant(Json& j, Link& out, std::string* why) {
             double v;
             std::string str;
             if (j.string(str)) {
-                if (!out.spec->is_string_constant) out.spec->string_constant = str;
-                out.spec->is_string_constant = true;
+                if (!out.state->spec->is_string_constant) out.state->spec->string_constant = str;
+                out.state->spec->is_string_constant = true;
             } else if (j.number(v)) {
-                out.spec->numbers.push_back(v);
+                out.state->spec->numbers.push_back(v);
             } else {
                 return fail(why, "bad array element in a JSON constant");
             }
@@ -87,13 +88,13 @@ bool json_constant(Json& j, Link& out, std::string* why) {
     }
     std::string str;
     if (j.string(str)) {
-        out.spec->string_constant = str;
-        out.spec->is_string_constant = true;
+        out.state->spec->string_constant = str;
+        out.state->spec->is_string_constant = true;
         return true;
     }
     double v;
     if (j.number(v)) {
-        out.spec->numbers.push_back(v);
+        out.state->spec->numbers.push_back(v);
         return true;
     }
     return fail(why, "expected a number, a string or an array in a JSON constant");
@@ -136,6 +137,34 @@ const char* link_ms_name(uint8_t ms) {
     return ms < 4 ? n[ms] : "?";
 }
 
+std::string_view Link::record_name() const {
+    if (state && !state->spec && state->target) return state->target->name();
+    return s().record;
+}
+
+std::string_view Link::field_name() const {
+    if (state && !state->spec && state->target_field) return state->field_written ? state->target_field->name : "";
+    return s().field;
+}
+
+void Link::forget_spec() {
+    if (kind != Kind::Db || !state || !state->spec || !state->target || !state->target_field) return;
+    const LinkSpec& sp = *state->spec;
+    if (!sp.field.empty() && sp.field != state->target_field->name) return;
+    if (sp.record != state->target->name()) return; // reached through an alias: keep the name written
+    state->field_written = !sp.field.empty();
+    state->spec.reset();
+}
+
+void Link::restore_spec() {
+    if (kind != Kind::Db || !state || state->spec) return;
+    auto sp = std::make_unique<LinkSpec>();
+    sp->record = std::string(record_name());
+    sp->field = std::string(field_name());
+    sp->text = canonical();
+    state->spec = std::move(sp);
+}
+
 std::string Link::canonical() const {
     const LinkSpec& sp = s();
     switch (kind) {
@@ -143,8 +172,8 @@ std::string Link::canonical() const {
     case Kind::Constant: return sp.text;
     case Kind::Hw: return "@" + sp.address;
     case Kind::Db: {
-        std::string r = sp.record;
-        if (!sp.field.empty()) r += "." + sp.field;
+        std::string r(record_name());
+        if (std::string_view f = field_name(); !f.empty()) (r += '.') += f;
         return r + " " + link_proc_name(proc) + " " + link_ms_name(ms);
     }
     }
@@ -158,13 +187,15 @@ bool parse_link(std::string_view text, Dbf type, Link& out, std::string* why) {
         out = std::move(l);
         return true;
     }
-    l.spec = std::make_unique<LinkSpec>();
-    l.spec->text = std::string(t);
-    t = l.spec->text;
+    l.state = std::make_unique<LinkState>();
+    l.state->spec = std::make_unique<LinkSpec>();
+    LinkSpec& spec = *l.state->spec;
+    spec.text = std::string(t);
+    t = spec.text;
     if (t[0] == '@') {
         if (type == Dbf::FwdLink) return fail(why, "a forward link cannot be a hardware address (@...)");
         l.kind = Link::Kind::Hw;
-        l.spec->address = std::string(trim(t.substr(1)));
+        spec.address = std::string(trim(t.substr(1)));
         out = std::move(l);
         return true;
     }
@@ -183,10 +214,10 @@ bool parse_link(std::string_view text, Dbf type, Link& out, std::string* why) {
         }
         if (type == Dbf::FwdLink) { // EPICS treats a numeric FLNK as no link
             l.kind = Link::Kind::Empty;
-            l.spec.reset();
+            l.state.reset();
         } else {
             l.kind = Link::Kind::Constant;
-            l.spec->numbers.push_back(v);
+            spec.numbers.push_back(v);
         }
         out = std::move(l);
         return true;
@@ -196,15 +227,15 @@ bool parse_link(std::string_view text, Dbf type, Link& out, std::string* why) {
     while (end < t.size() && !std::isspace(static_cast<unsigned char>(t[end])) && t[end] != ',') ++end;
     std::string_view name = t.substr(0, end);
     std::size_t dot = name.find('.');
-    l.spec->record = std::string(name.substr(0, dot));
-    if (dot != std::string_view::npos) l.spec->field = std::string(name.substr(dot + 1));
-    if (l.spec->record.empty()) return fail(why, "link '" + std::string(t) + "' names no record");
-    for (char c : l.spec->record)
+    spec.record = std::string(name.substr(0, dot));
+    if (dot != std::string_view::npos) spec.field = std::string(name.substr(dot + 1));
+    if (spec.record.empty()) return fail(why, "link '" + std::string(t) + "' names no record");
+    for (char c : spec.record)
         if (!valid_record_char(c))
             return fail(why, std::string("record name in link '") + std::string(t) + "' contains '" + c + "'");
-    for (char c : l.spec->field)
+    for (char c : spec.field)
         if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_')
-            return fail(why, "field '" + l.spec->field + "' in link '" + std::string(t) +
+            return fail(why, "field '" + spec.field + "' in link '" + std::string(t) +
                                  "': field modifiers, array ranges and filters are not supported");
     bool have_proc = false, have_ms = false;
     std::string_view rest = t.substr(end);

@@ -72,8 +72,10 @@ public:
     bool write(double v) override { return put(Prim::Double, &v, 1); }
 };
 
-// What a link was written as: kept apart from Link so that the many unset link fields of a
-// record (a calc has 24) cost little memory.
+// What a link was written as, where, and its parts. A link keeps it while it needs it: a database
+// link to a record of this database drops it once resolved (its text is rebuilt from the target),
+// so that the thousands of links of a large database cost little memory; constants, hardware
+// addresses and CA links keep it.
 struct LinkSpec {
     std::string text; // as written (what clients read)
     SourceLoc loc;    // where the .db file set it (for load errors)
@@ -85,10 +87,16 @@ struct LinkSpec {
     std::string record, field;
     // Hw: the address after '@'
     std::string address;
+};
+
+// The heap part of a set link: what it resolved to and, while needed, what it was written as.
+struct LinkState {
     // resolved at init: the target of a Db link, the device of a Hw (or CA) link
     Record* target = nullptr;
     const FieldDesc* target_field = nullptr;
     LinkDevice* device = nullptr;
+    std::unique_ptr<LinkSpec> spec; // null once a Db link resolved into this database
+    bool field_written = false;     // a resolved Db link was written "rec.FIELD", not "rec"
 };
 
 struct Link {
@@ -99,33 +107,49 @@ struct Link {
     Kind kind = Kind::Empty;
     uint8_t proc = kNpp;
     uint8_t ms = kNms;
-    // What the link was written as and what it resolved to; null while the link is empty (most of
-    // a record's link fields: 16 bytes each then).
-    std::unique_ptr<LinkSpec> spec;
+    // Set while the link's text waits in its Database until init_records parses and resolves it
+    // (Database::load keeps load-time link text out of the heap between records): the index + 1
+    // of that text. Kind and modifiers are already set; state is null until then.
+    uint32_t pending = 0;
+    // What the link resolved to and was written as; null while the link is empty (most of a
+    // record's link fields: 16 bytes each then).
+    std::unique_ptr<LinkState> state;
 
     // Resolved at init: the target of a Db link, the device of a Hw link (null when empty).
-    Record* target() const { return spec ? spec->target : nullptr; }
-    const FieldDesc* target_field() const { return spec ? spec->target_field : nullptr; }
-    LinkDevice* device() const { return spec ? spec->device : nullptr; }
+    Record* target() const { return state ? state->target : nullptr; }
+    const FieldDesc* target_field() const { return state ? state->target_field : nullptr; }
+    LinkDevice* device() const { return state ? state->device : nullptr; }
     // Sets them (an empty link has nothing to set: a no-op).
     void set_target(Record* r, const FieldDesc* f) {
-        if (spec) spec->target = r, spec->target_field = f;
+        if (state) state->target = r, state->target_field = f;
     }
     void set_device(LinkDevice* d) {
-        if (spec) spec->device = d;
+        if (state) state->device = d;
     }
+    // A Db link resolved into this database no longer needs its text: drop it (it is rebuilt from
+    // the target when asked for). Keeps it when the target field differs from the one written
+    // (a forward link to "rec.X" processes rec).
+    void forget_spec();
+    // Rebuilds the spec of a resolved Db link from its target (before the target goes away or the
+    // link is resolved again).
+    void restore_spec();
 
-    // The link as written (an empty spec for an empty link).
+    // The link as written (an empty spec for an empty link and for a resolved Db link: use
+    // record_name()/field_name()/canonical() for those).
     const LinkSpec& s() const {
         static const LinkSpec empty_spec;
-        return spec ? *spec : empty_spec;
+        return state && state->spec ? *state->spec : empty_spec;
     }
+    // A Db link's record and field as written (the field empty for "rec").
+    std::string_view record_name() const;
+    std::string_view field_name() const;
     bool empty() const { return kind == Kind::Empty; }
     bool is_constant() const { return kind == Kind::Constant; }
     bool is_db() const { return kind == Kind::Db; }
     // The CA link of a Db link to another server (nullptr for any other link).
     RemoteLink* remote() const {
-        return kind == Kind::Db && spec && !spec->target && spec->device ? static_cast<RemoteLink*>(spec->device) : nullptr;
+        return kind == Kind::Db && state && !state->target && state->device ? static_cast<RemoteLink*>(state->device)
+                                                                            : nullptr;
     }
     // Link text with its modifiers as EPICS prints them ("rec.VAL PP MS").
     std::string canonical() const;

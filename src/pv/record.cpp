@@ -1,4 +1,5 @@
 #include "pv/record.hpp"
+#include "pv/record_pool.hpp"
 
 #include "core/error.hpp"
 #include "pv/convert.hpp"
@@ -92,6 +93,8 @@ std::vector<std::string> RecordTypes::names() const {
 }
 
 Record::Record(const RecordType& type) : type_(type) {}
+void* Record::operator new(std::size_t size) { return record_pool::allocate(size); }
+void Record::operator delete(void* p, std::size_t size) { record_pool::deallocate(p, size); }
 Record::~Record() = default;
 
 std::vector<FieldDesc> Record::common_fields() {

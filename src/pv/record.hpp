@@ -127,6 +127,9 @@ public:
     virtual ~Record();
     Record(const Record&) = delete;
     Record& operator=(const Record&) = delete;
+    // Records live in blocks of their own (pv/record_pool.hpp: a large database stays packed).
+    static void* operator new(std::size_t size);
+    static void operator delete(void* p, std::size_t size);
 
     const RecordType& type() const { return type_; }
     std::string_view name() const { return name_; }
@@ -247,6 +250,7 @@ private:
     std::vector<std::string> aliases_;
     // processing bookkeeping (Database::process_record)
     struct PutNotify* pn_ = nullptr; // the put-callback this record's async completion belongs to
+    bool initialised_ = false;       // init_records ran init() (its links are resolved)
     bool in_process_ = false;        // inside process()
     bool done_in_process_ = false;   // async_done() was called inside process()
     PutStatus done_status_ = PutStatus::Ok;
@@ -257,5 +261,8 @@ template <typename T> T& field_ref(Record& r, const FieldDesc& f) {
     return *static_cast<T*>(f.addr(r));
 }
 void copy_string(char* dst, std::size_t size, std::string_view src); // truncating, NUL-terminated
+// The text of link field l of record r as clients read it (Link::canonical, or the text still
+// waiting in the database for init_records).
+std::string link_text(const Record& r, const Link& l);
 
 } // namespace beamctl::pv

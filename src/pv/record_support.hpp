@@ -13,6 +13,26 @@
 
 namespace beamctl::pv::support {
 
+// A run of consecutive fields in a type's table (A..U, DO0..DOF, B0..B1F): one pointer per record
+// instead of a table of pointers per record. bind() takes the first by name and checks that the
+// others follow it in order.
+struct FieldRun {
+    const FieldDesc* first = nullptr;
+    const FieldDesc* operator[](int i) const { return first + i; }
+    void bind(const RecordType& t, const char* const* names, int n) {
+        first = t.find(names[0]);
+        for (int i = 0; i < n; ++i)
+            if (!first || t.find(names[i]) != first + i)
+                throw Error(std::string("internal: fields from ") + names[0] + " of record type " + t.name() +
+                            " are not consecutive");
+    }
+    // The position of f in the run of n, or -1.
+    int index_of(const FieldDesc& f, int n) const {
+        for (int i = 0; i < n; ++i)
+            if (&f == first + i) return i;
+        return -1;
+    }
+};
 
 // recGblCheckDeadband: adds `bit` to mask and updates *last when |new - last| > deadband.
 inline void check_deadband(double& last, double v, double deadband, unsigned& mask, unsigned bit) {

@@ -61,7 +61,7 @@ template <typename Self> struct CalcBase : AnalogBase<Self> {
     double args[kN] = {};
     double last[kN] = {};
     const FieldDesc* calc_fd = this->type().find("CALC");
-    const FieldDesc* arg_fd[kN] = {};
+    FieldRun arg_fd; // A..U
 
     static std::vector<FieldDesc> calc_fields() {
         auto v = Self::analog_fields(Record::common_fields());
@@ -82,10 +82,8 @@ template <typename Self> struct CalcBase : AnalogBase<Self> {
     void calc_init() {
         std::string why;
         if (!compile_calc(calc_text, prog, &why)) throw Error(SB() << "CALC " << why);
-        for (int i = 0; i < kN; ++i) {
-            arg_fd[i] = this->type().find(kArgNames[i]);
-            this->load_constant(inp[i], args[i]);
-        }
+        arg_fd.bind(this->type(), kArgNames, kN);
+        for (int i = 0; i < kN; ++i) this->load_constant(inp[i], args[i]);
     }
     PutStatus calc_special(const FieldDesc& f) {
         if (&f != calc_fd) return PutStatus::Ok;
@@ -315,7 +313,7 @@ struct SeqRecord : Selecting<SeqRecord> {
     uint32_t pending_mask = 0; // groups still to run in this processing
     int next = 0;
     bool delayed = false;
-    const FieldDesc* do_fd[kGroups] = {};
+    FieldRun do_fd; // DO0..DOF
 
     static std::vector<FieldDesc> fields() {
         using R = SeqRecord;
@@ -353,10 +351,8 @@ struct SeqRecord : Selecting<SeqRecord> {
     void init() override {
         static const char* do_n[] = {"DO0", "DO1", "DO2", "DO3", "DO4", "DO5", "DO6", "DO7",
                                      "DO8", "DO9", "DOA", "DOB", "DOC", "DOD", "DOE", "DOF"};
-        for (int i = 0; i < kGroups; ++i) {
-            do_fd[i] = type().find(do_n[i]);
-            load_constant(dol[i], dov[i]);
-        }
+        do_fd.bind(type(), do_n, kGroups);
+        for (int i = 0; i < kGroups; ++i) load_constant(dol[i], dov[i]);
         selection_init();
     }
     int16_t precision(const FieldDesc& f) const override {
@@ -511,7 +507,7 @@ struct SelRecord : AnalogBase<SelRecord> {
     double args[kSelInputs];
     double last[kSelInputs];
     const FieldDesc* val_fd = type().find("VAL");
-    const FieldDesc* arg_fd[kSelInputs] = {};
+    FieldRun arg_fd; // A..L
 
     explicit SelRecord(const RecordType& t) : AnalogBase(t) {
         std::fill(std::begin(args), std::end(args), NAN); // unused inputs take no part
@@ -541,10 +537,8 @@ struct SelRecord : AnalogBase<SelRecord> {
          ...);
     }
     void init() override {
-        for (int i = 0; i < kSelInputs; ++i) {
-            arg_fd[i] = type().find(kArgNames[i]);
-            load_constant(inp[i], args[i]);
-        }
+        arg_fd.bind(type(), kArgNames, kSelInputs);
+        for (int i = 0; i < kSelInputs; ++i) load_constant(inp[i], args[i]);
         double v;
         if (load_constant(nvl, v)) seln = uint16_t(v);
     }

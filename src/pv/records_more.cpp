@@ -38,7 +38,7 @@ template <typename Self> struct MbbDirectBase : Record {
     uint8_t bits[kBits] = {};
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* rval_fd = type().find("RVAL");
-    const FieldDesc* bit_fd[kBits] = {};
+    FieldRun bit_fd; // B0..B1F
 
     static std::vector<FieldDesc> direct_fields(std::vector<FieldDesc> v, uint16_t bit_flags) {
         using R = Self;
@@ -61,17 +61,13 @@ template <typename Self> struct MbbDirectBase : Record {
          ...);
     }
     void direct_init() {
-        for (int i = 0; i < kBits; ++i) bit_fd[i] = type().find(kBitNames[i]);
+        bit_fd.bind(type(), kBitNames, kBits);
         if (mask == 0 && nobt >= 0 && nobt <= 32) mask = uint32_t((uint64_t(1) << nobt) - 1);
     }
     void bits_from_val() {
         for (int i = 0; i < kBits; ++i) bits[i] = (uint32_t(val) >> i) & 1u;
     }
-    int bit_index(const FieldDesc& f) const {
-        for (int i = 0; i < kBits; ++i)
-            if (&f == bit_fd[i]) return i;
-        return -1;
-    }
+    int bit_index(const FieldDesc& f) const { return bit_fd.index_of(f, kBits); }
     int16_t precision(const FieldDesc& f) const override {
         if (&f == val_fd) return nobt; // get_precision: NOBT digits
         return Record::precision(f);

@@ -35,7 +35,7 @@ struct SubRecord : AnalogBase<SubRecord> {
     uint16_t brsv = 0;
     beamctl_sub_routine routine = nullptr;
     const FieldDesc* val_fd = type().find("VAL");
-    const FieldDesc* arg_fd[kSubArgs] = {};
+    FieldRun arg_fd; // A..L
 
     double* arg(int i) { return &c.a + i; } // a..l are consecutive doubles
     static_assert(offsetof(beamctl_sub, l) == offsetof(beamctl_sub, a) + 11 * sizeof(double));
@@ -65,10 +65,8 @@ struct SubRecord : AnalogBase<SubRecord> {
     }
     void init() override {
         c.name = name_;
-        for (int i = 0; i < kSubArgs; ++i) {
-            arg_fd[i] = type().find(kSubIn[i]);
-            load_constant(inp[i], *arg(i));
-        }
+        arg_fd.bind(type(), kSubIn, kSubArgs);
+        for (int i = 0; i < kSubArgs; ++i) load_constant(inp[i], *arg(i));
         if (inam[0]) { // the init routine, called once
             const RecordRoutines::Routine* r = RecordRoutines::global().find(inam);
             if (!r || !r->sub) throw Error(missing_routine_message("INAM", inam, "sub"));
