@@ -10,8 +10,11 @@
 # Chain processings are counted on the servers (sum of the tails), CPU from /proc/PID/stat
 # (utime+stime) over the same interval. Memory per record: resident memory serving C copies
 # minus serving 1 copy, over 10 (C-1) records.
+# RATE=R paces the client to R rounds (puts to each of the H heads) per second, so that both
+# servers see the same offered load (unpaced, a faster server gets more, smaller reads).
 #   bash bench/bench_db_chain.sh [C=10000] [S=10] [H=1]
 #   SOFTIOC=/path/to/softIoc bash bench/bench_db_chain.sh
+#   RATE=40000 SOFTIOC=/path/to/softIoc bash bench/bench_db_chain.sh 10000 10 1
 set -euo pipefail
 cd "$(dirname "$0")/.."
 C=${1:-10000}; S=${2:-10}; H=${3:-1}
@@ -67,7 +70,7 @@ run() { # name command...
     local n0 c0 t0 n1 c1 t1
     n0=$(tails); c0=$(cpu); t0=$(date +%s.%N)
     EPICS_CA_ADDR_LIST=127.0.0.1:$PORT EPICS_CA_AUTO_ADDR_LIST=NO \
-        taskset -c "${CLIENT_CPUS:-1}" "$CABENCH" putff "chain%05d:head" "$H" "$S" 2>/dev/null | grep -v connect
+        taskset -c "${CLIENT_CPUS:-1}" "$CABENCH" putff "chain%05d:head" "$H" "$S" ${RATE:-} 2>/dev/null | grep -v connect
     n1=$(tails); c1=$(cpu); t1=$(date +%s.%N)
     local rl; rl=$(rss)
     stop

@@ -477,6 +477,7 @@ struct ClientImpl : std::enable_shared_from_this<ClientImpl> {
                         return;
                     }
                     if (circs.find(fd) == circs.end()) break;
+                    if (std::size_t(n) < rxbuf.size()) break; // emptied: later data wakes the loop again
                     continue;
                 }
                 if (n < 0 && errno == EINTR) continue;

@@ -407,6 +407,9 @@ void Server::on_conn_io(int fd, uint32_t events) {
                 budget = std::size_t(n) >= budget ? 0 : budget - std::size_t(n);
                 if (c.circuit->wants_close()) break;
                 if (c.circuit->output_size() > kStopReadingAt) break;
+                // A short read emptied the socket: what arrives later wakes the loop again (level-
+                // triggered), so no recv that would only say EAGAIN (one syscall less per wake-up).
+                if (std::size_t(n) < rxbuf_.size()) break;
                 continue;
             }
             if (n == 0 || (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {

@@ -814,7 +814,7 @@ PutStatus Database::store(const Address& a, Prim t, const void* data, uint32_t n
     if (val) r.udf = 0;
     if (!val || !(f.flags & kProcess)) post(r, &f, kDbeValue | kDbeLog); // VAL: processing posts it
     if (f.flags & kProp) post(r, nullptr, kDbeProperty);
-    if (is_named(f, "SCAN") || is_named(f, "PHAS") || is_named(f, "EVNT")) {
+    if (f.flags & kScanField) {
         remove_from_scan(r);
         add_to_scan(r);
     }
@@ -832,7 +832,7 @@ PutStatus Database::do_put(const Address& a, Prim t, const void* data, uint32_t 
     }
     // dbPutField: PROC always processes; another pp field only a Passive record. A record
     // that is busy (asynchronous) is processed again when it completes (RPRO).
-    bool proc = is_named(f, "PROC") || ((f.flags & kProcess) && r.scan == 0);
+    bool proc = (f.flags & kProcField) || ((f.flags & kProcess) && r.scan == 0);
     if (proc && r.pact) {
         r.rpro = 1;
     } else if (proc) {
@@ -956,7 +956,7 @@ void Database::link_forward(Record& r, Link& l) {
     if (l.kind != Link::Kind::Db || !l.target()) return;
     PutNotify* outer = notify_;
     if (r.pn_) notify_ = r.pn_; // an asynchronous record's forward link belongs to its put-callback
-    if (l.target()->scan == 0 || is_named(*l.target_field(), "PROC")) process_record(*l.target());
+    if (l.target()->scan == 0 || (l.target_field()->flags & kProcField)) process_record(*l.target());
     notify_ = outer;
 }
 
@@ -1036,7 +1036,7 @@ bool Database::link_put(Record& r, Link& l, Prim t, const void* src, uint32_t n)
         a.count = (tf.flags & kArray) ? tr.elements(tf).capacity : 1;
         if (!a.writable() || is_link(tf.dbf) || store(a, t, src, n) != PutStatus::Ok) break;
         tr.inherit_sevr(l.ms, r.nsta, r.nsev);
-        if (is_named(tf, "PROC") || (l.proc == Link::kPp && tr.scan == 0)) process_record(tr);
+        if ((tf.flags & kProcField) || (l.proc == Link::kPp && tr.scan == 0)) process_record(tr);
         return true;
     }
     }

@@ -38,6 +38,8 @@ enum FieldFlag : uint16_t {
     kInitOnly = 1 << 5, // settable from a .db file but read-only over CA (NELM, FTVL)
     kEgu = 1 << 6,      // reports the record's EGU as units
     kDisplayHopr = 1 << 7, // display limits are HOPR/LOPR (VAL and the alarm limits)
+    kScanField = 1 << 8,   // SCAN, PHAS, EVNT: a put moves the record to another scan list
+    kProcField = 1 << 9,   // PROC: a put or a link to it always processes the record
 };
 
 // Describes one field of a record type. `addr` returns the storage of that field in a record.

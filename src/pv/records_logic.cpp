@@ -61,6 +61,7 @@ template <typename Self> struct CalcBase : AnalogBase<Self> {
     double args[kN] = {};
     double last[kN] = {};
     const FieldDesc* calc_fd = this->type().find("CALC");
+    const FieldDesc* val_fd = this->type().find("VAL");
     FieldRun arg_fd; // A..U
 
     static std::vector<FieldDesc> calc_fields() {
@@ -109,8 +110,7 @@ template <typename Self> struct CalcBase : AnalogBase<Self> {
     }
     // monitor(): VAL with its deadbands, then every argument that changed.
     void calc_monitor() {
-        const FieldDesc* vfd = this->type().find("VAL");
-        if (unsigned m = this->analog_monitor_mask()) this->post(vfd, m);
+        if (unsigned m = this->analog_monitor_mask()) this->post(val_fd, m);
         for (int i = 0; i < kN; ++i)
             if (args[i] != last[i]) {
                 this->post(arg_fd[i], kDbeValue | kDbeLog);
