@@ -56,6 +56,10 @@ public:
     bool write(const SignalInfo& s, uint64_t value) noexcept;
     // Non-RT: the latest published snapshot (refreshed if a newer one exists).
     const BusSnapshot& snapshot() noexcept;
+    // Non-RT: the snapshot the last snapshot() call took, not refreshed. The IOC loop refreshes
+    // once per look (Ioc::publish, a change wake-up) and every record of that look reads this, so
+    // that records processed together see the same cycle.
+    const BusSnapshot& looked() const noexcept { return snap_.read_buffer(); }
 
     // Change watches (SCAN "I/O Intr" of records on bus entries): the cycle compares each watched
     // entry with its value of the previous cycle and counts the cycles in which it changed

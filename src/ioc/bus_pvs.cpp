@@ -108,7 +108,7 @@ private:
         case Item::Reset: return es.resets < engine_.resets_requested() ? 1 : 0;
         default: break;
         }
-        const ethercat::BusSnapshot& s = bus_->snapshot();
+        const ethercat::BusSnapshot& s = bus_->looked();
         switch (item_) {
         case Item::Ok: return s.link_up && s.wkc_ok;
         case Item::LinkUp: return s.link_up;

@@ -48,7 +48,7 @@ public:
     EcLinkDevice(ethercat::Bus& bus, const ethercat::SignalInfo& sig, int bit, int watch)
         : bus_(bus), sig_(sig), bit_(bit), watch_(watch) {}
     bool read(double& v) override {
-        const ethercat::BusSnapshot& s = bus_.snapshot();
+        const ethercat::BusSnapshot& s = bus_.looked();
         if (!s.link_up || !s.wkc_ok) return false; // no fresh data: LINK/INVALID
         v = value(s);
         last_ = v;
@@ -57,7 +57,9 @@ public:
     bool write(double v) override {
         if (!sig_.output || !std::isfinite(v)) return false;
         if (bit_ >= 0) { // one bit of a wider output: the others as last sent
-            uint64_t raw = ethercat::Bus::get(bus_.snapshot().image, sig_);
+            const ethercat::BusSnapshot& s = bus_.looked();
+            if (!in_image(s)) return false; // the bits beside it are not known yet
+            uint64_t raw = ethercat::Bus::get(s.image, sig_);
             raw = v != 0 ? raw | (uint64_t(1) << bit_) : raw & ~(uint64_t(1) << bit_);
             return bus_.write(sig_, raw);
         }
@@ -73,7 +75,7 @@ public:
         on_release = nullptr;
     }
     bool changed() override {
-        const ethercat::BusSnapshot& s = bus_.snapshot();
+        const ethercat::BusSnapshot& s = bus_.looked();
         bool ok = s.link_up && s.wkc_ok;
         if (ok != last_ok_) { // the bus went down (the record shows LINK/INVALID) or came back
             last_ok_ = ok;
@@ -97,7 +99,11 @@ public:
     }
 
 private:
+    bool in_image(const ethercat::BusSnapshot& s) const { // false before the first cycle published
+        return (std::size_t(sig_.bit_offset) + sig_.bits + 7) / 8 <= s.image.size();
+    }
     double value(const ethercat::BusSnapshot& s) const {
+        if (!in_image(s)) return NAN;
         uint64_t raw = ethercat::Bus::get(s.image, sig_);
         if (bit_ >= 0) return double(raw >> bit_ & 1);
         return registry::raw_to_double(raw, sig_.entry());
@@ -551,6 +557,7 @@ void Ioc::publish() {
     kinematics_->publish();
     plcs_->publish();
     engine_stats_ = engine_->stats(); // read by the engine items' device support
+    for (auto& b : buses_) b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
     const rt::EngineStats& es = engine_stats_;
     for (auto& b : buses_) {
         // the status PVs read their items (scan_io_intr below); the histogram is an array
@@ -563,6 +570,13 @@ void Ioc::publish() {
         set_array_if_changed(db_, *b.lat_edges, edges, rt::kLatencyBuckets);
     }
     db_.scan_io_intr(); // records on engine signals (axis items, bus entries) that changed since the last look
+}
+
+void Ioc::bus_changed(std::size_t i) {
+    ethercat::Bus& bus = *buses_.at(i).bus;
+    bus.drain_changes();
+    bus.snapshot(); // the cycle that woke the loop: what its records read (Bus::looked)
+    db_.scan_io_intr();
 }
 
 int Ioc::run() {
@@ -605,11 +619,8 @@ int Ioc::run() {
     for (auto& b : buses_) { // I/O Intr records: processed as soon as a cycle saw their entry change
         b.bus->freeze_watches();
         if (b.bus->watch_count() == 0) continue;
-        ethercat::Bus* bus = b.bus.get();
-        loop.add_fd(bus->change_fd(), EPOLLIN, [this, bus](uint32_t) {
-            bus->drain_changes();
-            db_.scan_io_intr();
-        });
+        std::size_t i = std::size_t(&b - buses_.data());
+        loop.add_fd(b.bus->change_fd(), EPOLLIN, [this, i](uint32_t) { bus_changed(i); });
     }
     engine_->start();
     for (auto& b : buses_) b.bus->start_health();

@@ -41,6 +41,9 @@ public:
     void bring_up();
     // Publishes the latest RT snapshots into the PVs (IOC loop thread).
     void publish();
+    // A cycle woke the loop through bus i's change_fd: drains it, takes the bus's newest snapshot
+    // and processes the I/O Intr records whose entries changed (IOC loop thread).
+    void bus_changed(std::size_t i);
     rt::Engine& engine() { return *engine_; }
     ethercat::Bus& bus(std::size_t i) { return *buses_.at(i).bus; }
     std::size_t bus_count() const { return buses_.size(); }

@@ -79,20 +79,18 @@ TEST(IocIoIntr, APulseBetweenTwoLooksStillProcessesTheRecordAndWakesTheLoop) {
     EXPECT_EQ(bus.watch_count(), 8u); // every input of the EL1008 (its entry PVs are I/O Intr; the
                                       // records here share the watches of inputs 1 and 2)
     ioc.engine().run_cycles(3);
-    bus.drain_changes();
-    ioc.database().scan_io_intr();
+    ioc.bus_changed(0);
     double count0 = value(ioc, "T:Count"), quiet0 = value(ioc, "T:QuietCount");
     EXPECT_FALSE(readable(bus.change_fd()));
     // the pulse: up and down again within these cycles, long before the loop looks again
     ioc.engine().run_cycles(20);
     EXPECT_EQ(value(ioc, "T:In"), 0); // nothing processed it yet; it reads 0 again anyway
     EXPECT_TRUE(readable(bus.change_fd())); // the cycle woke the loop
-    bus.drain_changes();
+    ioc.bus_changed(0);
     EXPECT_FALSE(readable(bus.change_fd()));
-    ioc.database().scan_io_intr();
     EXPECT_EQ(value(ioc, "T:Count"), count0 + 1); // processed once for the pulse
     EXPECT_EQ(value(ioc, "T:QuietCount"), quiet0); // an entry that did not change: not processed
-    ioc.database().scan_io_intr(); // nothing new since
+    ioc.bus_changed(0); // nothing new since
     EXPECT_EQ(value(ioc, "T:Count"), count0 + 1);
     ioc.engine().run_cycles(20);
     EXPECT_FALSE(readable(bus.change_fd())); // no change, no wake-up
@@ -125,8 +123,7 @@ record(longin, "T:In") {
     double one = 1;
     EXPECT_EQ(ioc.database().put(a, pv::Prim::Double, &one, 1), pv::PutStatus::Ok);
     ioc.engine().run_cycles(5); // sent, wired back, received
-    ioc.bus(0).drain_changes();
-    ioc.database().scan_io_intr();
+    ioc.bus_changed(0);
     EXPECT_EQ(value(ioc, "T:In"), 1);
 
     // a mask of more than one bit, and an asyn address without a signal name, are refused
@@ -150,4 +147,35 @@ record(longin, "T:None") { field(DTYP, "asynInt32") field(INP, "@asyn(MC_CPU1,0,
     EXPECT_NE(e.find("MASK '0x3': only a mask of one bit is supported"), std::string::npos) << e;
     EXPECT_NE(e.find("no signal name after the asyn port"), std::string::npos) << e;
     EXPECT_NE(e.find("io.db:"), std::string::npos) << e;
+}
+
+// Records of one IOC-loop look read the same cycle: bus-entry devices read the snapshot the loop
+// took for that look (Ioc::publish, a change wake-up), not whatever cycle is newest at each read.
+TEST(IocIoIntr, RecordsOfOneLookReadTheSameCycle) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("pulse.plc", "static.n := static.n + 1;\nec0.s2.binaryOutput01 := static.n >= 10;\n");
+    d.write("io.db", R"(
+record(bi, "T:A") { field(DTYP, "beamctl") field(INP, "@ec0.s1.binaryInput01") }
+record(bi, "T:B") { field(DTYP, "beamctl") field(INP, "@ec0.s1.binaryInput01") }
+)");
+    rt::VirtualClock clock;
+    ioc::Ioc ioc(config::IocConfig::load(d.write("ioc.yaml", kIoc)), clock);
+    ioc.bring_up();
+    auto process = [&](const char* name) {
+        pv::Address a;
+        EXPECT_TRUE(ioc.database().resolve(std::string(name) + ".PROC", a));
+        double one = 1;
+        ioc.database().put(a, pv::Prim::Double, &one, 1);
+        return value(ioc, name);
+    };
+    ioc.engine().run_cycles(3);
+    ioc.publish(); // the look: the input is still low
+    EXPECT_EQ(process("T:A"), 0);
+    ioc.engine().run_cycles(20); // the PLC raised the output, the input followed
+    EXPECT_EQ(process("T:B"), 0); // same look as T:A
+    EXPECT_EQ(process("T:A"), 0);
+    ioc.publish(); // the next look
+    EXPECT_EQ(process("T:A"), 1);
+    EXPECT_EQ(process("T:B"), 1);
 }
