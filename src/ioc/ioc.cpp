@@ -11,6 +11,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "ioc/rcp_signals.hpp"
 #include "core/signals.hpp"
 #include "ethercat/raw_link.hpp"
 #include "ethercat/sim/sim_config.hpp"
@@ -433,6 +434,9 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
                                           : " (" + slave + "* has: " + have + (shown > 12 ? ", ..." : "") + ")"));
     }
     bool output = f.dbf == pv::Dbf::OutLink;
+    if (sig->owner_kind == registry::OwnerKind::Bridge)
+        return fail(SB() << "'" << name << "' is an object of the RCP bridge: link to its PV instead (\""
+                         << sig->pv << (output ? " PP" : " CP") << "\")");
     if (sig->loop_only) { // a bus's counters or the engine's statistics
         ethercat::Bus* bus = nullptr;
         std::vector<int> positions;
@@ -610,6 +614,7 @@ int Ioc::run() {
             bc.motor_fields.erase(std::remove_if(bc.motor_fields.begin(), bc.motor_fields.end(), same), bc.motor_fields.end());
             bc.motor_fields.push_back(fv);
         }
+        bc.on_object = [this](const bridge::rcp::BridgeConfig::ObjectEvent& e) { on_rcp_object(registry_, e); };
         try {
             rcp = std::make_unique<bridge::rcp::RcpBridge>(db_, loop, bc);
         } catch (const Error& e) {
@@ -634,7 +639,13 @@ int Ioc::run() {
         loop.call_every(0.1, [this] { autosave_->tick(EventLoop::now_s()); });
     }
     // `beamctl shell`: introspection on a local UNIX socket, served on this loop.
-    pv::DbShell db_shell(db_, {[&server](int level, std::ostream& os) { server.report(level, os); }});
+    pv::DbShellHooks shell_hooks;
+    shell_hooks.casr = [&server](int level, std::ostream& os) { server.report(level, os); };
+    shell_hooks.signals = [this](const std::string& pattern, std::ostream& os) {
+        registry_.print(os, pattern);
+        return !registry_.match(pattern).empty();
+    };
+    pv::DbShell db_shell(db_, shell_hooks);
     auto shell_server = pv::start_shell_server(loop, db_shell, cfg_.name, shell_socket_);
     std::string rcp_text = rcp ? std::string(SB() << ", RCP bridge on udp " << cfg_.rcp->listen << ":" << rcp->port()) : std::string();
     std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)%s\n", server.listen_description().c_str(),

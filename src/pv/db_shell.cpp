@@ -64,6 +64,7 @@ const char* kHelp =
     "  dbtr NAME                              process a record, then print it as dbpr\n"
     "  scanppl [PERIOD]                       records of the periodic scan lists\n"
     "  casr [LEVEL]                           Channel Access server clients (1: channels too)\n"
+    "  signals [PATTERN]                      the IOC's signals now (as `beamctl signals`, with RCP objects)\n"
     "  help                                   this text\n";
 
 } // namespace
@@ -122,6 +123,12 @@ bool DbShell::execute(std::string_view line, std::ostream& os) {
             int level = level_arg(argv, 1, "casr");
             if (!hooks_.casr) throw Error("casr: this IOC has no Channel Access server");
             hooks_.casr(level, os);
+        } else if (cmd == "signals") {
+            if (!hooks_.signals) throw Error("signals: this IOC has no signal registry (a soft IOC)");
+            if (!hooks_.signals(arg(1), os)) {
+                os << "no signal matches '" << arg(1) << "'\n";
+                return false;
+            }
         } else {
             throw Error(SB() << "unknown command '" << cmd << "' (help lists the commands)");
         }

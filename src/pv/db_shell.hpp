@@ -1,5 +1,5 @@
 // The commands of `beamctl shell`: introspection of a running IOC as EPICS iocsh users know it
-// (dbl, dbpr, dbgf, dbpf, dbtr, scanppl, casr, help), one line in, the command's text out. No
+// (dbl, dbpr, dbgf, dbpf, dbtr, scanppl, casr, help; and signals, beamctl's registry), one line in, the command's text out. No
 // sockets (pv/shell_server.hpp serves it on a UNIX socket); what is not in the PV database (the
 // CA server's report for casr) comes in through DbShellHooks.
 // Threading: a DbShell and its Database are used by the database's thread (the IOC loop).
@@ -17,6 +17,9 @@ class Database;
 struct DbShellHooks {
     // casr [level]: the CA server's report (empty: "casr: no Channel Access server").
     std::function<void(int level, std::ostream& os)> casr;
+    // signals [PATTERN]: the IOC's signal registry now, with what the RCP bridge has declared since
+    // start (empty: "signals: this IOC has no signal registry" — a soft IOC). False: none matched.
+    std::function<bool(const std::string& pattern, std::ostream& os)> signals;
 };
 
 class DbShell {

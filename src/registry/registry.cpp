@@ -37,6 +37,21 @@ const Signal& Registry::declare(Signal s) {
     return it->second;
 }
 
+const Signal& Registry::declare_runtime(Signal s) {
+    if (!s.loop_only)
+        throw Error(SB() << "signal '" << s.name << "' of " << s.owner << ": only a signal of the IOC loop may be declared while the IOC runs");
+    if (s.name.empty()) throw Error(SB() << s.owner << " declared a signal without a name");
+    s.runtime = true;
+    auto [it, fresh] = signals_.try_emplace(s.name, s);
+    if (!fresh) throw Error(SB() << "signal '" << s.name << "' of " << s.owner << " is already declared by " << it->second.owner);
+    return it->second;
+}
+
+void Registry::withdraw(std::string_view name) {
+    auto it = signals_.find(name);
+    if (it != signals_.end() && it->second.runtime) signals_.erase(it);
+}
+
 void Registry::set_binder(std::string prefix, Binder b) { binders_.emplace_back(std::move(prefix), std::move(b)); }
 
 const Signal* Registry::find(std::string_view name) const {

@@ -37,7 +37,9 @@ struct Signal {
     std::string writer; // Output: who writes it ("axis 1 (SampleX)", "plc0", "record X"); empty: its PV (CA)
     std::string pv;     // the PV that serves it ("" if none)
     bool loop_only = false; // a value of the IOC loop (a bus's frame counters, the engine's
-                            // statistics): records read it; the cycle (PLC code, axes) cannot
+                            // statistics, an RCP object): records read it; the cycle (PLC code,
+                            // axes) cannot
+    bool runtime = false;   // declared while the IOC runs (declare_runtime), may be withdrawn
 };
 
 class Registry {
@@ -50,7 +52,13 @@ public:
     // Adds a signal. Throws Error if the name is taken (naming both owners) or the registry is frozen.
     const Signal& declare(Signal s);
     void set_binder(std::string prefix, Binder b);
-    // No more declarations: what the cycle will see is fixed.
+    // A signal of the IOC loop that appears and goes while the IOC runs (an object a prototyping
+    // machine's beacon announced to the RCP bridge): allowed after freeze() because the cycle
+    // never sees it (it must be loop_only). Throws Error if the name is taken or it is not loop_only.
+    const Signal& declare_runtime(Signal s);
+    // Removes a signal declared by declare_runtime (the bridge's object went); other names: no-op.
+    void withdraw(std::string_view name);
+    // No more declarations of signals the cycle sees: what the cycle will see is fixed.
     void freeze() { frozen_ = true; }
     bool frozen() const { return frozen_; }
 

@@ -388,3 +388,20 @@ def test_rcp_sim_data_before_its_beacon_is_not_malformed(tmp_path, prefix):
             srv.kill()
             forget_pvs(prefix)
             release_port(port)
+
+
+def test_rcp_objects_are_in_the_running_iocs_signal_registry(tmp_path, prefix):
+    """`beamctl shell` -> `signals rcp.*`: the objects the beacon announced, with their PVs."""
+    from test_shell import shell, socket_of
+    with bridge_ioc(tmp_path, prefix, timeout_s=3) as (srv, rcp_port), rcp_sim(rcp_port):
+        p = f"{prefix}RCP:sgDemo:"
+        assert wait_for(lambda: exists(p + "Stage"), timeout=3)
+        rc, out, err = shell(socket_of(srv), "signals rcp.*")
+        assert rc == 0, out + err
+        stage = [l for l in out.splitlines() if l.startswith("rcp.sgDemo.Stage ")]
+        assert len(stage) == 1, out
+        assert p + "Stage" in stage[0] and "rcp sgDemo (MOTOR)" in stage[0], stage
+        assert stage[0].split()[1:3] == ["LREAL", "variable"], stage
+        assert "rcp.sgDemo.Setpoint" in out and "rcp.sgDemo.Counter" in out, out
+        rc, out, err = shell(socket_of(srv), "signals nothing.like.this*")
+        assert rc != 0 and "no signal matches" in out, out + err

@@ -371,9 +371,12 @@ struct BridgeCore::Impl {
         } else {
             o.main->val_read_only = true;
         }
+        if (cfg.on_object) cfg.on_object({true, a.name, d.name, o.pv, t, d.data_type, uint16_t(o.count)});
     }
 
     void unbuild(Object& o) {
+        if (cfg.on_object && o.main)
+            cfg.on_object({false, o.app->name, o.desc.name, o.pv, o.desc.type, o.desc.data_type, uint16_t(o.count)});
         if (o.driver) o.driver->detach();
         for (const auto& d : o.defs) db.remove(d.name);
         o.defs.clear();

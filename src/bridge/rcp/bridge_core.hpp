@@ -70,6 +70,17 @@ struct BridgeConfig {
         {"MRES", "0.0001"}, {"PREC", "4"}, {"VELO", "1"}, {"ACCL", "0.5"},
         {"JVEL", "1"},      {"HVEL", "1"}, {"RTRY", "0"}, {"TWV", "1"},
     };
+    // Told when an object's PVs are made (added) and removed (the object went with a new beacon,
+    // or the bridge stops): the IOC declares the object in its signal registry. Optional.
+    struct ObjectEvent {
+        bool added = true;
+        std::string application, name; // as the beacon announced them
+        std::string pv;                 // the object's main PV
+        ObjectType type = ObjectType::AI;
+        DataType data_type = DataType::Float64;
+        uint16_t count = 1;             // elements (a waveform PV when > 1)
+    };
+    std::function<void(const ObjectEvent&)> on_object;
     // Throws Error naming the bad setting.
     void validate() const;
 };
