@@ -50,15 +50,6 @@ inline void check_deadband(double& last, double v, double deadband, unsigned& ma
     }
 }
 
-inline void check_deadband_int(int32_t& last, int32_t v, int32_t deadband, unsigned& mask, unsigned bit) {
-    int64_t delta = int64_t(last) - int64_t(v);
-    if (delta < 0) delta = -delta;
-    if (deadband < 0 || delta > int64_t(deadband)) {
-        mask |= bit;
-        last = v;
-    }
-}
-
 // aiRecord-style limit alarms with hysteresis; T is double or int32.
 template <typename T>
 void limit_alarms(Record& r, T val, T hihi, T high, T low, T lolo, uint16_t hhsv, uint16_t hsv,
@@ -230,5 +221,149 @@ template <typename F> inline void soft_write(Record& r, Link& out, const FieldDe
     }
     r.write_link(out, f);
 }
+
+// The Soft Channel output fields of output record R, in base's order: DOL, OMSL, OUT, IVOA and
+// IVOV (of type `ivov`, the record's value type).
+template <typename R> void add_output_fields(std::vector<FieldDesc>& v, Dbf ivov) {
+    v.push_back(BEAMCTL_FIELD(R, DOL, dol, InLink, 0));
+    v.push_back(BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0));
+    v.push_back(BEAMCTL_FIELD(R, OUT, out, OutLink, 0));
+    v.push_back(BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0));
+    v.push_back(FieldDesc{"IVOV", ivov, 0, uint16_t(sizeof(R::ivov)), nullptr,
+                          [](Record& r) -> void* { return &static_cast<R&>(r).ivov; }});
+}
+
+// ---------------------------------------------------------------- integers (longin/longout: T =
+// int32_t, DBF_LONG; int64in/int64out: T = int64_t, DBF_INT64), as base's four record supports:
+// limit alarms with hysteresis, MDEL/ADEL deadbands (negative: every processing posts), the
+// output's DRVH/DRVL clamp, OMSL closed_loop DOL and IVOA. MLST/ALST/LALM start at VAL (init_record).
+template <typename T> constexpr Dbf kIntegerDbf = sizeof(T) == 8 ? Dbf::Int64 : Dbf::Long;
+#define BEAMCTL_INT_FIELD(R, NAME, m, flags)                                                       \
+    ::beamctl::pv::FieldDesc {                                                                     \
+        #NAME, kIntegerDbf<T>, uint16_t(flags), uint16_t(sizeof(R::m)), nullptr,                   \
+            [](::beamctl::pv::Record& r) -> void* { return &static_cast<R&>(r).m; }                \
+    }
+
+template <typename Self, typename T> struct IntegerBase : Record {
+    using Record::Record;
+    T val = 0;
+    char egu[16] = {};
+    T hopr = 0, lopr = 0;
+    T hihi = 0, high = 0, low = 0, lolo = 0;
+    uint16_t hhsv = 0, hsv = 0, lsv = 0, llsv = 0;
+    T hyst = 0, mdel = 0, adel = 0;
+    T lalm = 0, alst = 0, mlst = 0;
+    Link inp, dol, out; // Soft Channel: an input's INP; an output's DOL (OMSL closed_loop) and OUT
+    uint16_t omsl = 0, ivoa = 0;
+    T ivov = 0;
+    const FieldDesc* val_fd = type().find("VAL");
+
+    static std::vector<FieldDesc> integer_fields() {
+        using R = Self;
+        auto v = common_fields();
+        auto add = {
+            BEAMCTL_INT_FIELD(R, VAL, val, kVal | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, EGU, egu, String, kMeta),
+            BEAMCTL_INT_FIELD(R, HOPR, hopr, kMeta | kEgu),
+            BEAMCTL_INT_FIELD(R, LOPR, lopr, kMeta | kEgu),
+            BEAMCTL_INT_FIELD(R, HIHI, hihi, kLim),
+            BEAMCTL_INT_FIELD(R, HIGH, high, kLim),
+            BEAMCTL_INT_FIELD(R, LOW, low, kLim),
+            BEAMCTL_INT_FIELD(R, LOLO, lolo, kLim),
+            BEAMCTL_MENU(R, HHSV, hhsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, HSV, hsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LSV, lsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_MENU(R, LLSV, llsv, kMenuAlarmSevr, kProcess | kProp),
+            BEAMCTL_INT_FIELD(R, HYST, hyst, kEgu),
+            BEAMCTL_INT_FIELD(R, MDEL, mdel, kEgu),
+            BEAMCTL_INT_FIELD(R, ADEL, adel, kEgu),
+            BEAMCTL_INT_FIELD(R, LALM, lalm, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_INT_FIELD(R, ALST, alst, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_INT_FIELD(R, MLST, mlst, kReadOnly | kEgu | kDisplayHopr),
+        };
+        v.insert(v.end(), add.begin(), add.end());
+        return v;
+    }
+    void init() override {
+        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
+        mlst = alst = lalm = val;
+    }
+    // |a - b| without overflow, as base's DELTA; a negative deadband posts every time.
+    static bool beyond(T last, T v, T deadband) {
+        uint64_t d = last > v ? uint64_t(last) - uint64_t(v) : uint64_t(v) - uint64_t(last);
+        return deadband < 0 || d > uint64_t(deadband);
+    }
+    void integer_process(bool output) {
+        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
+        limit_alarms<T>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm);
+        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { val = ivov; });
+        stamp_time();
+        unsigned mask = reset_alarms();
+        if (beyond(mlst, val, mdel)) {
+            mask |= kDbeValue;
+            mlst = val;
+        }
+        if (beyond(alst, val, adel)) {
+            mask |= kDbeLog;
+            alst = val;
+        }
+        if (mask) post(val_fd, mask);
+    }
+    void integer_metadata(const FieldDesc& f, Metadata& md, double chi, double clo) const {
+        Record::metadata(f, md);
+        if (f.flags & kEgu) md.units = egu;
+        if (f.flags & kDisplayHopr) fill_limits(md, double(hopr), double(lopr), chi, clo);
+        if (is(f, "VAL")) {
+            md.alarm_hihi = hhsv ? double(hihi) : NAN;
+            md.alarm_high = hsv ? double(high) : NAN;
+            md.alarm_low = lsv ? double(low) : NAN;
+            md.alarm_lolo = llsv ? double(lolo) : NAN;
+        }
+    }
+};
+
+template <typename T> struct IntegerInRecord : IntegerBase<IntegerInRecord<T>, T> {
+    using IntegerBase<IntegerInRecord<T>, T>::IntegerBase;
+    static std::vector<FieldDesc> fields() {
+        using R = IntegerInRecord;
+        auto v = R::integer_fields();
+        v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        return v;
+    }
+    ProcessResult process() override {
+        this->pact = 1;
+        this->integer_process(false);
+        this->pact = 0;
+        return ProcessResult::Done;
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        this->integer_metadata(f, md, double(this->hopr), double(this->lopr));
+    }
+};
+
+template <typename T> struct IntegerOutRecord : IntegerBase<IntegerOutRecord<T>, T> {
+    using IntegerBase<IntegerOutRecord<T>, T>::IntegerBase;
+    T drvh = 0, drvl = 0;
+    static std::vector<FieldDesc> fields() {
+        using R = IntegerOutRecord;
+        auto v = R::integer_fields();
+        v.push_back(BEAMCTL_INT_FIELD(R, DRVH, drvh, kProcess | kProp | kEgu));
+        v.push_back(BEAMCTL_INT_FIELD(R, DRVL, drvl, kProcess | kProp | kEgu));
+        add_output_fields<R>(v, kIntegerDbf<T>);
+        return v;
+    }
+    ProcessResult process() override {
+        this->pact = 1;
+        if (this->omsl == 1 && soft_read(*this, this->dol, *this->val_fd)) this->udf = 0;
+        if (drvh > drvl) this->val = std::clamp(this->val, drvl, drvh); // convert(): the drive limits
+        this->integer_process(true);
+        this->pact = 0;
+        return ProcessResult::Done;
+    }
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        this->integer_metadata(f, md, double(drvh), double(drvl));
+    }
+};
+#undef BEAMCTL_INT_FIELD
 
 } // namespace beamctl::pv::support

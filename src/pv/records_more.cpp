@@ -222,133 +222,8 @@ struct MbboDirectRecord : MbbDirectBase<MbboDirectRecord> {
 };
 
 // ---------------------------------------------------------------- int64in, int64out
-// |a - b| without overflow, as base's DELTA.
-inline uint64_t delta64(int64_t a, int64_t b) {
-    return a > b ? uint64_t(a) - uint64_t(b) : uint64_t(b) - uint64_t(a);
-}
-
-template <typename Self> struct Int64Base : Record {
-    using Record::Record;
-    int64_t val = 0;
-    char egu[16] = {};
-    int64_t hopr = 0, lopr = 0;
-    int64_t hihi = 0, high = 0, low = 0, lolo = 0;
-    uint16_t hhsv = 0, hsv = 0, lsv = 0, llsv = 0;
-    int64_t hyst = 0, mdel = 0, adel = 0;
-    int64_t lalm = 0, alst = 0, mlst = 0;
-    Link inp, dol, out; // Soft Channel: int64in INP; int64out DOL (OMSL closed_loop) and OUT
-    uint16_t omsl = 0, ivoa = 0;
-    int64_t ivov = 0;
-    const FieldDesc* val_fd = type().find("VAL");
-
-    static std::vector<FieldDesc> int64_fields(std::vector<FieldDesc> v) {
-        using R = Self;
-        auto add = {
-            BEAMCTL_FIELD(R, VAL, val, Int64, kVal | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, EGU, egu, String, kMeta),
-            BEAMCTL_FIELD(R, HOPR, hopr, Int64, kMeta | kEgu),
-            BEAMCTL_FIELD(R, LOPR, lopr, Int64, kMeta | kEgu),
-            BEAMCTL_FIELD(R, HIHI, hihi, Int64, kLim),
-            BEAMCTL_FIELD(R, HIGH, high, Int64, kLim),
-            BEAMCTL_FIELD(R, LOW, low, Int64, kLim),
-            BEAMCTL_FIELD(R, LOLO, lolo, Int64, kLim),
-            BEAMCTL_MENU(R, HHSV, hhsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_MENU(R, HSV, hsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_MENU(R, LSV, lsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_MENU(R, LLSV, llsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_FIELD(R, HYST, hyst, Int64, kEgu),
-            BEAMCTL_FIELD(R, MDEL, mdel, Int64, kEgu),
-            BEAMCTL_FIELD(R, ADEL, adel, Int64, kEgu),
-            BEAMCTL_FIELD(R, LALM, lalm, Int64, kReadOnly | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, ALST, alst, Int64, kReadOnly | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, MLST, mlst, Int64, kReadOnly | kEgu | kDisplayHopr),
-        };
-        v.insert(v.end(), add.begin(), add.end());
-        return v;
-    }
-    void init() override {
-        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
-        mlst = alst = lalm = val;
-    }
-    void int64_process(bool output) {
-        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
-        limit_alarms<int64_t>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm);
-        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { val = ivov; });
-        stamp_time();
-        unsigned mask = reset_alarms();
-        if (mdel < 0 || delta64(mlst, val) > uint64_t(mdel)) {
-            mask |= kDbeValue;
-            mlst = val;
-        }
-        if (adel < 0 || delta64(alst, val) > uint64_t(adel)) {
-            mask |= kDbeLog;
-            alst = val;
-        }
-        if (mask) post(val_fd, mask);
-    }
-    void int64_metadata(const FieldDesc& f, Metadata& md, double chi, double clo) const {
-        Record::metadata(f, md);
-        if (f.flags & kEgu) md.units = egu;
-        if (f.flags & kDisplayHopr) fill_limits(md, double(hopr), double(lopr), chi, clo);
-        if (is(f, "VAL")) {
-            md.alarm_hihi = hhsv ? double(hihi) : NAN;
-            md.alarm_high = hsv ? double(high) : NAN;
-            md.alarm_low = lsv ? double(low) : NAN;
-            md.alarm_lolo = llsv ? double(lolo) : NAN;
-        }
-    }
-};
-
-struct Int64inRecord : Int64Base<Int64inRecord> {
-    using Int64Base::Int64Base;
-    static std::vector<FieldDesc> fields() {
-        using R = Int64inRecord;
-        auto v = int64_fields(common_fields());
-        v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
-        return v;
-    }
-    ProcessResult process() override {
-        pact = 1;
-        int64_process(false);
-        pact = 0;
-        return ProcessResult::Done;
-    }
-    void metadata(const FieldDesc& f, Metadata& md) const override {
-        int64_metadata(f, md, double(hopr), double(lopr));
-    }
-};
-
-struct Int64outRecord : Int64Base<Int64outRecord> {
-    using Int64Base::Int64Base;
-    int64_t drvh = 0, drvl = 0;
-    static std::vector<FieldDesc> fields() {
-        using R = Int64outRecord;
-        auto v = int64_fields(common_fields());
-        auto add = {
-            BEAMCTL_FIELD(R, DRVH, drvh, Int64, kProcess | kProp | kEgu),
-            BEAMCTL_FIELD(R, DRVL, drvl, Int64, kProcess | kProp | kEgu),
-            BEAMCTL_FIELD(R, DOL, dol, InLink, 0),
-            BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
-            BEAMCTL_FIELD(R, OUT, out, OutLink, 0),
-            BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
-            BEAMCTL_FIELD(R, IVOV, ivov, Int64, 0),
-        };
-        v.insert(v.end(), add.begin(), add.end());
-        return v;
-    }
-    ProcessResult process() override {
-        pact = 1;
-        if (omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
-        if (drvh > drvl) val = std::clamp(val, drvl, drvh); // convert(): the drive limits
-        int64_process(true);
-        pact = 0;
-        return ProcessResult::Done;
-    }
-    void metadata(const FieldDesc& f, Metadata& md) const override {
-        int64_metadata(f, md, double(drvh), double(drvl));
-    }
-};
-
+using Int64inRecord = IntegerInRecord<int64_t>; // record_support.hpp, shared with longin
+using Int64outRecord = IntegerOutRecord<int64_t>;
 
 // ---------------------------------------------------------------- lsi, lso
 // Long strings: VAL is a char array of SIZV (16..32767) characters, NUL-terminated, read and
@@ -480,12 +355,7 @@ struct LsoRecord : LongStringBase<LsoRecord> {
     static std::vector<FieldDesc> fields() {
         using R = LsoRecord;
         auto v = long_string_fields(common_fields());
-        auto add = {
-            BEAMCTL_FIELD(R, DOL, dol, InLink, 0), BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
-            BEAMCTL_FIELD(R, OUT, out, OutLink, 0), BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
-            BEAMCTL_FIELD(R, IVOV, ivov, String, 0),
-        };
-        v.insert(v.end(), add.begin(), add.end());
+        add_output_fields<R>(v, Dbf::String);
         return v;
     }
     void init() override {

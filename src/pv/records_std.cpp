@@ -111,120 +111,8 @@ struct AoRecord : AnalogBase<AoRecord> {
 };
 
 // ---------------------------------------------------------------- long (longin, longout)
-template <typename Self> struct LongBase : Record {
-    using Record::Record;
-    int32_t val = 0;
-    char egu[16] = {};
-    int32_t hopr = 0, lopr = 0;
-    int32_t hihi = 0, high = 0, low = 0, lolo = 0;
-    uint16_t hhsv = 0, hsv = 0, lsv = 0, llsv = 0;
-    int32_t hyst = 0, mdel = 0, adel = 0;
-    int32_t lalm = 0, alst = 0, mlst = 0;
-    Link inp, dol, out; // Soft Channel: longin INP; longout DOL (OMSL closed_loop) and OUT
-    uint16_t omsl = 0, ivoa = 0;
-    int32_t ivov = 0;
-    const FieldDesc* val_fd = type().find("VAL");
-
-    static std::vector<FieldDesc> long_fields(std::vector<FieldDesc> v) {
-        using R = Self;
-        auto add = {
-            BEAMCTL_FIELD(R, VAL, val, Long, kVal | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, EGU, egu, String, kMeta),
-            BEAMCTL_FIELD(R, HOPR, hopr, Long, kMeta | kEgu),
-            BEAMCTL_FIELD(R, LOPR, lopr, Long, kMeta | kEgu),
-            BEAMCTL_FIELD(R, HIHI, hihi, Long, kLim),
-            BEAMCTL_FIELD(R, HIGH, high, Long, kLim),
-            BEAMCTL_FIELD(R, LOW, low, Long, kLim),
-            BEAMCTL_FIELD(R, LOLO, lolo, Long, kLim),
-            BEAMCTL_MENU(R, HHSV, hhsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_MENU(R, HSV, hsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_MENU(R, LSV, lsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_MENU(R, LLSV, llsv, kMenuAlarmSevr, kProcess | kProp),
-            BEAMCTL_FIELD(R, HYST, hyst, Long, kEgu),
-            BEAMCTL_FIELD(R, MDEL, mdel, Long, kEgu),
-            BEAMCTL_FIELD(R, ADEL, adel, Long, kEgu),
-            BEAMCTL_FIELD(R, LALM, lalm, Long, kReadOnly | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, ALST, alst, Long, kReadOnly | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, MLST, mlst, Long, kReadOnly | kEgu | kDisplayHopr),
-        };
-        v.insert(v.end(), add.begin(), add.end());
-        return v;
-    }
-    void init() override {
-        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
-    }
-    void long_process(bool output) {
-        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
-        limit_alarms<int32_t>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm);
-        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { val = ivov; });
-        stamp_time();
-        unsigned mask = reset_alarms();
-        check_deadband_int(mlst, val, mdel, mask, kDbeValue);
-        check_deadband_int(alst, val, adel, mask, kDbeLog);
-        if (mask) post(val_fd, mask);
-    }
-    void long_metadata(const FieldDesc& f, Metadata& md, double chi, double clo) const {
-        Record::metadata(f, md);
-        if (f.flags & kEgu) md.units = egu;
-        if (f.flags & kDisplayHopr) fill_limits(md, hopr, lopr, chi, clo);
-        if (is(f, "VAL")) {
-            md.alarm_hihi = hhsv ? hihi : NAN;
-            md.alarm_high = hsv ? high : NAN;
-            md.alarm_low = lsv ? low : NAN;
-            md.alarm_lolo = llsv ? lolo : NAN;
-        }
-    }
-};
-
-struct LonginRecord : LongBase<LonginRecord> {
-    using LongBase::LongBase;
-    static std::vector<FieldDesc> fields() {
-        using R = LonginRecord;
-        auto v = long_fields(common_fields());
-        v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
-        return v;
-    }
-    ProcessResult process() override {
-        pact = 1;
-        long_process(false);
-        pact = 0;
-        return ProcessResult::Done;
-    }
-    void metadata(const FieldDesc& f, Metadata& md) const override {
-        long_metadata(f, md, hopr, lopr);
-    }
-};
-
-struct LongoutRecord : LongBase<LongoutRecord> {
-    using LongBase::LongBase;
-    int32_t drvh = 0, drvl = 0;
-    static std::vector<FieldDesc> fields() {
-        using R = LongoutRecord;
-        auto v = long_fields(common_fields());
-        auto add = {
-            BEAMCTL_FIELD(R, DRVH, drvh, Long, kProcess | kProp | kEgu),
-            BEAMCTL_FIELD(R, DRVL, drvl, Long, kProcess | kProp | kEgu),
-            BEAMCTL_FIELD(R, DOL, dol, InLink, 0),
-            BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
-            BEAMCTL_FIELD(R, OUT, out, OutLink, 0),
-            BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
-            BEAMCTL_FIELD(R, IVOV, ivov, Long, 0),
-        };
-        v.insert(v.end(), add.begin(), add.end());
-        return v;
-    }
-    ProcessResult process() override {
-        pact = 1;
-        if (omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
-        if (drvh > drvl) val = std::clamp(val, drvl, drvh);
-        long_process(true);
-        pact = 0;
-        return ProcessResult::Done;
-    }
-    void metadata(const FieldDesc& f, Metadata& md) const override {
-        long_metadata(f, md, drvh, drvl);
-    }
-};
+using LonginRecord = IntegerInRecord<int32_t>;  // record_support.hpp, shared with int64in
+using LongoutRecord = IntegerOutRecord<int32_t>;
 
 // ---------------------------------------------------------------- binary (bi, bo)
 template <typename Self> struct BinaryBase : Record {
@@ -317,12 +205,7 @@ struct BoRecord : BinaryBase<BoRecord> {
     static std::vector<FieldDesc> fields() {
         using R = BoRecord;
         auto v = binary_fields(common_fields());
-        auto add = {
-            BEAMCTL_FIELD(R, DOL, dol, InLink, 0), BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
-            BEAMCTL_FIELD(R, OUT, out, OutLink, 0), BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
-            BEAMCTL_FIELD(R, IVOV, ivov, UShort, 0),
-        };
-        v.insert(v.end(), add.begin(), add.end());
+        add_output_fields<R>(v, Dbf::UShort);
         return v;
     }
     ProcessResult process() override {
@@ -442,12 +325,7 @@ struct MbboRecord : MbbBase<MbboRecord> {
     static std::vector<FieldDesc> fields() {
         using R = MbboRecord;
         auto v = mbb_fields(common_fields());
-        auto add = {
-            BEAMCTL_FIELD(R, DOL, dol, InLink, 0), BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
-            BEAMCTL_FIELD(R, OUT, out, OutLink, 0), BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
-            BEAMCTL_FIELD(R, IVOV, ivov, UShort, 0),
-        };
-        v.insert(v.end(), add.begin(), add.end());
+        add_output_fields<R>(v, Dbf::UShort);
         return v;
     }
     ProcessResult process() override {
@@ -512,12 +390,7 @@ struct StringoutRecord : StringBase<StringoutRecord> {
     static std::vector<FieldDesc> fields() {
         using R = StringoutRecord;
         auto v = string_fields(common_fields());
-        auto add = {
-            BEAMCTL_FIELD(R, DOL, dol, InLink, 0), BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
-            BEAMCTL_FIELD(R, OUT, out, OutLink, 0), BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
-            BEAMCTL_FIELD(R, IVOV, ivov, String, 0),
-        };
-        v.insert(v.end(), add.begin(), add.end());
+        add_output_fields<R>(v, Dbf::String);
         return v;
     }
 };

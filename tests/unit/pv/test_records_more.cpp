@@ -177,6 +177,41 @@ TEST_F(RecordsMore, Int64inDeadbands) {
     EXPECT_EQ(r.masks[1], unsigned(kDbeValue | kDbeLog));
 }
 
+// longin/longout and int64in/int64out share their record support (record_support.hpp): as base's
+// init_record, MLST, ALST and LALM start at VAL, so a first processing with the .db's value posts
+// nothing; longout keeps its 32-bit drive limits.
+TEST_F(RecordsMore, IntegerRecordsStartTheirDeadbandsAtVal) {
+    load(R"(
+record(longin, "l") { field(VAL, "5") field(MDEL, "-1") }
+record(longout, "lo") { field(VAL, "7") field(DRVH, "100") field(DRVL, "-100") }
+record(int64in, "i") { field(VAL, "6000000000") }
+)");
+    EXPECT_EQ(getd("l.MLST"), 5);
+    EXPECT_EQ(getd("l.ALST"), 5);
+    EXPECT_EQ(getd("l.LALM"), 5);
+    EXPECT_EQ(getd("lo.MLST"), 7);
+    EXPECT_EQ(getd("i.MLST"), 6e9);
+    Recorder r;
+    r.addr = addr("lo");
+    r.mask = kDbeValue;
+    db.subscribe(r);
+    put("lo.PROC", 1); // the same value: no post
+    EXPECT_TRUE(r.masks.empty());
+    put("lo", 500); // clamped to DRVH
+    EXPECT_EQ(getd("lo"), 100);
+    ASSERT_EQ(r.masks.size(), 1u);
+    db.unsubscribe(r);
+    // MDEL -1 posts every processing
+    Recorder all;
+    all.addr = addr("l");
+    all.mask = kDbeValue;
+    db.subscribe(all);
+    put("l.PROC", 1);
+    put("l.PROC", 1);
+    EXPECT_EQ(all.masks.size(), 2u);
+    db.unsubscribe(all);
+}
+
 TEST_F(RecordsMore, Int64outDriveLimitsClosedLoopAndIvoa) {
     load(R"(
 record(int64out, "o") { field(DRVH, "10000000000") field(DRVL, "-10") field(OUT, "dst PP") }
