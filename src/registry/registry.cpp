@@ -31,17 +31,18 @@ const char* owner_kind_name(OwnerKind k) {
 
 const Signal& Registry::declare(Signal s) {
     if (frozen_) throw Error(SB() << "signal '" << s.name << "' declared by " << s.owner << " after the registry was frozen");
-    if (s.name.empty()) throw Error(SB() << s.owner << " declared a signal without a name");
-    auto [it, fresh] = signals_.try_emplace(s.name, s);
-    if (!fresh) throw Error(SB() << "signal '" << s.name << "' of " << s.owner << " is already declared by " << it->second.owner);
-    return it->second;
+    return insert(std::move(s));
 }
 
 const Signal& Registry::declare_runtime(Signal s) {
     if (!s.loop_only)
         throw Error(SB() << "signal '" << s.name << "' of " << s.owner << ": only a signal of the IOC loop may be declared while the IOC runs");
-    if (s.name.empty()) throw Error(SB() << s.owner << " declared a signal without a name");
     s.runtime = true;
+    return insert(std::move(s));
+}
+
+const Signal& Registry::insert(Signal s) {
+    if (s.name.empty()) throw Error(SB() << s.owner << " declared a signal without a name");
     auto [it, fresh] = signals_.try_emplace(s.name, s);
     if (!fresh) throw Error(SB() << "signal '" << s.name << "' of " << s.owner << " is already declared by " << it->second.owner);
     return it->second;

@@ -86,6 +86,7 @@ public:
 
 private:
     Signal* find_mut(std::string_view name);
+    const Signal& insert(Signal s); // declare and declare_runtime: a new name, or Error naming both owners
     std::map<std::string, Signal, std::less<>> signals_;
     std::vector<std::pair<std::string, Binder>> binders_;
     bool frozen_ = false;
