@@ -545,6 +545,20 @@ int main(int argc, char** argv) {
     plccheck->add_option("--ioc", plco.ioc_file, "Bind names against this IOC configuration (buses, axes, plugins)");
     plccheck->add_option("files", plco.files, "PLC files")->required();
 
+    std::vector<std::string> axis_macros, axis_encoders;
+    std::string axis_file;
+    auto* axiscmd = app.add_subcommand("axis", "ECMC axis files");
+    axiscmd->require_subcommand(1);
+    auto* axischeck = axiscmd->add_subcommand(
+        "check", "Check an ECMC axis YAML file on its own (as loadYamlAxis.cmd) and compile its axis PLC (exit 1 on any error)");
+    axischeck->add_option("-m,--macros", axis_macros, "Macro definitions, e.g. \"AX_ID=1,DRV_SLAVE=3\"")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    axischeck->add_option("-e,--encoder", axis_encoders, "An encoder file added after the axis (loadYamlEnc.cmd)")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    axischeck->add_option("file", axis_file, "The axis file")->required();
+
     std::string rcp_model;
     bridge::rcp::RcpSimOptions rcpo;
     auto* rcpcmd = app.add_subcommand("rcp-sim", "Stand in for a rapid-control-prototyping machine: run MODEL.yaml, send beacons and data, take writes");
@@ -618,6 +632,7 @@ int main(int argc, char** argv) {
             return run_softioc(soft);
         }
         if (*plccheck) return run_plc_check(plco);
+        if (*axischeck) return ioc::run_axis_check(axis_file, axis_encoders, macro_options(axis_macros));
         if (*shellcmd) return pv::run_shell_client(shello);
         if (*rcpcmd) return bridge::rcp::run_rcp_sim(rcp_model, rcpo);
         if (*repcmd)

@@ -10,6 +10,7 @@
 #include "ioc/ioc.hpp"
 #include "ioc/plcs.hpp"
 #include "motion/axis_config.hpp"
+#include "motion/axis_setup.hpp"
 #include "plc/plugin.hpp"
 #include "plc/program.hpp"
 #include "plc/runtime.hpp"
@@ -200,6 +201,41 @@ int run_check(const std::string& path, const MacroMap& macros, std::FILE* out, s
         return 1;
     }
     std::fprintf(out, "%s: OK (%zu PVs, %zu bus(es))\n", path.c_str(), r.pvs, r.buses);
+    return 0;
+}
+
+int run_axis_check(const std::string& file, const std::vector<std::string>& encoder_files,
+                   const MacroMap& macros, std::FILE* out, std::FILE* err) {
+    ErrorList errors;
+    std::vector<Error> file_errors;
+    motion::AxisConfig axis = motion::load_axis_config(file, macros, file_errors);
+    for (const auto& enc_file : encoder_files) {
+        motion::EncoderConfig enc = motion::load_encoder_config(enc_file, macros, file_errors);
+        if (file_errors.empty()) errors.capture([&] { motion::add_encoder(axis, std::move(enc)); });
+    }
+    for (const auto& e : file_errors) errors.add(e);
+    if (errors.empty()) {
+        errors.capture([&] { motion::make_axis_params(axis); });
+        errors.capture([&] {
+            std::optional<plc::PlcSource> src = axis_plc_source(axis);
+            if (!src) return;
+            plc::PlcRuntime::Options opt;
+            opt.check_only = true;
+            plc::PlcRuntime check(opt);
+            try {
+                check.add(*src);
+            } catch (const plc::CompileError& e) {
+                for (const auto& m : e.errors()) errors.add(m);
+            }
+        });
+    }
+    for (const auto& w : axis.warnings) std::fprintf(out, "warning: %s\n", w.c_str());
+    for (const auto& m : errors.messages()) std::fprintf(err, "%s\n", m.c_str());
+    if (!errors.empty()) {
+        std::fprintf(err, "%s: %zu error%s\n", file.c_str(), errors.size(), errors.size() == 1 ? "" : "s");
+        return 1;
+    }
+    std::fprintf(out, "%s: OK\n", file.c_str());
     return 0;
 }
 

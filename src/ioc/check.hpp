@@ -32,4 +32,13 @@ CheckReport check_ioc(const std::string& path, const MacroMap& macros = {});
 int run_check(const std::string& path, const MacroMap& macros = {}, std::FILE* out = stdout,
               std::FILE* err = stderr);
 
+// `beamctl axis check`: one ECMC axis file on its own, as loadYamlAxis.cmd takes it (with the
+// encoder files of loadYamlEnc.cmd after it), without an IOC: every error of the files, what
+// the runtime cannot do (make_axis_params), and the axis PLC compiled with every well-formed
+// name accepted (as `beamctl plc check` without --ioc). Signal names are checked for syntax only
+// (the IOC checks them against its buses). Prints the warnings and "<file>: OK" on `out`, the
+// errors on `err`; returns 0, or 1 with errors.
+int run_axis_check(const std::string& file, const std::vector<std::string>& encoder_files,
+                   const MacroMap& macros, std::FILE* out = stdout, std::FILE* err = stderr);
+
 } // namespace beamctl::ioc

@@ -52,6 +52,26 @@ plc::PlcSource plc_source(const config::PlcEntry& e) {
     return s;
 }
 
+std::optional<plc::PlcSource> axis_plc_source(const motion::AxisConfig& a) {
+    if (!a.plc || !a.plc->enable || (a.plc->file.empty() && a.plc->code.empty())) return std::nullopt;
+    plc::PlcSource s;
+    s.id = a.axis.id.value_or(1);
+    s.axis_plc = true;
+    std::filesystem::path dir = std::filesystem::path(a.file).parent_path();
+    if (!a.plc->file.empty()) {
+        std::filesystem::path f = a.plc->file;
+        if (f.is_relative()) f = dir / f;
+        s.file = f.string();
+        s.text = read_text(s.file, a.file);
+    } else {
+        s.file = a.file + " (plc.code)";
+    }
+    for (const auto& line : a.plc->code) s.text += "\n" + line;
+    if (!a.plc->macros.empty()) s.macros = parse_macro_defs(a.plc->macros);
+    s.include_path.push_back(dir.empty() ? "." : dir.string());
+    return s;
+}
+
 IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisConfig>& axes, registry::Registry& signals,
                  pv::Database& db)
     : cycle_s_(1.0 / cfg.rate_hz), signals_(signals), db_(db) {
@@ -65,25 +85,8 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
     }
     for (const auto& e : cfg.plcs) sources_.push_back(plc_source(e));
     // Axis PLCs: the axis file's plc.file (next to the axis file) and plc.code lines.
-    for (const auto& a : axes) {
-        if (!a.plc || !a.plc->enable || (a.plc->file.empty() && a.plc->code.empty())) continue;
-        plc::PlcSource s;
-        s.id = a.axis.id.value_or(1);
-        s.axis_plc = true;
-        std::filesystem::path dir = std::filesystem::path(a.file).parent_path();
-        if (!a.plc->file.empty()) {
-            std::filesystem::path f = a.plc->file;
-            if (f.is_relative()) f = dir / f;
-            s.file = f.string();
-            s.text = read_text(s.file, a.file);
-        } else {
-            s.file = a.file + " (plc.code)";
-        }
-        for (const auto& line : a.plc->code) s.text += "\n" + line;
-        if (!a.plc->macros.empty()) s.macros = parse_macro_defs(a.plc->macros);
-        s.include_path.push_back(dir.empty() ? "." : dir.string());
-        sources_.push_back(std::move(s));
-    }
+    for (const auto& a : axes)
+        if (auto s = axis_plc_source(a)) sources_.push_back(std::move(*s));
     // Check-compile everything now, so `beamctl check` and `run` report every error before
     // anything starts.
     plc::PlcRuntime check(check_options());

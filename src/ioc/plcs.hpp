@@ -24,10 +24,16 @@
 
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 namespace beamctl::ioc {
+
+// The axis PLC of an axis file (`plc:` with enable, and file or code): plc.file read next to the
+// axis file, then the plc.code lines; nullopt when the axis has none. Throws Error when the file
+// cannot be read.
+std::optional<plc::PlcSource> axis_plc_source(const motion::AxisConfig& axis);
 
 class IocPlcs {
 public:
