@@ -341,7 +341,10 @@ bool YamlNode::keys(std::initializer_list<std::string_view> allowed,
         const auto kn = std::find_if(known.begin(), known.end(),
                                      [&](const KnownKey& i) { return i.key == key; });
         if (kn != known.end()) {
-            if (kn->error)
+            if (kn->error && rd_->unknown_keys_ignored_)
+                rd_->warn(at, SB() << "unknown key '" << key << "' in " << name() << ": "
+                                   << kn->hint << " (ignored)");
+            else if (kn->error)
                 rd_->error(at, SB() << "unknown key '" << key << "' in " << name() << ": "
                                     << kn->hint);
             else
@@ -359,7 +362,10 @@ bool YamlNode::keys(std::initializer_list<std::string_view> allowed,
             for (auto a : allowed) msg << (i++ ? ", " : "") << a;
             msg << ")";
         }
-        rd_->error(at, msg);
+        if (rd_->unknown_keys_ignored_)
+            rd_->warn(at, SB() << std::string(msg) << ": ignored, as ECMC does");
+        else
+            rd_->error(at, msg);
     }
     return true;
 }
@@ -379,12 +385,16 @@ YamlNode YamlNode::required(std::string_view key, std::string_view hint) const {
     // Nothing more to say about a section that is missing or not a mapping itself, nor when a
     // misspelt key is there: its "did you mean" says it.
     if (n.present_ || !present_ || !(node_.IsMap() || node_.IsNull())) return n;
+    std::string misspelt;
     if (node_.IsMap())
         for (auto it = node_.begin(); it != node_.end(); ++it)
             if (it->first.IsScalar() &&
                 !close_matches(it->first.Scalar(), {std::string(key)}, 1).empty())
-                return n;
-    rd_->error(key_at_, SB() << name() << ": missing required key '" << key << "'" << hint);
+                misspelt = it->first.Scalar();
+    // Where unknown keys are only warnings, the missing key is the error, naming the misspelt one.
+    if (!misspelt.empty() && !rd_->unknown_keys_ignored_) return n;
+    rd_->error(key_at_, SB() << name() << ": missing required key '" << key << "'" << hint
+                             << (misspelt.empty() ? std::string() : " ('" + misspelt + "' is not it)"));
     return n;
 }
 

@@ -176,6 +176,11 @@ public:
         const std::string& raw, const SourceLoc& at, const std::string& path)>;
     void set_expander(Expander e) { expander_ = std::move(e); }
 
+    // Keys outside a mapping's schema (unknown ones, and KnownKeys marked error) are warnings
+    // "..., ignored" instead of errors: for ECMC's files, whose loader drops them (ecmccfg's
+    // cerberus validator runs with purge_unknown), so that every file ECMC accepts loads.
+    void set_unknown_keys_ignored(bool on) { unknown_keys_ignored_ = on; }
+
     void error(const SourceLoc& at, const std::string& what);
     void warn(const SourceLoc& at, const std::string& what);
     bool ok() const { return errors_.empty(); }
@@ -197,6 +202,7 @@ private:
     YAML::Node doc_;
     bool parsed_ = false;
     Expander expander_;
+    bool unknown_keys_ignored_ = false;
     std::vector<std::pair<SourceLoc, std::string>> errors_;
     std::unordered_set<std::string> seen_; // the texts of errors_, for dropping repeats
     std::vector<std::string> warnings_;

@@ -104,8 +104,9 @@ public:
             const config::AxisEntry& a = cfg.axes[i];
             if (readable(a.file_where, SB() << "axes[" << i << "].file", a.file)) {
                 std::vector<Error> errors;
-                motion::load_axis_config(a.file, a.macros, errors);
+                motion::AxisConfig c = motion::load_axis_config(a.file, a.macros, errors);
                 for (const auto& e : errors) errors_.add(e);
+                warnings_.insert(warnings_.end(), c.warnings.begin(), c.warnings.end());
             }
             for (std::size_t k = 0; k < a.encoders.size(); ++k) {
                 const auto& enc = a.encoders[k];
@@ -113,8 +114,9 @@ public:
                               enc.file))
                     continue;
                 std::vector<Error> errors;
-                motion::load_encoder_config(enc.file, enc.macros, errors);
+                motion::EncoderConfig c = motion::load_encoder_config(enc.file, enc.macros, errors);
                 for (const auto& e : errors) errors_.add(e);
+                warnings_.insert(warnings_.end(), c.warnings.begin(), c.warnings.end());
             }
         }
     }
@@ -162,6 +164,9 @@ private:
     }
 
     ErrorList& errors_;
+
+public:
+    std::vector<std::string> warnings_; // of the axis and encoder files
 };
 
 } // namespace
@@ -179,6 +184,7 @@ CheckReport check_ioc(const std::string& path, const MacroMap& macros) {
         c.axes(cfg);
         c.plcs(cfg);
         c.databases(cfg);
+        report.warnings = std::move(c.warnings_);
     }
     if (errors.empty()) { // the errors between the files: the IOC as `run` builds it
         rt::MonotonicClock clock;
@@ -194,6 +200,7 @@ CheckReport check_ioc(const std::string& path, const MacroMap& macros) {
 
 int run_check(const std::string& path, const MacroMap& macros, std::FILE* out, std::FILE* err) {
     CheckReport r = check_ioc(path, macros);
+    for (const auto& w : r.warnings) std::fprintf(err, "warning: %s\n", w.c_str());
     for (const auto& e : r.errors) std::fprintf(err, "%s\n", e.c_str());
     if (!r.ok()) {
         std::fprintf(err, "%s: %zu error%s\n", path.c_str(), r.errors.size(),

@@ -13,6 +13,7 @@ namespace beamctl::ioc {
 
 struct CheckReport {
     std::vector<std::string> errors; // "file:line:col: what", the IOC file's first, then by file
+    std::vector<std::string> warnings; // of the ECMC axis and encoder files (unknown keys, ...)
     std::size_t pvs = 0, buses = 0;  // of the IOC built from the files (when there is no error)
     bool ok() const { return errors.empty(); }
 };
@@ -27,7 +28,8 @@ struct CheckReport {
 // files: signal names of axes, PLC bindings, kinematics.
 CheckReport check_ioc(const std::string& path, const MacroMap& macros = {});
 
-// check_ioc, printed: each error on `err`, or "<path>: OK (N PVs, M bus(es))" on `out`.
+// check_ioc, printed: each warning ("warning: ...") and error on `err`, then
+// "<path>: OK (N PVs, M bus(es))" on `out` when there is no error.
 // Returns the exit code of `beamctl check`: 0, or 1 with errors.
 int run_check(const std::string& path, const MacroMap& macros = {}, std::FILE* out = stdout,
               std::FILE* err = stderr);

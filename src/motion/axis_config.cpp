@@ -1119,6 +1119,7 @@ AxisConfig parse_axis_config(std::string_view text, const std::string& filename,
 AxisConfig parse_axis_config(std::string_view text, const std::string& filename,
                              const MacroMap& macros, std::vector<Error>& errors) {
     config::YamlReader yr(filename, std::string(text));
+    yr.set_unknown_keys_ignored(true); // ECMC's loader drops them
     Reader rd(yr, macros);
     AxisConfig cfg;
     cfg.file = filename;
@@ -1159,6 +1160,7 @@ EncoderConfig parse_encoder_config(std::string_view text, const std::string& fil
 EncoderConfig parse_encoder_config(std::string_view text, const std::string& filename,
                                    const MacroMap& macros, std::vector<Error>& errors) {
     config::YamlReader yr(filename, std::string(text));
+    yr.set_unknown_keys_ignored(true); // ECMC's loader drops them
     Reader rd(yr, macros);
     EncoderConfig enc;
     parse_encoder_file(rd, enc);
