@@ -41,17 +41,22 @@ ENV_REF = re.compile(r"\$[({]([A-Za-z0-9_]+)(?:=([^)}]*))?[)}]")
 CALL = re.compile(r"(loadPLCFile|loadYamlAxis|loadYamlEnc)\.cmd\s*,?\s*\(?\s*\"([^\"]*)\"")
 
 
-def resolve_env(value, root):
-    """Replaces the startup script's run-time values (see the module doc)."""
+def resolve_env(value, root, env=None, unknown="1"):
+    """Replaces the startup script's run-time values (see the module doc): its epicsEnvSet
+    values so far, else the reference's default, else `unknown`."""
+    env = env or {}
+
     def sub(m):
         name, default = m.group(1), m.group(2)
         if name == "ecmccfg_DIR":
             return root + "/"
         if name == "ecmc_master_slave_DIR":
             return root + "/plc_lib/master_slave/"
+        if name in env:
+            return env[name]
         if default is not None:
             return default
-        return "1"
+        return unknown
     for _ in range(3):
         value = ENV_REF.sub(sub, value)
     return value
@@ -120,7 +125,7 @@ def collect_calls(root):
                 continue
             e = ENV_SET.search(line)
             if e:
-                env[e.group(1)] = resolve_env(e.group(2), root)
+                env[e.group(1)] = resolve_env(e.group(2), root, env)
             m = CALL.search(line)
             if not m:
                 continue
@@ -133,7 +138,7 @@ def collect_calls(root):
             macros.update({k: resolve_env(v, root) for k, v in args.items()
                       if k not in ("FILE", "PLC_ID", "SAMPLE_RATE_MS", "INC", "DESC", "PLC_MACROS")})
             if m.group(1) == "loadPLCFile":
-                pm = resolve_env(args.get("PLC_MACROS", ""), root)
+                pm = resolve_env(args.get("PLC_MACROS", ""), root, env, unknown="")
                 inc = [os.path.normpath(os.path.join(d, p))
                        for p in resolve_env(args.get("INC", "."), root).split(":") if p]
                 plc_calls[path].append((pm, inc, []))

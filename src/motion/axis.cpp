@@ -11,6 +11,7 @@ const char* error_id::text(uint32_t id) noexcept {
     case kBusNotOk: return "EtherCAT not OK: axis disabled";
     case kNotEnabled: return "Axis not enabled";
     case kBusy: return "Axis busy";
+    case kAutoEnableTimeout: return "Auto enable timeout: axis not enabled in time";
     case kDriveAlarm0: return "Drive alarm 0";
     case kDriveAlarm0 + 1: return "Drive alarm 1";
     case kDriveAlarm0 + 2: return "Drive alarm 2";
@@ -270,6 +271,14 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
         if ((seq == 11 || seq == 12) && (!io_.latch_arm.bound() || !io_.latch_valid.bound() || !io_.latch_position.bound() ||
                                          p_.homing_latch_count < 1))
             return refuse(error_id::kLatchCount);
+    }
+    // ECMC autoEnable: a motion command enables the axis (homing 15 was handled above).
+    if (!enable_req_ && p_.auto_enable_timeout_s > 0) {
+        AxisCommand on{CommandType::Power};
+        on.on = true;
+        (void)command(on);
+        auto_enabling_ = !p_.virtual_axis;
+        auto_enable_time_ = 0;
     }
     bool enabled = p_.virtual_axis ? enable_req_ : drive_.enabled();
     if (!enabled && enable_req_ && !p_.virtual_axis) { // still enabling: run it once enabled
@@ -777,11 +786,17 @@ void Axis::run(double dt) noexcept {
     }
     was_enabled_ = enabled;
     st_.enabled = enabled;
+    if (has_pending_ && auto_enabling_ && !enabled) {
+        auto_enable_time_ += dt;
+        if (auto_enable_time_ > p_.auto_enable_timeout_s) fault(error_id::kAutoEnableTimeout, true);
+    }
     if (has_pending_) {
         if (enabled) {
-            has_pending_ = false;
+            has_pending_ = auto_enabling_ = false;
             (void)command(pending_);
         } else if (!enable_req_ || st_.error_id) { // the enable failed or was withdrawn
+            auto_enabling_ = false;
+            st_.move_failed = true; // the move never ran
             has_pending_ = false;
             finish(pending_.tag);
             st_.refused_tag = pending_.tag;
@@ -850,6 +865,18 @@ void Axis::run(double dt) noexcept {
     st_.moving = st_.busy && std::fabs(st_.act_vel) > 0;
     monitor(dt);
     st_.busy = seq_ != Seq::Idle || has_pending_;
+    // ECMC autoEnable.disableTimeout: idle (not busy, enabled, at target if monitored) this long
+    if (p_.auto_disable_timeout_s > 0) {
+        if (st_.busy || !enabled || (p_.target_enable && !st_.at_target)) {
+            idle_time_ = 0;
+        } else if (idle_time_ > p_.auto_disable_timeout_s && enable_req_) {
+            AxisCommand off{CommandType::Power};
+            (void)command(off);
+            idle_time_ = 0;
+        } else {
+            idle_time_ += dt;
+        }
+    }
     last_home_ = st_.home_sensor;
     last_lim_fwd_ = st_.limit_fwd;
     last_lim_bwd_ = st_.limit_bwd;

@@ -33,6 +33,7 @@ constexpr uint32_t kNone = 0;
 constexpr uint32_t kBusNotOk = 0x14315;        // ERROR_AXIS_HARDWARE_STATUS_NOT_OK: disabled
 constexpr uint32_t kNotEnabled = 0x14316;      // ERROR_AXIS_NOT_ENABLED: motion command refused
 constexpr uint32_t kBusy = 0x1431C;            // ERROR_AXIS_BUSY: homing while busy
+constexpr uint32_t kAutoEnableTimeout = 0x1432F; // ERROR_AXIS_AUTO_ENABLE_TIMEOUT: not enabled in time
 constexpr uint32_t kDriveAlarm0 = 0x1460E;     // ERROR_DRV_HW_ALARM_0..2: drive error input n
 constexpr uint32_t kDriveTimeout = 0x14613;    // ERROR_DRV_STATE_MACHINE_TIME_OUT (stepper)
 constexpr uint32_t kDs402Timeout = 0x14652;    // ERROR_DRV_DS402_STATE_MACHINE_TIME_OUT
@@ -102,6 +103,11 @@ struct AxisParams {
     // many cycles before the drive is disabled (ECMC openDelay / closeAhead)
     int brake_open_delay_cycles = 0, brake_close_ahead_cycles = 0;
     bool enable_at_startup = false; // re-enable after a bus outage (ECMC autoEnable.atStartup)
+    // ECMC autoEnable (axis.autoEnable): a motion command to a disabled axis enables it and runs
+    // once it is enabled, error kAutoEnableTimeout (and disabled) if it is not within
+    // `auto_enable_timeout_s`; an enabled axis idle (not busy, at target when target monitoring
+    // is on) for `auto_disable_timeout_s` is disabled. <= 0: off (ECMC: active when > 0).
+    double auto_enable_timeout_s = -1, auto_disable_timeout_s = -1;
     // PLC connection (ECMC): initial sources (0 internal/encoder, 1 PLC: traj.extsetpos /
     // enc.extactpos), commands from PLC variables, switches written by PLC code (plcOverride)
     int trajectory_source = 0, encoder_source = 0;
@@ -270,6 +276,8 @@ private:
     int brake_cycles_ = 0, close_ahead_left_ = 0;
     AxisCommand pending_{};
     bool has_pending_ = false;
+    bool auto_enabling_ = false; // pending_ waits for an auto-enable (times out)
+    double auto_enable_time_ = 0, idle_time_ = 0; // [s] enabling, idle while enabled
     // homing
     int home_seq_ = 0, home_step_ = 0;
     bool last_home_ = false, last_lim_fwd_ = false, last_lim_bwd_ = false;

@@ -130,6 +130,10 @@ AxisParams make_axis_params(const AxisConfig& c) {
     if (m.velocity.drive_cycles) p.velocity_time_drive_cycles = int(*m.velocity.drive_cycles);
     p.stall_enable = !m.stall || m.stall->enable;
     p.enable_at_startup = c.axis.auto_enable && c.axis.auto_enable->at_startup;
+    if (c.axis.auto_enable) {
+        p.auto_enable_timeout_s = c.axis.auto_enable->enable_timeout_s;
+        p.auto_disable_timeout_s = c.axis.auto_enable->disable_timeout_s;
+    }
     return p;
 }
 

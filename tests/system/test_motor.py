@@ -128,3 +128,60 @@ def test_soft_limit_interlock_from_ecmc_pvs_sets_problem(motor):
     assert abs(m.get("RBV")) < 0.01
     assert m.move(1.0, wait=True, timeout=20) == 0  # a valid move clears it
     assert wait_for(lambda: not int(m.get("MSTA")) & (1 << 9), timeout=5)
+
+
+def auto_enable_ioc(tmp_path, prefix, enabled_bit=1):
+    """The stepper with ECMC's axis.autoEnable (enable within 2 s, disable after 1 s idle)."""
+    axis = (DATA / "stepper.yaml").read_text()
+    axis = axis.replace("axis:\n  id: 1\n", "axis:\n  id: 1\n  autoEnable:\n    enableTimeout: 2\n"
+                        "    disableTimeout: 1\n", 1)
+    axis = axis.replace("  enabled: 1\n", f"  enabled: {enabled_bit}\n", 1)
+    assert "autoEnable" in axis and f"enabled: {enabled_bit}" in axis
+    (tmp_path / "auto.yaml").write_text(axis)
+    files = {"plant.yaml": DATA / "plant.yaml"}
+    return running_ioc(tmp_path, prefix, IOC.replace("stepper.yaml", "auto.yaml"), files)
+
+
+def test_auto_enable_axis_moves_from_cnen_0_and_disables_after_the_idle_time(tmp_path, prefix):
+    """Issue 13: Motor.move(wait=True) on an autoEnable axis with CNEN=0 enables it, moves, ends
+    in success, and the axis disables itself disableTimeout after it is idle (CNEN follows)."""
+    with auto_enable_ioc(tmp_path, prefix):
+        m = epics.Motor(prefix + "X", timeout=5)
+        assert m.get("CNEN") == 0
+        assert ca.get(connect(prefix + "X-EnaAct")) == 0
+        cnen = []
+        mon = epics.PV(prefix + "X.CNEN", auto_monitor=True, callback=lambda value=None, **kw: cnen.append(value))
+        assert mon.wait_for_connection(5)
+        assert m.move(3, wait=True, timeout=30) == 0
+        assert abs(m.get("RBV") - 3) < 0.01
+        assert m.get("DMOV") == 1
+        assert not int(m.get("MSTA")) & (1 << 9)  # no PROBLEM
+        assert ca.get(connect(prefix + "X.SEVR")) == 0
+        # disabled by itself once idle for 1 s; the record's CNEN followed it up and down
+        assert wait_for(lambda: ca.get(connect(prefix + "X-EnaAct")) == 0, timeout=10)
+        assert wait_for(lambda: m.get("CNEN") == 0, timeout=5)
+        assert wait_for(lambda: cnen[-2:] == [1, 0], timeout=5), cnen
+        assert ca.get(connect(prefix + "X-ErrId")) == 0
+        # and it moves again from there
+        assert m.move(1, wait=True, timeout=30) == 0
+        assert abs(m.get("RBV") - 1) < 0.01
+        mon.disconnect()
+
+
+def test_auto_enable_timeout_fails_the_move(tmp_path, prefix):
+    """A drive that never reports enabled: after enableTimeout the axis latches 0x1432F, the move
+    fails (PROBLEM, alarm, failed put-callback) and nothing moved."""
+    import ca_raw
+    with auto_enable_ioc(tmp_path, prefix, enabled_bit=7) as ioc:
+        m = epics.Motor(prefix + "X", timeout=5)
+        m.move(3, wait=True, timeout=30)  # pyepics looks only at LVIO/HLS/LLS: check the record
+        assert wait_for(lambda: ca.get(connect(prefix + "X-ErrId")) == 0x1432F, timeout=10)
+        assert int(m.get("MSTA")) & (1 << 9)  # PROBLEM
+        assert ca.get(connect(prefix + "X.SEVR")) != 0
+        assert abs(m.get("RBV")) < 0.01
+        assert m.get("CNEN") == 0
+        # the put-callback of a move fails (ECA_PUTFAIL), as ophyd and caput -c see it
+        assert ca.put(connect(prefix + "X-RstCmd"), 1, wait=True) == 1
+        with ca_raw.Circuit("127.0.0.1", ioc.port) as c:
+            ch = c.create(prefix + "X")
+            assert c.write_notify(ch, [2.0], dtype=ca_raw.DOUBLE, timeout=30).p1 == ca_raw.ECA_PUTFAIL

@@ -822,3 +822,71 @@ TEST(AxisVariables, VirtualAxisActualFromThePlcAndPlcLimitSwitches) {
     EXPECT_TRUE(ax.status().limit_fwd);
     EXPECT_EQ(ax.command(AxisCommand{CommandType::MoveAbsolute, 9}), error_id::kHardLimitFwd);
 }
+
+// ECMC axis.autoEnable (ecmcAxisBase autoEnableSM/autoDisableSM): a motion command to a disabled
+// axis enables it, runs once the drive is enabled and the axis is busy meanwhile; an idle enabled
+// axis is disabled after disableTimeout.
+TEST(Axis, AutoEnableRunsTheMoveAndAutoDisablesAfterTheIdleTime) {
+    AxisParams p = stepper_params();
+    p.auto_enable_timeout_s = 1.0;
+    p.auto_disable_timeout_s = 2.0;
+    AxisBus a(p);
+    ASSERT_FALSE(a.ax.status().enable_cmd);
+    ASSERT_EQ(a.cmd(CommandType::MoveAbsolute, 3, 0, 7), 0u); // taken: no 0x14316
+    EXPECT_TRUE(a.ax.status().busy);
+    EXPECT_TRUE(a.ax.status().enable_cmd);
+    int to_idle = a.until([&] { return !a.ax.status().busy; }, 10000);
+    EXPECT_EQ(a.ax.status().done_tag, 7u);
+    EXPECT_EQ(a.ax.status().error_id, 0u);
+    EXPECT_FALSE(a.ax.status().move_failed);
+    EXPECT_NEAR(a.ax.status().act_pos, 3.0, 0.01);
+    EXPECT_GT(to_idle, 1000); // the trapezoid: 3 mm at 5 mm/s, 10 mm/s^2 (1.1 s) after enabling
+    ASSERT_TRUE(a.ax.status().enabled);
+    // disabled once idle and at target for 2 s (at target comes 10 cycles after the setpoint)
+    int to_disabled = a.until([&] { return !a.ax.status().enabled; }, 10000);
+    EXPECT_GE(to_disabled, 2000);
+    EXPECT_LE(to_disabled, 2100);
+    EXPECT_FALSE(a.ax.status().enable_cmd);
+    EXPECT_EQ(a.ax.status().error_id, 0u);
+    EXPECT_NEAR(a.ax.status().act_pos, 3.0, 0.01); // stays where it went
+    // a second move enables it again
+    ASSERT_EQ(a.cmd(CommandType::MoveRelative, -1, 0, 8), 0u);
+    a.until([&] { return !a.ax.status().busy; }, 10000);
+    EXPECT_EQ(a.ax.status().done_tag, 8u);
+    EXPECT_NEAR(a.ax.status().act_pos, 2.0, 0.01);
+    EXPECT_TRUE(a.ax.status().enabled);
+}
+
+TEST(Axis, AutoEnableTimeoutIsError1432FAndTheMoveFails) {
+    AxisParams p = stepper_params();
+    p.auto_enable_timeout_s = 0.5;
+    p.drive.enabled_bit = 7; // a status bit the drive never sets: it never reports enabled
+    AxisBus a(p);
+    ASSERT_EQ(a.cmd(CommandType::MoveAbsolute, 3, 0, 9), 0u);
+    int n = a.until([&] { return !a.ax.status().busy; }, 5000);
+    EXPECT_GE(n, 499);
+    EXPECT_LE(n, 503);
+    EXPECT_EQ(a.ax.status().error_id, error_id::kAutoEnableTimeout);
+    EXPECT_FALSE(a.ax.status().enable_cmd); // ECMC: setEnable(false)
+    EXPECT_EQ(a.ax.status().done_tag, 9u);
+    EXPECT_EQ(a.ax.status().refused_tag, 9u);
+    EXPECT_TRUE(a.ax.status().move_failed);
+    EXPECT_NEAR(a.stage(), 0.0, 1e-9);
+}
+
+TEST(Axis, WithoutAutoEnableAMoveOfADisabledAxisIsRefused) {
+    AxisBus a; // autoEnable absent: ECMC refuses with 0x14316
+    EXPECT_EQ(a.cmd(CommandType::MoveAbsolute, 3, 0, 4), error_id::kNotEnabled);
+    EXPECT_FALSE(a.ax.status().enable_cmd);
+    EXPECT_TRUE(a.ax.status().move_failed);
+    // homing 15 (set position) needs no enable, and does not auto-enable either
+    AxisParams p = stepper_params();
+    p.auto_enable_timeout_s = 1.0;
+    p.homing_sequence = 15;
+    p.homing_position = 5;
+    AxisBus b(p);
+    EXPECT_EQ(b.cmd(CommandType::Home), 0u);
+    EXPECT_FALSE(b.ax.status().enable_cmd);
+    b.cycles(2);
+    EXPECT_NEAR(b.ax.status().act_pos, 5.0, 1e-9);
+}
