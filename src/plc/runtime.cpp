@@ -486,7 +486,7 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
         {"mc_reset", Builtins::reset, 1, 1, true},         {"mc_get_busy", Builtins::get_busy, 1, 1, true},
         {"mc_get_homed", Builtins::get_homed, 1, 1, true}, {"mc_get_axis_err", Builtins::get_axis_err, 1, 1, true},
         {"mc_get_act_pos", Builtins::get_act_pos, 1, 2, true}, {"mc_set_act_pos", Builtins::set_act_pos, 2, 2, true},
-        {"mc_get_enc_ready", Builtins::get_enc_ready, 1, 1, true}, {"mc_get_err", Builtins::get_err, 0, 0, false},
+        {"mc_get_enc_ready", Builtins::get_enc_ready, 1, 2, true}, {"mc_get_err", Builtins::get_err, 0, 0, false},
         {"ec_set_bit", Builtins::set_bit, 2, 2, false},    {"ec_clr_bit", Builtins::clr_bit, 2, 2, false},
         {"ec_flp_bit", Builtins::flp_bit, 2, 2, false},    {"ec_chk_bit", Builtins::chk_bit, 2, 2, false},
         {"ec_wrt_bit", Builtins::wrt_bit, 3, 3, false},    {"ec_wrt_bits", Builtins::wrt_bits, 4, 4, false},
