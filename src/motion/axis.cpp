@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace beamctl::motion {
 
@@ -11,6 +12,7 @@ const char* error_id::text(uint32_t id) noexcept {
     case kBusNotOk: return "EtherCAT not OK: axis disabled";
     case kNotEnabled: return "Axis not enabled";
     case kBusy: return "Axis busy";
+    case kBlockCom: return "Commands blocked (blockcom)";
     case kAutoEnableTimeout: return "Auto enable timeout: axis not enabled in time";
     case kDriveAlarm0: return "Drive alarm 0";
     case kDriveAlarm0 + 1: return "Drive alarm 1";
@@ -87,6 +89,10 @@ Axis::Axis(const AxisParams& p, const AxisIo& io)
     vars_.ctrl.kff = p_.controller.kff;
     vars_.traj.targetvel = p_.trajectory.velocity;
     vars_.traj.targetacc = p_.trajectory.acceleration;
+    vars_.traj.targetdec = p_.trajectory.deceleration;
+    vars_.id = p_.id;
+    vars_.blockcom = p_.block_com;
+    vars_.enc.homepos = p_.homing_position;
     seen_ = vars_;
     st_.soft_fwd_enabled = p_.soft_fwd_enable;
     st_.soft_bwd_enabled = p_.soft_bwd_enable;
@@ -209,6 +215,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     switch (c.type) {
     case CommandType::None: return refuse(0);
     case CommandType::Power:
+        if (c.on && !enable_req_ && vars_.blockcom != 0) return refuse(error_id::kBlockCom);
         if (c.on && !enable_req_) { // enabling also resets errors (ECMC enableAutoResetError)
             st_.error_id = 0;
             st_.warning_id = 0;
@@ -256,6 +263,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     default: break;
     }
     // Motion commands. Homing 15/25 (set position) works without enable.
+    if (vars_.blockcom != 0) return refuse(error_id::kBlockCom); // ECMC: latched as the axis error
     if (st_.error_id) return refuse(st_.error_id);
     if (c.type == CommandType::Home) {
         int seq = c.homing_sequence < 0 || c.homing_sequence == 14 ? p_.homing_sequence : c.homing_sequence;
@@ -263,6 +271,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
         if (seq == 0) return refuse(error_id::kHomeNotAllowed);
         if (seq_ != Seq::Idle) return refuse(error_id::kBusy);
         if (seq == 15) {
+            if (c.set_home_position && std::isfinite(c.position)) p_.homing_position = vars_.enc.homepos = c.position;
             AxisCommand set{CommandType::SetPosition, p_.homing_position};
             (void)command(set);
             return refuse(0);
@@ -306,6 +315,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     st_.last_interlock = Interlock::None;
     st_.move_failed = false;
     if (c.type == CommandType::Home) {
+        if (c.set_home_position && std::isfinite(c.position)) p_.homing_position = vars_.enc.homepos = c.position;
         home_seq_ = c.homing_sequence < 0 || c.homing_sequence == 14 ? p_.homing_sequence : c.homing_sequence;
         if (home_seq_ == 25) home_seq_ = 15;
         home_step_ = 0;
@@ -560,6 +570,19 @@ void Axis::homing_step(double) noexcept {
     }
 }
 
+void Axis::set_trajectory_limits(double v, double a, double d, double j) noexcept {
+    auto take = [](double x, double& into) {
+        if (std::isfinite(x) && x > 0) into = x;
+    };
+    take(v, p_.trajectory.velocity);
+    take(a, p_.trajectory.acceleration);
+    take(d, p_.trajectory.deceleration);
+    if (p_.trajectory.jerk > 0) take(j, p_.trajectory.jerk); // a trapezoid axis stays one
+    vars_.traj.targetvel = p_.trajectory.velocity;
+    vars_.traj.targetacc = p_.trajectory.acceleration;
+    vars_.traj.targetdec = p_.trajectory.deceleration;
+}
+
 void Axis::take_variables() noexcept {
     AxisVariables& v = vars_;
     AxisVariables& was = seen_;
@@ -591,6 +614,13 @@ void Axis::take_variables() noexcept {
         }
         if (c.type != CommandType::None) (void)command(c);
     }
+    // ECMC: a write to enc.actpos stores the external actual position, one to traj.setpos the
+    // external setpoint (used while the source is the PLC); writes only when allowplccmd.
+    auto written = [](double a, double b) { return std::memcmp(&a, &b, sizeof a) != 0; };
+    if (written(v.enc.actpos, was.enc.actpos) && v.allowplccmd != 0) v.enc.extactpos = v.enc.actpos;
+    if (written(v.traj.setpos, was.traj.setpos) && v.allowplccmd != 0) v.traj.extsetpos = v.traj.setpos;
+    p_.homing_position = v.enc.homepos;
+    if (v.traj.targetdec > 0) p_.trajectory.deceleration = v.traj.targetdec;
     plc_ilock_fwd_ = v.mon.ilock == 0 || v.mon.ilockfwd == 0;
     plc_ilock_bwd_ = v.mon.ilock == 0 || v.mon.ilockbwd == 0;
     p_.soft_fwd = v.mon.highsoftlim;
@@ -626,7 +656,18 @@ void Axis::publish_variables() noexcept {
     if (!p_.limit_fwd_plc) v.mon.highlim = !st_.limit_fwd;
     if (!p_.limit_bwd_plc) v.mon.lowlim = !st_.limit_bwd;
     if (!p_.home_plc) v.mon.homesensor = st_.home_sensor;
+    v.counter = double(st_.cycle);
+    v.enc.rawpos = double(enc_.counts());
+    v.traj.setvel = st_.set_vel;
+    v.traj.setvelffraw = st_.set_vel * ctrl_.params().kff;
+    v.traj.dir = !st_.enabled || st_.set_vel == 0 ? 0 : st_.set_vel > 0 ? 1 : -1;
+    v.drv.setvelraw = st_.drive_output;
+    v.cntrl.poserror = st_.pos_err;
+    v.cntrl.output = st_.drive_output - v.traj.setvelffraw;
+    v.seq.state = st_.sequence_state;
     seen_.drv.enable = v.drv.enable; // the axis's own change is not a PLC write
+    seen_.enc.actpos = v.enc.actpos; // nor are these
+    seen_.traj.setpos = v.traj.setpos;
 }
 
 void Axis::monitor(double dt) noexcept {

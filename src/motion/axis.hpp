@@ -53,6 +53,7 @@ constexpr uint32_t kHomeNotAllowed = 0x14D1A;  // ERROR_SEQ_HOME_NOT_ALLOWED (se
 // refusals that do not latch an axis error (ECMC returns them to the caller only)
 constexpr uint32_t kTrajSourceNotInternal = 0x20052; // ERROR_MAIN_TRAJ_SOURCE_NOT_INTERNAL
 constexpr uint32_t kCommandsBlocked = 0x20053;       // ERROR_MAIN_AXIS_COM_BLOCKED (allowplccmd 0)
+constexpr uint32_t kBlockCom = 0x20039; // ERROR_MAIN_AXIS_BLOCK_COM: ax<n>.blockcom / features.blockCom
 // warnings
 constexpr uint32_t kEnableLost = 0x114601;     // WARNING_DRV_ENABLED_LOST
 constexpr uint32_t kHardLimitFwd = 0x114C02;   // WARNING_MON_HARD_LIMIT_FWD_INTERLOCK
@@ -112,6 +113,7 @@ struct AxisParams {
     // enc.extactpos), commands from PLC variables, switches written by PLC code (plcOverride)
     int trajectory_source = 0, encoder_source = 0;
     bool external_commands = false;  // plc.externalCommands: traj.* commands from PLC code
+    bool block_com = false; // features.blockCom at start (ax<n>.blockcom): motion and enable refused
     bool allow_source_change = true; // features.allowSrcChangeWhenEnabled (else only when disabled)
     bool limit_fwd_plc = false, limit_bwd_plc = false, home_plc = false;
     // homing defaults (ECMC encoder.homing)
@@ -156,6 +158,7 @@ struct AxisCommand {
     double acceleration = 0, deceleration = 0; // [units/s^2]; 0 = configured
     int homing_sequence = -1; // Home: -1 or 14 = the configured sequence (ECMC: 14 = encoder's)
     bool on = false;         // Power
+    bool set_home_position = false; // Home: `position` is the new homing position (mc_home_pos)
     uint64_t tag = 0;        // echoed as AxisStatus::done_tag when this command has finished
 };
 
@@ -222,6 +225,9 @@ public:
     // kinematics group stop together, at once, when one of them reaches a limit (the geometry
     // holds: a slit's centre does not shift). Released when the group is at rest.
     void hold_external(bool on) noexcept { ext_hold_ = on; }
+    // RT: the trajectory's velocity, acceleration, deceleration, jerk for the next moves (ECMC
+    // mc_set_traj_*); a value <= 0 or not finite leaves that one as it is.
+    void set_trajectory_limits(double v, double a, double d, double j) noexcept;
 
     const AxisStatus& status() const noexcept { return st_; }
     // ECMC's ax<n>.* variables: PLC code reads and writes them between the axis's cycles.

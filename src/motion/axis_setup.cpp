@@ -33,6 +33,7 @@ AxisParams make_axis_params(const AxisConfig& c) {
     p.trajectory_source = c.trajectory.source == TrajectorySource::PLC ? 1 : 0;
     p.external_commands = c.plc && c.plc->external_commands;
     p.allow_source_change = c.axis.features.allow_src_change_when_enabled;
+    p.block_com = c.axis.features.block_com;
     p.limit_fwd_plc = c.input.limit_forward.plc_override;
     p.limit_bwd_plc = c.input.limit_backward.plc_override;
     p.home_plc = c.input.home && c.input.home->plc_override;

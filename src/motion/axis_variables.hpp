@@ -12,24 +12,41 @@
 namespace beamctl::motion {
 
 struct AxisVariables {
+    double id = 0;          // r: the axis id
     double reset = 0;       // rw: rising edge resets errors
+    double counter = 0;     // r: the axis's cycle counter
     double error = 0;       // r: error id
+    double blockcom = 0;    // rw: commands blocked (ECMC features.blockCom; error 0x20039)
     double allowplccmd = 1; // rw: PLC commands allowed
     struct {
+        // actpos: r, and w as ECMC: a write stores the external actual position (extactpos),
+        // the axis's actual position while enc.source is 1
         double actpos = 0, extactpos = 0, actvel = 0;
-        double source = 0; // rw: 0 encoder, 1 PLC (extactpos)
+        double rawpos = 0;  // r: raw counter of the primary encoder
+        double source = 0;  // rw: 0 encoder, 1 PLC (extactpos)
         double homed = 0;
+        double homepos = 0; // rw: the homing position [EGU]
     } enc;
     struct {
-        double setpos = 0, targetpos = 0, extsetpos = 0, targetvel = 0, targetacc = 0;
+        // setpos: r, and w as ECMC: a write sets the external setpoint (extsetpos)
+        double setpos = 0, targetpos = 0, extsetpos = 0, targetvel = 0, targetacc = 0, targetdec = 0;
+        double setvel = 0, setvelffraw = 0; // r: setpoint velocity; feed-forward part [EGU/s]
         double command = 0, cmddata = 0; // rw: 1 VEL, 2 REL, 3 ABS, 10 HOME; homing sequence
         double source = 0;               // rw: 0 internal trajectory, 1 PLC (extsetpos)
         double execute = 0;              // rw: rising edge runs `command`, falling edge halts
         double busy = 0;
+        double dir = 0; // r: -1 backward, 0 standing (or disabled), 1 forward
     } traj;
     struct {
         double enable = 0, enabled = 0; // rw / r
+        double setvelraw = 0;           // r: drive velocity setpoint [EGU/s]
     } drv;
+    struct {
+        double poserror = 0, output = 0; // r: following error [EGU], controller output [EGU/s]
+    } cntrl;
+    struct {
+        double state = 0; // r: homing sequence state
+    } seq;
     struct {
         double ilock = 1, ilockfwd = 1, ilockbwd = 1; // rw: 1 = motion allowed (PLC interlocks)
         double attarget = 0;

@@ -6,6 +6,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 #include <limits>
 #include <set>
 
@@ -309,7 +310,9 @@ struct Builtins {
         motion::Axis& axis = *rt.opt_.axes[std::size_t(i)];
         PlcRuntime::McMemory& m = rt.mc_[std::size_t(i)];
         bool exe = a[1] != 0;
-        bool* last = which == 0 ? &m.abs : which == 1 ? &m.rel : which == 2 ? &m.vel : which == 3 ? &m.home : &m.halt;
+        // ECMC: mc_move_ext_pos shares mc_move_abs's edge memory, mc_home_pos mc_home's
+        bool* last = which == 0 || which == 6 ? &m.abs : which == 1 ? &m.rel : which == 2 ? &m.vel
+                   : which == 3 || which == 5 ? &m.home : &m.halt;
         if (which != 4 && axis.variables().allowplccmd == 0) return result(rt, motion::error_id::kCommandsBlocked);
         if (axis.variables().traj.source != 0) return result(rt, motion::error_id::kTrajSourceNotInternal);
         bool rising = exe && !*last, falling = !exe && *last;
@@ -336,8 +339,20 @@ struct Builtins {
             c.deceleration = a[4];
             break;
         case 3:
+        case 5: // mc_home_pos(ax, exe, seq, velTowardsCam, velOffCam, homePos)
             c.type = motion::CommandType::Home;
             c.homing_sequence = int(a[2]);
+            if (which == 5) {
+                c.position = a[5];
+                c.set_home_position = true;
+            }
+            break;
+        case 6: // mc_move_ext_pos(ax, exe, vel, acc, dec): to the PLC's setpoint (traj.extsetpos)
+            c.type = motion::CommandType::MoveAbsolute;
+            c.position = axis.variables().traj.extsetpos;
+            c.velocity = a[2];
+            c.acceleration = a[3];
+            c.deceleration = a[4];
             break;
         default:
             c.type = motion::CommandType::Halt;
@@ -351,6 +366,32 @@ struct Builtins {
     static double move_vel(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 2); }
     static double home(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 3); }
     static double halt(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 4); }
+    static double home_pos(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 5); }
+    static double move_ext_pos(void* ctx, const double* a, int) noexcept { return fb(*static_cast<PlcRuntime*>(ctx), a, 6); }
+
+    // mc_set_traj_vel/acc/dec/jerk(ax, value): the limits of the next moves (ECMC: no COM check)
+    template <int K> static double set_traj(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        double v[4] = {0, 0, 0, 0};
+        v[K] = a[1];
+        rt.opt_.axes[std::size_t(i)]->set_trajectory_limits(v[0], v[1], v[2], v[3]);
+        return 0;
+    }
+    static double get_prim_enc(void* ctx, const double* a, int) noexcept {
+        return query(ctx, a, [](motion::Axis& x) { return double(x.params().primary_encoder + 1); });
+    }
+    static double get_enc_homed(void* ctx, const double* a, int) noexcept { // (ax, enc from 1)
+        int enc = int(a[1]);
+        return query(ctx, a, [enc](motion::Axis& x) {
+            // the primary encoder's homed state; the others are not referenced (none homes them yet)
+            return enc == x.params().primary_encoder + 1 ? (x.status().homed ? 1.0 : 0.0) : 0.0;
+        });
+    }
+    static double get_hw_ready(void* ctx, const double* a, int) noexcept {
+        return query(ctx, a, [](motion::Axis& x) { return x.status().position_valid && x.status().error_id == 0 ? 1.0 : 0.0; });
+    }
 
     static double power(void* ctx, const double* a, int) noexcept {
         auto& rt = *static_cast<PlcRuntime*>(ctx);
@@ -461,6 +502,31 @@ struct Builtins {
     static double get_time_l32(void* c, const double*, int) noexcept { return double(uint32_t(static_cast<PlcRuntime*>(c)->cycle_ns_)); }
     static double get_time_u32(void* c, const double*, int) noexcept { return double(uint32_t(static_cast<PlcRuntime*>(c)->cycle_ns_ >> 32)); }
     static double ec_get_err(void* c, const double*, int) noexcept { return static_cast<PlcRuntime*>(c)->ec_error_; }
+    // ec_print_hex/bin(value, start, stop): bits start..stop printed (no newline), ctx the Plc
+    template <bool Hex> static double print_bits(void* c, const double* a, int) noexcept {
+        auto& plc = *static_cast<Plc*>(c);
+        if (!bit_ok(plc.rt, a[1]) || !bit_ok(plc.rt, a[2])) return 0;
+        int s0 = int(a[1]), s1 = int(a[2]);
+        uint64_t v = u(a[0]) >> s0 & mask(s0, s1);
+        char text[72];
+        int n = 0;
+        if (Hex) {
+            n = std::snprintf(text, sizeof text, "%llx", static_cast<unsigned long long>(v));
+        } else {
+            for (int b = s1 - s0; b >= 0 && n < 64; --b) text[n++] = char('0' + (v >> b & 1));
+        }
+        plc.print(std::string_view(text, std::size_t(std::max(n, 0))));
+        return 0;
+    }
+    // ec_get_time_local_nsec/sec/min/hour(ns): fields of a time in ns since 1970 (local time)
+    template <int Field> static double local_time(void*, const double* a, int) noexcept {
+        if (!std::isfinite(a[0]) || a[0] < 0) return 0;
+        if (Field == 0) return std::fmod(a[0], 1e9);
+        std::time_t t = std::time_t(a[0] / 1e9);
+        std::tm tm{};
+        localtime_r(&t, &tm);
+        return Field == 1 ? tm.tm_sec : Field == 2 ? tm.tm_min : tm.tm_hour;
+    }
     static double ec_err_rst(void* c, const double*, int) noexcept {
         static_cast<PlcRuntime*>(c)->ec_error_ = 0;
         return 0;
@@ -493,8 +559,19 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
         {"ec_chk_bits", Builtins::chk_bits, 3, 3, false},  {"ec_get_time", Builtins::get_time, 0, 0, false},
         {"ec_get_time_l32", Builtins::get_time_l32, 0, 0, false}, {"ec_get_time_u32", Builtins::get_time_u32, 0, 0, false},
         {"ec_get_err", Builtins::ec_get_err, 0, 0, false}, {"ec_err_rst", Builtins::ec_err_rst, 0, 0, false},
+        {"mc_home_pos", Builtins::home_pos, 6, 6, true},   {"mc_move_ext_pos", Builtins::move_ext_pos, 5, 5, true},
+        {"mc_set_traj_vel", Builtins::set_traj<0>, 2, 2, true}, {"mc_set_traj_acc", Builtins::set_traj<1>, 2, 2, true},
+        {"mc_set_traj_dec", Builtins::set_traj<2>, 2, 2, true}, {"mc_set_traj_jerk", Builtins::set_traj<3>, 2, 2, true},
+        {"mc_get_prim_enc", Builtins::get_prim_enc, 1, 1, true}, {"mc_get_enc_homed", Builtins::get_enc_homed, 2, 2, true},
+        {"mc_get_hw_ready", Builtins::get_hw_ready, 1, 1, true},
+        {"ec_get_time_local_nsec", Builtins::local_time<0>, 1, 1, false},
+        {"ec_get_time_local_sec", Builtins::local_time<1>, 1, 1, false},
+        {"ec_get_time_local_min", Builtins::local_time<2>, 1, 1, false},
+        {"ec_get_time_local_hour", Builtins::local_time<3>, 1, 1, false},
     };
     std::string n = lower(name);
+    if (n == "ec_print_hex") return FunctionInfo{Builtins::print_bits<true>, this, 3, 3};
+    if (n == "ec_print_bin") return FunctionInfo{Builtins::print_bits<false>, this, 3, 3};
     for (const Entry& e : table)
         if (n == e.name) return FunctionInfo{e.fn, &rt, e.min, e.max};
     for (Plugin* p : rt.opt_.plugins)

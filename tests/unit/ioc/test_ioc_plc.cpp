@@ -347,7 +347,7 @@ TEST(IocPlc, PluginFunctions) {
 TEST(IocPlc, CompileErrorsNameWhatAndWhere) {
     TempDir d;
     d.write("plant.yaml", kPlant);
-    d.write("main.plc", "ax1.enc.actpos := 1;\nstatic.a := ax9.enc.actpos;\nec0.s1.binaryInput01 := 1;\nstatic.b := ec0.s1.nothing;\n"
+    d.write("main.plc", "ax1.enc.actvel := 1;\nstatic.a := ax9.enc.actpos;\nec0.s1.binaryInput01 := 1;\nstatic.b := ec0.s1.nothing;\n"
                         "static.c := ec0.s2.binaryOutput01.99;\nstatic.d := ds0.data;\n");
     try {
         rt::VirtualClock clock;
@@ -356,7 +356,7 @@ TEST(IocPlc, CompileErrorsNameWhatAndWhere) {
     } catch (const plc::CompileError& e) {
         std::string all;
         for (const auto& s : e.errors()) all += s + "\n";
-        EXPECT_NE(all.find("main.plc:1:1: 'ax1.enc.actpos' is read-only"), std::string::npos) << all;
+        EXPECT_NE(all.find("main.plc:1:1: 'ax1.enc.actvel' is read-only"), std::string::npos) << all;
         EXPECT_NE(all.find("main.plc:2:13: unknown name 'ax9.enc.actpos': no axis 9 (axes: 1)"), std::string::npos) << all;
         EXPECT_NE(all.find("main.plc:3:1: 'ec0.s1.binaryInput01' is read-only"), std::string::npos) << all;
         EXPECT_NE(all.find("main.plc:4:13: unknown name 'ec0.s1.nothing': no process-data entry 'ec0.s1.nothing'"), std::string::npos) << all;

@@ -729,8 +729,14 @@ TEST(AxisVariables, NamesAndWritability) {
     const AxisVariableInfo* v = find_axis_variable("traj.extsetpos");
     ASSERT_NE(v, nullptr);
     EXPECT_TRUE(v->writable);
-    EXPECT_FALSE(find_axis_variable("enc.actpos")->writable);
+    EXPECT_FALSE(find_axis_variable("enc.actvel")->writable);
+    EXPECT_TRUE(find_axis_variable("enc.actpos")->writable); // ECMC: stores the external position
     EXPECT_EQ(find_axis_variable("enc.nope"), nullptr);
+    EXPECT_EQ(find_axis_variable("enc.actvelo"), nullptr); // not ECMC's either
+    EXPECT_EQ(find_axis_variable("cntrl.error"), nullptr);  // defined in ECMC, never parsed
+    for (const char* name : {"id", "counter", "blockcom", "enc.rawpos", "enc.homepos", "traj.targetdec", "traj.setvel",
+                             "traj.setvelffraw", "traj.dir", "drv.setvelraw", "cntrl.poserror", "cntrl.output", "seq.state"})
+        EXPECT_NE(find_axis_variable(name), nullptr) << name;
     AxisVariables vars;
     *axis_variable(vars, *v) = 4.5;
     EXPECT_EQ(vars.traj.extsetpos, 4.5);
@@ -889,4 +895,54 @@ TEST(Axis, WithoutAutoEnableAMoveOfADisabledAxisIsRefused) {
     EXPECT_FALSE(b.ax.status().enable_cmd);
     b.cycles(2);
     EXPECT_NEAR(b.ax.status().act_pos, 5.0, 1e-9);
+}
+
+// ECMC's rules for the variables that PLC code (ecmccfg's plc_lib/master_slave) writes: enc.actpos
+// stores the external actual position (the actual position while enc.source is 1), traj.setpos
+// the external setpoint; blockcom refuses motion and enabling (0x20039); id, counter, traj.dir read.
+TEST(AxisVariables, EcmcWriteRulesBlockcomAndReadOnlyState) {
+    AxisParams p = stepper_params();
+    p.virtual_axis = true;
+    p.encoder_source = 1;
+    p.id = 7;
+    AxisBus a(p);
+    AxisVariables& v = a.ax.variables();
+    EXPECT_EQ(v.id, 7);
+    v.enc.actpos = 12.5; // the kinematics PLC writes the virtual axis's actual position
+    a.cycles(1);
+    EXPECT_DOUBLE_EQ(v.enc.extactpos, 12.5);
+    EXPECT_DOUBLE_EQ(a.ax.status().act_pos, 12.5);
+    EXPECT_DOUBLE_EQ(v.enc.actpos, 12.5);
+    double c0 = v.counter;
+    a.cycles(3);
+    EXPECT_EQ(v.counter, c0 + 3);
+    // allowplccmd 0: the write is dropped, as ECMC
+    v.allowplccmd = 0;
+    v.enc.actpos = 1;
+    a.cycles(1);
+    EXPECT_DOUBLE_EQ(a.ax.status().act_pos, 12.5);
+    v.allowplccmd = 1;
+
+    AxisBus b; // a physical stepper
+    AxisVariables& w = b.ax.variables();
+    w.blockcom = 1;
+    b.cycles(1);
+    AxisCommand on{CommandType::Power};
+    on.on = true;
+    EXPECT_EQ(b.ax.command(on), error_id::kBlockCom);
+    EXPECT_EQ(b.ax.status().error_id, error_id::kBlockCom);
+    EXPECT_FALSE(b.ax.status().enable_cmd);
+    w.blockcom = 0;
+    (void)b.ax.command(AxisCommand{CommandType::Reset});
+    b.enable();
+    ASSERT_EQ(b.cmd(CommandType::MoveVelocity, 0, -2), 0u);
+    b.cycles(300);
+    EXPECT_EQ(w.traj.dir, -1);
+    EXPECT_LT(w.traj.setvel, 0);
+    w.blockcom = 1;
+    b.cycles(1);
+    EXPECT_EQ(b.cmd(CommandType::MoveAbsolute, 5), error_id::kBlockCom);
+    (void)b.ax.command(AxisCommand{CommandType::Halt}); // stopping is never blocked
+    b.until([&] { return !b.ax.status().busy; }, 5000);
+    EXPECT_EQ(w.traj.dir, 0);
 }
