@@ -138,7 +138,9 @@ def collect_calls(root):
             macros.update({k: resolve_env(v, root) for k, v in args.items()
                       if k not in ("FILE", "PLC_ID", "SAMPLE_RATE_MS", "INC", "DESC", "PLC_MACROS")})
             if m.group(1) == "loadPLCFile":
-                pm = resolve_env(args.get("PLC_MACROS", ""), root, env, unknown="")
+                pm = args.get("PLC_MACROS", "")
+                whole = ENV_REF.fullmatch(pm.strip())  # PLC_MACROS='${PLC_MACROS}': the script's set
+                pm = resolve_env(pm, root, env, unknown="" if whole else "1")
                 inc = [os.path.normpath(os.path.join(d, p))
                        for p in resolve_env(args.get("INC", "."), root).split(":") if p]
                 plc_calls[path].append((pm, inc, []))

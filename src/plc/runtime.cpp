@@ -16,6 +16,7 @@ namespace {
 // ECMC error codes returned by the mc_* and ec_* functions (ecmcPLCTask.h, ecmcErrorsList.h).
 constexpr double kAxisIdOutOfRange = 0x20502;   // ERROR_PLC_AXIS_ID_OUT_OF_RANGE
 constexpr double kEcBitsOutOfRange = 0x20800;   // ERROR_PLC_EC_LIB_BITS_OUT_OF_RANGE
+constexpr uint32_t kEncIndexOutOfRange = 0x14326; // ECMC: encoder index out of range (mc_*_act_pos)
 
 std::string lower(std::string_view s) {
     std::string r(s);
@@ -413,11 +414,16 @@ struct Builtins {
         if (axis.variables().allowplccmd == 0) return result(rt, motion::error_id::kCommandsBlocked);
         return result(rt, axis.command(motion::AxisCommand{motion::CommandType::Reset}));
     }
-    static double set_act_pos(void* ctx, const double* a, int) noexcept {
+    // mc_set_act_pos(ax, encIndex, pos) as ECMC (encIndex from 1; the primary encoder is the one
+    // that can be set here, others give 0x14326); (ax, pos) is kept for the primary encoder.
+    static double set_act_pos(void* ctx, const double* a, int n) noexcept {
         auto& rt = *static_cast<PlcRuntime*>(ctx);
         int i = axis_index(rt, a[0]);
         if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
-        return result(rt, rt.opt_.axes[std::size_t(i)]->command(motion::AxisCommand{motion::CommandType::SetPosition, a[1]}));
+        motion::Axis& axis = *rt.opt_.axes[std::size_t(i)];
+        double pos = n >= 3 ? a[2] : a[1];
+        if (n >= 3 && int(a[1]) != axis.params().primary_encoder + 1) return result(rt, kEncIndexOutOfRange);
+        return result(rt, axis.command(motion::AxisCommand{motion::CommandType::SetPosition, pos}));
     }
     template <typename F> static double query(void* ctx, const double* a, F f) noexcept {
         auto& rt = *static_cast<PlcRuntime*>(ctx);
@@ -551,7 +557,7 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
         {"mc_halt", Builtins::halt, 2, 2, true},           {"mc_power", Builtins::power, 2, 2, true},
         {"mc_reset", Builtins::reset, 1, 1, true},         {"mc_get_busy", Builtins::get_busy, 1, 1, true},
         {"mc_get_homed", Builtins::get_homed, 1, 1, true}, {"mc_get_axis_err", Builtins::get_axis_err, 1, 1, true},
-        {"mc_get_act_pos", Builtins::get_act_pos, 1, 2, true}, {"mc_set_act_pos", Builtins::set_act_pos, 2, 2, true},
+        {"mc_get_act_pos", Builtins::get_act_pos, 1, 2, true}, {"mc_set_act_pos", Builtins::set_act_pos, 2, 3, true},
         {"mc_get_enc_ready", Builtins::get_enc_ready, 1, 2, true}, {"mc_get_err", Builtins::get_err, 0, 0, false},
         {"ec_set_bit", Builtins::set_bit, 2, 2, false},    {"ec_clr_bit", Builtins::clr_bit, 2, 2, false},
         {"ec_flp_bit", Builtins::flp_bit, 2, 2, false},    {"ec_chk_bit", Builtins::chk_bit, 2, 2, false},
