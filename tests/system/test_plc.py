@@ -136,10 +136,10 @@ def test_plc_check_command(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "good.plc: OK" in r.stdout
     bad = tmp_path / "bad.plc"
-    bad.write_text("static.x := 1;\nax1.enc.actpos := 2;\nstatic.y := nosuch + 1;\n")
+    bad.write_text("static.x := 1;\nax1.enc.actvel := 2;\nstatic.y := nosuch + 1;\n")
     r = run_check(str(bad))
     assert r.returncode == 1
-    assert f"{bad}:2:1: 'ax1.enc.actpos' is read-only" in r.stderr
+    assert f"{bad}:2:1: 'ax1.enc.actvel' is read-only" in r.stderr
     assert f"{bad}:3:13: unknown name 'nosuch'" in r.stderr
     assert "^" in r.stderr  # the line is shown with a caret
     # against the demo IOC: its axes and entries exist, others do not
