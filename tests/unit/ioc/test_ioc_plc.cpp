@@ -212,6 +212,48 @@ TEST(IocPlc, McErrorCodes) {
     EXPECT_EQ(v.axis("V1").status().error_id, 0u);
 }
 
+// The functions and variables ECMC files use that came with issue 13: mc_home_pos (homing
+// position, here with sequence 15), mc_move_ext_pos (to traj.extsetpos), mc_set_traj_vel,
+// mc_get_prim_enc, mc_get_hw_ready, ax<n>.id / enc.homepos / enc.actpos writes, ec_print_bin/hex.
+TEST(IocPlc, EcmcFunctionsOfIssue13) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("main.plc", R"(
+        static.n := static.n + 1;
+        if (static.n == 1) { mc_power(1, 1); ax1.enc.actpos := 3; };
+        if (static.n == 3) { static.act := ax1.enc.actpos; static.id := ax1.id; };
+        if (static.n == 4) { static.hp := mc_home_pos(1, 1, 15, 1, 1, 42); };
+        if (static.n == 6) { static.homepos := ax1.enc.homepos; static.pe := mc_get_prim_enc(1);
+                             static.hw := mc_get_hw_ready(1); };
+        if (static.n == 7) { mc_set_traj_vel(1, 2); ax1.traj.extsetpos := 7; };
+        if (static.n == 8) { static.mv := mc_move_ext_pos(1, 1, 0, 0, 0); };
+        if (static.n == 9) { ec_print_bin(10, 0, 3); ec_print_hex(255, 4, 7); };
+        static.set := ax1.traj.setpos;
+        if (static.n > 4) { ax1.enc.actpos := ax1.traj.setpos; }; // the kinematics loop closes
+    )");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("axes:\n" + virtual_axis(1), "plcs:\n  - {id: 0, file: main.plc}\n")));
+    v.cycles(10);
+    EXPECT_EQ(v.stat(0, "act"), 3);  // enc.actpos written: the external (PLC) actual position
+    EXPECT_EQ(v.stat(0, "id"), 1);
+    EXPECT_EQ(v.stat(0, "hp"), 0);
+    EXPECT_EQ(v.stat(0, "homepos"), 42);
+    EXPECT_EQ(v.stat(0, "pe"), 1);
+    EXPECT_EQ(v.stat(0, "hw"), 1);
+    EXPECT_EQ(v.stat(0, "mv"), 0);
+    std::string out, line;
+    while (v.plcs().pop_output(line)) out += line + "|";
+    EXPECT_NE(out.find("plc0: 1010"), std::string::npos) << out;
+    EXPECT_NE(out.find("plc0: f"), std::string::npos) << out;
+    // homing 15 set the position to 42; the move to extsetpos 7 runs at the velocity
+    // mc_set_traj_vel set: 2 mm/s
+    v.cycles(1000);
+    double after_1s = v.stat(0, "set");
+    EXPECT_GT(after_1s, 42 - 2.05);
+    EXPECT_LT(after_1s, 42 - 1.0);
+    v.cycles(18000);
+    EXPECT_NEAR(v.stat(0, "set"), 7.0, 1e-6);
+}
+
 // ec_* bit operations and ec_get_time (the cycle's time, ns).
 TEST(IocPlc, EcFunctions) {
     TempDir d;
