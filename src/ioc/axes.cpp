@@ -311,7 +311,7 @@ IocAxes::IocAxes(const std::vector<config::AxisEntry>& entries, const std::strin
             registry::Signal s;
             s.name = SB() << "ax" << id << "." << v.name;
             s.type = "LREAL";
-            s.direction = v.writable ? registry::Direction::Variable : registry::Direction::Input;
+            s.direction = motion::is_readback(v) ? registry::Direction::Input : registry::Direction::Variable;
             s.owner_kind = registry::OwnerKind::Axis;
             s.owner = owner;
             signals.declare(std::move(s));

@@ -69,6 +69,13 @@ struct AxisVariableInfo {
 std::span<const AxisVariableInfo> axis_variables();
 const AxisVariableInfo* find_axis_variable(std::string_view name);
 
+// A readback the axis publishes every cycle (enc.actpos, traj.setpos, ...): an input for records
+// and the registry, even where ECMC lets PLC code write it (enc.actpos, traj.setpos).
+inline bool is_readback(const AxisVariableInfo& info) {
+    std::string_view n = info.name;
+    return !info.writable || n == "enc.actpos" || n == "traj.setpos";
+}
+
 inline double* axis_variable(AxisVariables& v, const AxisVariableInfo& info) {
     return reinterpret_cast<double*>(reinterpret_cast<char*>(&v) + info.offset);
 }

@@ -10,7 +10,7 @@ from epics import ca
 from conftest import (BEAMCTL, REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port,
                       require_binary, wait_for)
 
-SUBCOMMANDS = ["softioc", "db", "run", "check", "signals", "plc", "rcp-sim", "sim", "shell", "ca-repeater"]
+SUBCOMMANDS = ["softioc", "db", "run", "check", "signals", "plc", "axis", "rcp-sim", "sim", "shell", "ca-repeater"]
 
 
 def beamctl(*args, cwd=None):
