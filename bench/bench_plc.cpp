@@ -5,7 +5,9 @@
 // (`r := <expr>;`, one scan) and, when built with BEAMCTL_BENCH_MUPARSER, by muparser
 // (Parser::Eval) with the same variables bound. Issue target: beamctl faster than muparser on
 // every expression.
+#include "daq/data_storage.hpp"
 #include "plc/program.hpp"
+#include "plc/runtime.hpp"
 
 #include <benchmark/benchmark.h>
 
@@ -217,6 +219,49 @@ void BM_Scan_100_statements(benchmark::State& state) {
         100 * double(state.iterations()), benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
 BENCHMARK(BM_Scan_100_statements);
+
+// ---- data storage (issue 13: "data storage append per value") ----------------------------------
+
+// The buffer alone: one value appended to a 1000-value ring (arg 1) or FIFO (arg 2).
+void BM_DsAppend_buffer(benchmark::State& state) {
+    beamctl::daq::DataStorage d(0, 1000, beamctl::daq::BufferType(state.range(0)));
+    double v = 0;
+    for (auto _ : state) {
+        d.append(v);
+        v += 1;
+        benchmark::ClobberMemory();
+    }
+}
+BENCHMARK(BM_DsAppend_buffer)->Arg(1)->Arg(2);
+
+// From PLC code, in a PlcRuntime scan: 100 `ds_append_data(0, v)` calls (arg 0), or one
+// `ds0.append := v` (arg 1: the variable's per-scan read and write-back included); per value.
+void BM_DsAppend_plc(benchmark::State& state) {
+    beamctl::daq::DataStorage d(0, 1000, beamctl::daq::BufferType::Ring);
+    beamctl::plc::PlcRuntime::Options o;
+    o.storages = {&d};
+    beamctl::plc::PlcRuntime rt(o);
+    beamctl::plc::PlcSource src;
+    src.file = "ds.plc";
+    const bool by_variable = state.range(0) == 1;
+    const int per_scan = by_variable ? 1 : 100;
+    if (by_variable) {
+        src.text = "static.v += 1;\nds0.append := static.v;\n";
+    } else {
+        for (int i = 0; i < per_scan; ++i) src.text += "ds_append_data(0, static.v + " + std::to_string(i) + ");\n";
+        src.text += "static.v += 1;\n";
+    }
+    rt.add(src);
+    uint64_t cycle = 0;
+    for (auto _ : state) {
+        rt.run(beamctl::rt::CycleInfo{cycle++, 0, 1000000});
+        benchmark::ClobberMemory();
+    }
+    if (d.appended() != uint64_t(per_scan) * cycle) state.SkipWithError("values were lost");
+    state.counters["ns_per_value"] = benchmark::Counter(double(per_scan) * double(state.iterations()),
+                                                        benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_DsAppend_plc)->Arg(0)->Arg(1);
 
 } // namespace
 

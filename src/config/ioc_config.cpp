@@ -158,7 +158,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "db", "bridges", "ca", "autosave"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "db", "bridges", "ca", "autosave"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -261,6 +261,33 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             e.macros = macros_of(k["macros"]);
             e.include = paths_of(k["include"], dir);
             cfg.kinematics.push_back(std::move(e));
+        }
+    }
+    {
+        std::set<int> ids;
+        const auto list = root["storages"].list();
+        for (std::size_t i = 0; i < list.size(); ++i) {
+            const YamlNode& d = list[i];
+            if (!d.keys({"id", "size", "type", "capacity", "sample_rate_ms", "desc"})) continue;
+            StorageEntry e;
+            e.where = d.where();
+            e.id = int_of(d["id"], int(i), 0, 31);
+            if (!ids.insert(e.id).second) d.error(SB() << "data storage id " << e.id << " used twice");
+            e.size = std::size_t(d["size"].unsigned_integer(10000000).value_or(e.size));
+            if (e.size == 0) d["size"].error("should be at least 1 value");
+            if (YamlNode t = d["type"]) {
+                std::string v = t.string().value_or("");
+                if (v == "normal" || v == "0") e.type = 0;
+                else if (v == "ring" || v == "1") e.type = 1;
+                else if (v == "fifo" || v == "2") e.type = 2;
+                else t.error(SB() << "'" << v << "' is not a buffer type (normal or 0, ring or 1, fifo or 2)");
+            }
+            e.capacity = std::size_t(d["capacity"].unsigned_integer(10000000).value_or(0));
+            if (e.capacity && e.capacity < e.size)
+                d["capacity"].error(SB() << e.capacity << " is less than the size " << e.size);
+            e.sample_rate_ms = d["sample_rate_ms"].number(between(0, 3600000)).value_or(e.sample_rate_ms);
+            e.desc = d["desc"].string().value_or(SB() << "ds" << e.id);
+            cfg.storages.push_back(std::move(e));
         }
     }
     for (const YamlNode& d : root["db"].list()) {

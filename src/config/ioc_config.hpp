@@ -116,6 +116,18 @@ struct RcpBridgeEntry {
     std::string where;
 };
 
+// A data storage (ECMC's ecmccfg addDataStorage.cmd; docs/plc.md): `storages: [{id, size, type,
+// capacity, sample_rate_ms, desc}]`. PLC code fills it (ds<id>.*, ds_*); PVs DSnn-*.
+struct StorageEntry {
+    int id = 0;                 // ds<id>, 0..31
+    std::size_t size = 1000;    // values (ECMC DS_SIZE)
+    int type = 0;               // 0 normal, 1 ring, 2 fifo (ECMC DS_TYPE)
+    std::size_t capacity = 0;   // the most ds<id>.size may grow to (0: size)
+    double sample_rate_ms = 100; // [ms] a changed buffer reaches its PVs at most this often
+    std::string desc;           // DSnn-Desc (default "ds<id>")
+    std::string where;          // file:line:col of the entry
+};
+
 // Autosave of the records' info(autosaveFields[_pass0], "...") fields (docs/autosave.md):
 // `autosave: {dir: DIR, period_s: 5}`.
 struct AutosaveEntry {
@@ -136,6 +148,7 @@ struct IocConfig {
     std::vector<PluginEntry> plugins;
     std::vector<PlcEntry> plcs;
     std::vector<KinematicsEntry> kinematics;
+    std::vector<StorageEntry> storages;
     std::vector<DbConfig> db;
     std::optional<RcpBridgeEntry> rcp;
     std::optional<uint16_t> ca_port; // default: EPICS_CAS_SERVER_PORT / 5064

@@ -272,6 +272,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, registry_, db_);
     std::vector<motion::AxisConfig> axis_configs;
     for (std::size_t i = 0; i < axes_->size(); ++i) axis_configs.push_back(axes_->config(i));
+    storages_ = std::make_unique<IocStorages>(cfg_, db_);
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
@@ -531,7 +532,8 @@ void Ioc::bring_up() {
         std::string why;
         bus_ok.push_back(registry_.bind(std::string(SB() << "ec" << b.bus->id() << ".masterstatus"), why));
     }
-    plcs_->bind(*engine_, axes_->group(), std::move(bus_ok));
+    storages_->bind(*engine_);
+    plcs_->bind(*engine_, axes_->group(), std::move(bus_ok), storages_->storages());
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
@@ -553,6 +555,7 @@ void Ioc::bring_up() {
         db_.set_restore_hook([this] { autosave_->restore(); });
     }
     db_.init_records();
+    if (plc::PlcRuntime* rt = plcs_->runtime()) rt->set_epics_state(12); // initHookAfterIocBuilt
     brought_up_ = true;
 }
 
@@ -560,6 +563,7 @@ void Ioc::publish() {
     axes_->publish();
     kinematics_->publish();
     plcs_->publish();
+    storages_->publish();
     engine_stats_ = engine_->stats(); // read by the engine items' device support
     for (auto& b : buses_) b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
     const rt::EngineStats& es = engine_stats_;
@@ -647,6 +651,7 @@ int Ioc::run() {
     };
     pv::DbShell db_shell(db_, shell_hooks);
     auto shell_server = pv::start_shell_server(loop, db_shell, cfg_.name, shell_socket_);
+    if (plc::PlcRuntime* rt = plcs_->runtime()) rt->set_epics_state(16); // initHookAfterIocRunning: epics_get_started()
     std::string rcp_text = rcp ? std::string(SB() << ", RCP bridge on udp " << cfg_.rcp->listen << ":" << rcp->port()) : std::string();
     std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)%s\n", server.listen_description().c_str(),
                 db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str(), rcp_text.c_str());

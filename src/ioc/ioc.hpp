@@ -14,6 +14,7 @@
 #include "ioc/axes.hpp"
 #include "ioc/kinematics.hpp"
 #include "ioc/plcs.hpp"
+#include "ioc/storages.hpp"
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "pv/autosave.hpp"
@@ -52,6 +53,7 @@ public:
     const config::IocConfig& config() const { return cfg_; }
     IocAxes& axes() { return *axes_; }
     IocPlcs& plcs() { return *plcs_; }
+    IocStorages& storages() { return *storages_; }
     IocKinematics& kinematics() { return *kinematics_; }
     // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
     // (`beamctl signals`). Frozen once the IOC is built.
@@ -99,6 +101,7 @@ private:
     std::vector<BusRt> buses_;
     registry::Registry registry_;
     std::unique_ptr<IocAxes> axes_;
+    std::unique_ptr<IocStorages> storages_; // before plcs_: the PLCs' storages outlive them
     std::unique_ptr<IocPlcs> plcs_;
     std::unique_ptr<IocKinematics> kinematics_;
     bool brought_up_ = false;

@@ -76,6 +76,7 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
                  pv::Database& db)
     : cycle_s_(1.0 / cfg.rate_hz), signals_(signals), db_(db) {
     for (const auto& a : axes) axis_ids_.push_back(a.axis.id.value_or(1));
+    for (const auto& st : cfg.storages) storage_ids_.push_back(st.id);
     for (const auto& p : cfg.plugins) {
         try {
             plugins_.push_back(plc::Plugin::load(p.file, p.config));
@@ -134,6 +135,7 @@ plc::PlcRuntime::Options IocPlcs::check_options() const {
     o.cycle_s = cycle_s_;
     o.check_only = true;
     o.known_axis_ids = axis_ids_;
+    o.known_storage_ids = storage_ids_;
     const registry::Registry* reg = &signals_;
     o.ec = [reg](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
         const registry::Signal* s = reg->find(name);
@@ -263,9 +265,11 @@ std::unique_ptr<pv::LinkDevice> IocPlcs::make_device(std::string_view name, int 
     return nullptr;
 }
 
-void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok) {
+void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok,
+                   std::vector<daq::DataStorage*> storages) {
     if (sources_.empty() && plugins_.empty()) return;
     plc::PlcRuntime::Options o;
+    o.storages = std::move(storages);
     o.cycle_s = cycle_s_;
     o.ec = [this](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
         const registry::Signal* s = signals_.find(name);

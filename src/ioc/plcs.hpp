@@ -47,7 +47,9 @@ public:
 
     // Bring-up: compiles for real (ec names bound through the registry, after the buses are up;
     // ax names to the axes), adds the general PLCs' stage and the axis PLCs' hook.
-    void bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok);
+    // `storages`: the IOC's data storages (ds<n> of PLC code).
+    void bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok,
+              std::vector<daq::DataStorage*> storages = {});
     // IOC loop: statuses into PVs, output lines to stdout, faults to the log.
     void publish();
 
@@ -67,6 +69,7 @@ private:
     double cycle_s_;
     const registry::Registry& signals_;
     std::vector<int> axis_ids_;
+    std::vector<int> storage_ids_; // `storages:` of the IOC file
     std::vector<std::unique_ptr<plc::Plugin>> plugins_;
     std::vector<plc::PlcSource> sources_;
     std::unique_ptr<plc::PlcRuntime> runtime_;

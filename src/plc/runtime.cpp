@@ -65,6 +65,15 @@ struct PlcRuntime::Plc : Host {
     };
     std::deque<EcCell> ec;
     std::map<std::string, EcCell*> ec_names;
+    // ds<n>.<item>: read from the storage before each scan, applied after it when changed
+    enum class DsItem : uint8_t { Append, Data, Index, Size, Full, Clear, Error };
+    struct DsCell {
+        daq::DataStorage* ds = nullptr; // null when only checking
+        DsItem item = DsItem::Append;
+        double value = 0, read = 0;
+    };
+    std::deque<DsCell> ds;
+    std::map<std::string, DsCell*> ds_names;
     std::set<std::string> written; // ec entries the code assigns (bit suffix removed)
     void assigned(std::string_view name) override {
         if (name.rfind("ec", 0) != 0 || !ec_names.count(std::string(name))) return;
@@ -153,12 +162,39 @@ struct PlcRuntime::Plc : Host {
             return std::nullopt;
         }
         if (split_indexed(n, "ec", id, rest)) return ec_entry(n);
+        if (split_indexed(n, "ds", id, rest)) return ds_variable(n, id, rest);
         for (Plugin* p : rt.opt_.plugins)
             if (auto v = p->constant(n)) {
                 cells.push_back(*v);
                 return Binding{&cells.back(), false, 1};
             }
         return std::nullopt;
+    }
+
+    static std::optional<DsItem> ds_item(std::string_view item) {
+        static const std::pair<const char*, DsItem> items[] = {
+            {"append", DsItem::Append}, {"data", DsItem::Data},   {"index", DsItem::Index}, {"size", DsItem::Size},
+            {"full", DsItem::Full},     {"clear", DsItem::Clear}, {"error", DsItem::Error}};
+        std::string i = lower(item);
+        for (const auto& [name, it] : items)
+            if (i == name) return it;
+        return std::nullopt;
+    }
+
+    // "ds0.append": a cell of data storage 0 (ECMC's ecmcPLCDataIF for storages).
+    std::optional<Binding> ds_variable(const std::string& n, int id, std::string_view rest) {
+        if (auto it = ds_names.find(n); it != ds_names.end())
+            return Binding{&it->second->value, it->second->item != DsItem::Full && it->second->item != DsItem::Error, 1};
+        std::optional<DsItem> item = ds_item(rest);
+        if (!item || id < 0 || id >= daq::kMaxStorages) return std::nullopt;
+        daq::DataStorage* storage = rt.storage_by_id_[id];
+        if (!storage) {
+            const auto& known = rt.opt_.known_storage_ids;
+            if (!rt.opt_.check_only || (known && !std::count(known->begin(), known->end(), id))) return std::nullopt;
+        }
+        ds.push_back(DsCell{storage, *item});
+        ds_names[n] = &ds.back();
+        return Binding{&ds.back().value, *item != DsItem::Full && *item != DsItem::Error, 1};
     }
 
     // "ec0.s3.binaryInput01[.bit]", "ec0.masterstatus": a cell copied from/to the image.
@@ -226,7 +262,16 @@ struct PlcRuntime::Plc : Host {
             if (rt.opt_.ec(entry, why)) return "bit number out of range (0..63)";
             return why;
         }
-        if (split_indexed(n, "ds", id, rest)) return "data storage (ds<n>) is not available yet";
+        if (split_indexed(n, "ds", id, rest)) {
+            if (!ds_item(rest)) return SB() << "'" << rest << "' is not one of append, data, index, size, full, clear, error";
+            if (id >= daq::kMaxStorages) return SB() << "data storage " << id << " is out of range (ds0..ds31)";
+            std::string ids;
+            for (daq::DataStorage* d : rt.opt_.storages) ids += (ids.empty() ? "" : ", ") + std::to_string(d->id());
+            if (rt.opt_.known_storage_ids)
+                for (int k : *rt.opt_.known_storage_ids) ids += (ids.empty() ? "" : ", ") + std::to_string(k);
+            return SB() << "no data storage " << id
+                        << (ids.empty() ? std::string(" (the IOC has none: `storages:` in the IOC file)") : " (storages: " + ids + ")");
+        }
         if (n.rfind("static.", 0) == 0 || n.rfind("global.", 0) == 0) return "not a valid variable name";
         return {};
     }
@@ -264,6 +309,44 @@ struct PlcRuntime::Plc : Host {
             c.value = c.read = v;
         }
     }
+    // RT: the data storages' values into their cells (append and clear read NaN, as ECMC: every
+    // scan that assigns them acts; data reads the element at the index, keeping the last value
+    // when the index is at the end).
+    void ds_in() noexcept {
+        for (DsCell& c : ds) {
+            if (!c.ds) continue;
+            switch (c.item) {
+            case DsItem::Append:
+            case DsItem::Clear: c.value = std::numeric_limits<double>::quiet_NaN(); break;
+            case DsItem::Data: (void)c.ds->get(double(c.ds->index()), c.value); break;
+            case DsItem::Index: c.value = double(c.ds->index()); break;
+            case DsItem::Size: c.value = double(c.ds->size()); break;
+            case DsItem::Full: c.value = c.ds->full() ? 1 : 0; break;
+            case DsItem::Error: c.value = c.ds->error(); break;
+            }
+            c.read = c.value;
+        }
+    }
+    // RT: what the scan assigned, applied to the storages (only when changed).
+    void ds_out() noexcept {
+        for (DsCell& c : ds) {
+            if (!c.ds || std::memcmp(&c.value, &c.read, sizeof(double)) == 0) continue;
+            switch (c.item) {
+            case DsItem::Append:
+                if (!std::isnan(c.value)) (void)c.ds->append(c.value);
+                break;
+            case DsItem::Clear:
+                if (c.value > 0) c.ds->clear();
+                break;
+            case DsItem::Data: (void)c.ds->set(double(c.ds->index()), c.value); break;
+            case DsItem::Index: (void)c.ds->set_index(c.value); break;
+            case DsItem::Size: (void)c.ds->resize(c.value); break;
+            case DsItem::Full:
+            case DsItem::Error: break;
+            }
+        }
+    }
+
     // RT: cells the scan changed back into the image (as ECMC: only when changed).
     void copy_out() noexcept {
         for (EcCell& c : ec) {
@@ -538,6 +621,107 @@ struct Builtins {
         return 0;
     }
 
+    // ---- ds_*: data storage (ECMC's libDs); ds_errorCode is ds_error_ ---------------------------
+    // The storage `id`, or null with ds_error_ set (0x20509 outside 0..31, 0x2050A none).
+    static daq::DataStorage* storage(PlcRuntime& rt, double id) noexcept {
+        if (!(id >= 0 && id < daq::kMaxStorages)) {
+            rt.ds_error_ = daq::ds_error::kIndexOutOfRange;
+            return nullptr;
+        }
+        daq::DataStorage* d = rt.storage_by_id_[int(id)];
+        if (!d) rt.ds_error_ = daq::ds_error::kObjectNull;
+        return d;
+    }
+    static double ds_result(PlcRuntime& rt, uint32_t code) noexcept {
+        if (code) rt.ds_error_ = code;
+        return code;
+    }
+    // Functions returning an error code return it for a bad storage too.
+    static double ds_bad(PlcRuntime& rt) noexcept { return rt.ds_error_; }
+    static double ds_append_data(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        return d ? ds_result(rt, d->append(a[1])) : ds_bad(rt);
+    }
+    static double ds_clear_data(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        if (!d) return ds_bad(rt);
+        d->clear();
+        return 0;
+    }
+    static double ds_get_data(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        double v = 0;
+        if (d) (void)ds_result(rt, d->get(a[1], v));
+        return v;
+    }
+    static double ds_set_data(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        return d ? ds_result(rt, d->set(a[1], a[2])) : ds_bad(rt);
+    }
+    static double ds_get_buff_id(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        return d ? double(d->index()) : -1;
+    }
+    static double ds_set_buff_id(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        return d ? ds_result(rt, d->set_index(a[1])) : ds_bad(rt);
+    }
+    static double ds_is_full(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        return d ? (d->full() ? 1 : 0) : -1;
+    }
+    static double ds_get_size(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        return d ? double(d->size()) : -1;
+    }
+    static double ds_push_asyn(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        if (!d) return -1;
+        d->request_push();
+        return 0;
+    }
+    template <int Stat> static double ds_stat(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* d = storage(rt, a[0]);
+        if (!d) return 0;
+        return Stat == 0 ? d->average() : Stat == 1 ? d->minimum() : d->maximum();
+    }
+    // ds_append_to_ds(src, srcIndex, elements, dst): src[srcIndex..] appended to dst as one block
+    static double ds_append_to_ds(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        daq::DataStorage* src = storage(rt, a[0]);
+        daq::DataStorage* dst = storage(rt, a[3]);
+        if (!src || !dst) return 0;
+        if (!(a[1] >= 0 && a[1] < double(src->size()))) return ds_result(rt, daq::ds_error::kPositionOutOfRange);
+        std::size_t from = std::size_t(a[1]);
+        double want = std::isfinite(a[2]) && a[2] > 0 ? a[2] : 0;
+        std::size_t n = std::size_t(std::min(want, double(src->size() - from)));
+        return ds_result(rt, dst->append(src->data() + from, n));
+    }
+    static double ds_get_err(void* c, const double*, int) noexcept { return static_cast<PlcRuntime*>(c)->ds_error_; }
+    static double ds_err_rst(void* c, const double*, int) noexcept {
+        static_cast<PlcRuntime*>(c)->ds_error_ = 0;
+        return 0;
+    }
+
+    // epics_get_state(): EPICS's initHookState the IOC reached; epics_get_started(): 1 once running
+    static constexpr int kAfterIocRunning = 16; // initHookAfterIocRunning
+    static double epics_state(void* c, const double*, int) noexcept {
+        return static_cast<PlcRuntime*>(c)->epics_state_.load(std::memory_order_relaxed);
+    }
+    static double epics_started(void* c, const double*, int) noexcept {
+        return static_cast<PlcRuntime*>(c)->epics_state_.load(std::memory_order_relaxed) >= kAfterIocRunning ? 1 : 0;
+    }
+
     // A plugin function: ctx is the Plugin::Function.
     static double plugin(void* ctx, const double* a, int) noexcept {
         return static_cast<const Plugin::Function*>(ctx)->fn(a);
@@ -574,6 +758,15 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
         {"ec_get_time_local_sec", Builtins::local_time<1>, 1, 1, false},
         {"ec_get_time_local_min", Builtins::local_time<2>, 1, 1, false},
         {"ec_get_time_local_hour", Builtins::local_time<3>, 1, 1, false},
+        {"ds_append_data", Builtins::ds_append_data, 2, 2, false}, {"ds_clear_data", Builtins::ds_clear_data, 1, 1, false},
+        {"ds_get_data", Builtins::ds_get_data, 2, 2, false},   {"ds_set_data", Builtins::ds_set_data, 3, 3, false},
+        {"ds_get_buff_id", Builtins::ds_get_buff_id, 1, 1, false}, {"ds_set_buff_id", Builtins::ds_set_buff_id, 2, 2, false},
+        {"ds_is_full", Builtins::ds_is_full, 1, 1, false},     {"ds_get_size", Builtins::ds_get_size, 1, 1, false},
+        {"ds_push_asyn", Builtins::ds_push_asyn, 1, 1, false}, {"ds_get_avg", Builtins::ds_stat<0>, 1, 1, false},
+        {"ds_get_min", Builtins::ds_stat<1>, 1, 1, false},     {"ds_get_max", Builtins::ds_stat<2>, 1, 1, false},
+        {"ds_append_to_ds", Builtins::ds_append_to_ds, 4, 4, false}, {"ds_get_err", Builtins::ds_get_err, 0, 0, false},
+        {"ds_err_rst", Builtins::ds_err_rst, 0, 0, false},
+        {"epics_get_state", Builtins::epics_state, 0, 0, false}, {"epics_get_started", Builtins::epics_started, 0, 0, false},
     };
     std::string n = lower(name);
     if (n == "ec_print_hex") return FunctionInfo{Builtins::print_bits<true>, this, 3, 3};
@@ -589,6 +782,8 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
 // ---- the runtime -----------------------------------------------------------------------------
 
 PlcRuntime::PlcRuntime(Options options) : opt_(std::move(options)), output_(256) {
+    for (daq::DataStorage* d : opt_.storages)
+        if (d && d->id() >= 0 && d->id() < daq::kMaxStorages) storage_by_id_[d->id()] = d;
     axis_plcs_.assign(opt_.axes.size(), nullptr);
     mc_.assign(opt_.axes.size(), McMemory{});
     for (std::size_t i = 0; i < opt_.axes.size(); ++i) {
@@ -666,8 +861,10 @@ void PlcRuntime::scan(Plc& p, const rt::CycleInfo& c) noexcept {
     if (!buses_ok()) return; // PLCs wait for the first cycle with every bus OK
     p.vars.firstscan = p.first_done ? 0 : 1;
     p.copy_in();
+    p.ds_in();
     int r = p.program->run();
     p.copy_out();
+    p.ds_out();
     p.first_done = true;
     p.st_firstscan.store(false, std::memory_order_relaxed);
     p.st_scans.fetch_add(1, std::memory_order_relaxed);

@@ -11,12 +11,14 @@
 //   global.<name>              shared by all PLCs of the IOC
 //   plc<n>.enable|error|scantime|firstscan|dbg   a general PLC's own variables
 //   ax<n>.plc.enable|error|scantime|firstscan|dbg  an axis PLC's
+//   ds<n>.append|data|index|size|full|clear|error   data storage n (daq::DataStorage), read
+//                              before each scan and applied after it when the scan changed them
 //   plugin constants
 // Functions: ExprTk's math (the language), ec_* bit operations and ec_get_time, mc_* motion
 // function blocks (on the axis command API, acting on the rising edge of `execute`, returning
-// ECMC error codes), and plugin functions. A run-time fault (index out of range, loop budget)
-// latches the PLC's `error` (cleared when it is enabled again) and the scan's remaining code is
-// skipped; the next scan runs normally.
+// ECMC error codes), ds_* data storage functions, epics_get_started/state, and plugin functions.
+// A run-time fault (index out of range, loop budget) latches the PLC's `error` (cleared when it
+// is enabled again) and the scan's remaining code is skipped; the next scan runs normally.
 //
 // Threading: the constructor and add() on a non-RT thread before the cycle starts; run() and
 // before_axis() on the RT thread; request_enable(), status(), fault() and pop_output() on ONE
@@ -25,6 +27,7 @@
 
 #include "core/macros.hpp"
 #include "core/spsc_queue.hpp"
+#include "daq/data_storage.hpp"
 #include "motion/axis.hpp"
 #include "motion/axis_group.hpp"
 #include "plc/plugin.hpp"
@@ -79,6 +82,9 @@ public:
         // check_only: the axis ids that exist (nullopt: any id)
         std::optional<std::vector<int>> known_axis_ids;
         std::vector<Plugin*> plugins;      // functions and constants by name
+        std::vector<daq::DataStorage*> storages; // ds<id> by DataStorage::id()
+        // check_only: the storage ids that exist (nullopt: any id 0..31)
+        std::optional<std::vector<int>> known_storage_ids;
         std::uint64_t loop_budget = 1000000; // loop iterations per scan before a fault
     };
     explicit PlcRuntime(Options options);
@@ -122,6 +128,10 @@ public:
     // assigns: the PLC is their writer.
     std::vector<std::string> written_entries(std::size_t i) const;
 
+    // Non-RT: the IOC's EPICS state as EPICS's initHookState (16: initHookAfterIocRunning), for
+    // epics_get_state() and epics_get_started().
+    void set_epics_state(int state) noexcept { epics_state_.store(state, std::memory_order_relaxed); }
+
     // The cells a name is bound to (tests and diagnostics; nullptr if no PLC uses it).
     const double* global(const std::string& name) const;
     const double* static_variable(std::size_t plc, const std::string& name) const;
@@ -148,6 +158,9 @@ private:
     std::vector<McMemory> mc_;
     double mc_error_ = 0; // last mc_* error (mc_get_err)
     double ec_error_ = 0; // last ec_* error (ec_get_err)
+    double ds_error_ = 0; // last ds_* error (ds_get_err)
+    daq::DataStorage* storage_by_id_[daq::kMaxStorages] = {};
+    std::atomic<int> epics_state_{0};
     struct Output {
         int plc = 0;
         std::uint16_t len = 0;

@@ -157,3 +157,77 @@ def test_plc_check_command(tmp_path):
     # the shipped PLC library compiles
     r = run_check("-I", str(REPO_ROOT / "examples" / "plc_lib"), str(REPO_ROOT / "examples" / "demo" / "plc" / "slit.plc"))
     assert r.returncode == 0, r.stderr
+
+
+DS_IOC = """
+ioc: {{name: {name}, prefix: "{prefix}"}}
+engine: {{rate_hz: 1000}}
+buses:
+  - id: 0
+    link: {{type: sim}}
+    slaves:
+      - {{position: 0, type: EK1100}}
+storages:
+  - {{id: 0, size: 5, type: normal, sample_rate_ms: 10, desc: "counter samples"}}
+  - {{id: 1, size: 4, type: ring, capacity: 8}}
+plcs:
+  - {{id: 0, file: ds.plc, rate_ms: 10}}
+"""
+
+# ecmccfg's best-practice data storage PLC, in spirit: fill ds0, push when a trigger rises;
+# ds1 is a ring of the last 4 values, published only on ds_push_asyn
+DS_PLC = """
+static.n += 1;
+ds_append_data(0, static.n);
+ds1.append := static.n * 10;
+if (static.n % 20 == 0) { ds_push_asyn(1); };
+static.started := epics_get_started();
+if (static.started and not(static.was)) { println('epics started at scan', static.n); };
+static.was := static.started;
+"""
+
+
+def test_data_storage_pvs(tmp_path, prefix):
+    with running_ioc(tmp_path, prefix, DS_IOC, {"ds.plc": DS_PLC}) as srv:
+        p = prefix + "DS00-"
+        assert epics.caget(p + "Desc") == "counter samples"
+        assert epics.caget(p + "Type", as_string=True) == "Normal"
+        assert epics.caget(p + "DataAct.NELM") == 5
+        full = connect(p + "Full")
+        assert wait_for(lambda: ca.get(full) == 1, timeout=5)
+        data = epics.caget(p + "DataAct")
+        assert list(data) == [1, 2, 3, 4, 5]  # a normal buffer keeps its first values
+        assert epics.caget(p + "DataIdAct") == 5
+        assert epics.caget(p + "Stat") == 1  # bit 0 full, type 0
+        # the operator clears it: it fills again with newer values
+        assert epics.caput(p + "ClrCmd", 1, wait=True) == 1
+        assert wait_for(lambda: epics.caget(p + "DataAct")[0] > 5, timeout=5)
+        # the ring: capacity 8 for NELM, the size 4 values; pushed every 20 scans
+        r = prefix + "DS01-"
+        assert epics.caget(r + "DataAct.NELM") == 8
+        assert epics.caget(r + "Type", as_string=True) == "Ring"
+        assert wait_for(lambda: epics.caget(r + "Count") == 4, timeout=5)
+        vals = epics.caget(r + "DataAct")
+        assert len(vals) == 4 and sorted(vals)[-1] - sorted(vals)[0] == 30  # the last four: n*10
+        assert epics.caget(r + "Err") == 0
+        # epics_get_started() turned 1 once the IOC ran
+        assert wait_for(lambda: any("epics started at scan" in l for l in srv.stdout_lines), timeout=5)
+        # the DataSet write: values from index 0 (the cycle keeps appending after them)
+        st = prefix + "DS00-"
+        assert epics.caput(st + "DataSet", [100, 200], wait=True) == 1
+        assert wait_for(lambda: list(epics.caget(st + "DataAct"))[:2] == [100, 200], timeout=5)
+        assert wait_for(lambda: epics.caget(st + "Full") == 1, timeout=5)
+        assert epics.caget(st + "DataAct")[2] > 5  # the PLC's appends went on after them
+
+
+def test_data_storage_config_errors(tmp_path):
+    cfg = tmp_path / "ioc.yaml"
+    cfg.write_text("ioc: {name: X}\nstorages:\n  - {id: 0, size: 10, type: circular}\n  - {id: 0, size: 5, capacity: 2}\n"
+                   "plcs:\n  - {id: 0, file: p.plc}\n")
+    (tmp_path / "p.plc").write_text("ds3.append := 1;\n")
+    r = subprocess.run([str(BEAMCTL), "check", str(cfg)], capture_output=True, text=True, timeout=60)
+    assert r.returncode != 0
+    out = r.stdout + r.stderr
+    assert "ioc.yaml:3:" in out and "'circular' is not a buffer type" in out, out
+    assert "data storage id 0 used twice" in out, out
+    assert "2 is less than the size 5" in out, out

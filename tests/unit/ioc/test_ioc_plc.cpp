@@ -403,7 +403,7 @@ TEST(IocPlc, CompileErrorsNameWhatAndWhere) {
         EXPECT_NE(all.find("main.plc:3:1: 'ec0.s1.binaryInput01' is read-only"), std::string::npos) << all;
         EXPECT_NE(all.find("main.plc:4:13: unknown name 'ec0.s1.nothing': no process-data entry 'ec0.s1.nothing'"), std::string::npos) << all;
         EXPECT_NE(all.find("main.plc:5:13: unknown name 'ec0.s2.binaryOutput01.99': bit number out of range"), std::string::npos) << all;
-        EXPECT_NE(all.find("main.plc:6:13: unknown name 'ds0.data': data storage"), std::string::npos) << all;
+        EXPECT_NE(all.find("main.plc:6:13: unknown name 'ds0.data': no data storage 0 (the IOC has none: `storages:` in the IOC file)"), std::string::npos) << all;
     }
 }
 
