@@ -158,7 +158,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "db", "bridges", "ca", "autosave"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -289,6 +289,31 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             e.desc = d["desc"].string().value_or(SB() << "ds" << e.id);
             cfg.storages.push_back(std::move(e));
         }
+    }
+    {
+        std::set<int> ids;
+        const auto list = root["luts"].list();
+        for (std::size_t i = 0; i < list.size(); ++i) {
+            const YamlNode& l = list[i];
+            if (!l.keys({"id", "file"})) continue;
+            LutEntry e;
+            e.where = l.where();
+            e.id = int_of(l["id"], int(i), 0, 15);
+            if (!ids.insert(e.id).second) l.error(SB() << "lookup table id " << e.id << " used twice");
+            e.file = resolve(dir, l.required("file", " (an ECMC lookup table file)").string().value_or(""));
+            e.file_where = l["file"].where();
+            cfg.luts.push_back(std::move(e));
+        }
+    }
+    if (YamlNode m = root["m2m"]; m.keys({"name", "master"}) && m) {
+        M2mEntry e;
+        e.where = m.where();
+        if (auto n = m["name"].string()) {
+            if (n->empty() || n->find('/') != std::string::npos) m["name"].error(SB() << "'" << *n << "' should be a plain name (no '/')");
+            else e.name = *n;
+        }
+        if (m.has("master")) e.master = int_of(m["master"], 0, -15, 15);
+        cfg.m2m = e;
     }
     for (const YamlNode& d : root["db"].list()) {
         if (!d.keys({"file", "macros"})) continue;

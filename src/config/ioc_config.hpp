@@ -128,6 +128,21 @@ struct StorageEntry {
     std::string where;          // file:line:col of the entry
 };
 
+// A lookup table for PLC code (ecmccfg loadLUTFile.cmd): `luts: [{id, file}]`; lut_get_value(id, x).
+struct LutEntry {
+    int id = 0;             // 0..15
+    std::string file;       // resolved path
+    std::string where, file_where;
+};
+
+// ECMC's m2m shared memory (plc/m2m.hpp): `m2m: {name, master}`. Opened when given, or when a
+// PLC calls an m2m_* function (then with the defaults).
+struct M2mEntry {
+    std::string name = "beamctl_m2m"; // /dev/shm/<name>: IOCs with the same name share values
+    std::optional<int> master;        // this IOC's index (-15..15); default: its first bus id, -1 without buses
+    std::string where;
+};
+
 // Autosave of the records' info(autosaveFields[_pass0], "...") fields (docs/autosave.md):
 // `autosave: {dir: DIR, period_s: 5}`.
 struct AutosaveEntry {
@@ -149,6 +164,8 @@ struct IocConfig {
     std::vector<PlcEntry> plcs;
     std::vector<KinematicsEntry> kinematics;
     std::vector<StorageEntry> storages;
+    std::vector<LutEntry> luts;
+    std::optional<M2mEntry> m2m;
     std::vector<DbConfig> db;
     std::optional<RcpBridgeEntry> rcp;
     std::optional<uint16_t> ca_port; // default: EPICS_CAS_SERVER_PORT / 5064

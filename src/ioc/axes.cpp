@@ -102,6 +102,8 @@ public:
         r.valid = s.position_valid;
         r.enabled = s.enabled;
         r.slip_stall = s.error_id == motion::error_id::kStall;
+        r.sync_requests = s.mr_sync_requests;
+        r.stop_requests = s.mr_stop_requests;
         return r;
     }
 

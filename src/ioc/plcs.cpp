@@ -6,6 +6,7 @@
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "core/macros.hpp"
+#include "core/paths.hpp"
 
 #include <algorithm>
 #include <cstdio>
@@ -59,9 +60,7 @@ std::optional<plc::PlcSource> axis_plc_source(const motion::AxisConfig& a) {
     s.axis_plc = true;
     std::filesystem::path dir = std::filesystem::path(a.file).parent_path();
     if (!a.plc->file.empty()) {
-        std::filesystem::path f = a.plc->file;
-        if (f.is_relative()) f = dir / f;
-        s.file = f.string();
+        s.file = resolve_beside(dir, a.plc->file); // or, as ECMC, the working directory's
         s.text = read_text(s.file, a.file);
     } else {
         s.file = a.file + " (plc.code)";
@@ -77,6 +76,13 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
     : cycle_s_(1.0 / cfg.rate_hz), signals_(signals), db_(db) {
     for (const auto& a : axes) axis_ids_.push_back(a.axis.id.value_or(1));
     for (const auto& st : cfg.storages) storage_ids_.push_back(st.id);
+    for (const auto& l : cfg.luts) {
+        try {
+            luts_.emplace_back(l.id, std::make_unique<LookupTable>(LookupTable::load(l.file)));
+        } catch (const Error& e) {
+            throw Error(SB() << l.file_where << ": " << e.what());
+        }
+    }
     for (const auto& p : cfg.plugins) {
         try {
             plugins_.push_back(plc::Plugin::load(p.file, p.config));
@@ -84,10 +90,23 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
             throw Error(SB() << p.where << ": " << e.what());
         }
     }
+    std::vector<std::string> group_names;
+    for (const auto& a : axes) {
+        if (a.axis.group.empty()) continue;
+        auto it = std::find(group_names.begin(), group_names.end(), a.axis.group);
+        if (it == group_names.end()) {
+            group_names.push_back(a.axis.group);
+            groups_.emplace_back();
+            it = group_names.end() - 1;
+        }
+        groups_[std::size_t(it - group_names.begin())].push_back(a.axis.id.value_or(1));
+    }
     for (const auto& e : cfg.plcs) sources_.push_back(plc_source(e));
     // Axis PLCs: the axis file's plc.file (next to the axis file) and plc.code lines.
     for (const auto& a : axes)
         if (auto s = axis_plc_source(a)) sources_.push_back(std::move(*s));
+    for (auto& s : sources_) // ecmccfg's GRP_<name>_ID environment, as macros
+        for (std::size_t g = 0; g < group_names.size(); ++g) s.macros.emplace("GRP_" + group_names[g] + "_ID", std::to_string(g));
     // Check-compile everything now, so `beamctl check` and `run` report every error before
     // anything starts.
     plc::PlcRuntime check(check_options());
@@ -100,6 +119,15 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
         }
     }
     if (!errors.empty()) throw plc::CompileError(std::move(errors));
+    if (cfg.m2m || check.uses_m2m()) {
+        config::M2mEntry m = cfg.m2m.value_or(config::M2mEntry{});
+        int master = m.master.value_or(cfg.buses.empty() ? -1 : cfg.buses.front().id);
+        try {
+            m2m_ = std::make_unique<plc::M2m>(m.name, master);
+        } catch (const Error& e) {
+            throw Error(SB() << (m.where.empty() ? cfg.path : m.where) << ": " << e.what());
+        }
+    }
     // The registry: each PLC's own variables, and the outputs its code writes (one writer each).
     for (std::size_t i = 0; i < sources_.size(); ++i) {
         const plc::PlcSource& s = sources_[i];
@@ -270,6 +298,9 @@ void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<reg
     if (sources_.empty() && plugins_.empty()) return;
     plc::PlcRuntime::Options o;
     o.storages = std::move(storages);
+    o.groups = groups_;
+    for (const auto& [id, t] : luts_) o.luts.emplace_back(id, t.get());
+    o.m2m = m2m_.get();
     o.cycle_s = cycle_s_;
     o.ec = [this](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
         const registry::Signal* s = signals_.find(name);

@@ -7,6 +7,9 @@
 // (plcs.cpp, plc_table) on the PLC's items plc<n>.enable, .error, .scantime, .scans, .faults:
 //   $(P)PLCnn-EnaCmd (bo, writes plc<n>.enable; follows it), -EnaAct (bi), -ScanTime (ai, s),
 //   -Err (longin: the latched run-time fault, 0 none), -Faults (longin), -Scans (longin)
+// Axis groups: each `axis.group` name of the axis files is a group, numbered from 0 in the order
+// the axes name them (ECMC AddAxisToGroupByName); every PLC gets the macro GRP_<name>_ID with its
+// number, as ecmccfg sets the environment variable, for mc_grp_*(group, ...).
 // println/print output goes to the IOC's standard output ("plc0: text"); faults are logged with
 // their location.
 // Threading: everything here on the IOC loop thread, except the runtime's RT side.
@@ -70,6 +73,9 @@ private:
     const registry::Registry& signals_;
     std::vector<int> axis_ids_;
     std::vector<int> storage_ids_; // `storages:` of the IOC file
+    std::vector<std::vector<int>> groups_; // ECMC axis groups (axis.group), in order of appearance: axis ids
+    std::vector<std::pair<int, std::unique_ptr<LookupTable>>> luts_; // `luts:` of the IOC file
+    std::unique_ptr<plc::M2m> m2m_; // `m2m:`, or a PLC calls m2m_*
     std::vector<std::unique_ptr<plc::Plugin>> plugins_;
     std::vector<plc::PlcSource> sources_;
     std::unique_ptr<plc::PlcRuntime> runtime_;

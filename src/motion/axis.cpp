@@ -14,6 +14,9 @@ const char* error_id::text(uint32_t id) noexcept {
     case kBusy: return "Axis busy";
     case kBlockCom: return "Commands blocked (blockcom)";
     case kAutoEnableTimeout: return "Auto enable timeout: axis not enabled in time";
+    case kNotAllowedWhenEnabled: return "Not allowed while enabled (source change)";
+    case kSlavedAxisInError: return "An axis of its group is in error";
+    case kSlavedAxisInterlock: return "An axis of its group is interlocked";
     case kDriveAlarm0: return "Drive alarm 0";
     case kDriveAlarm0 + 1: return "Drive alarm 1";
     case kDriveAlarm0 + 2: return "Drive alarm 2";
@@ -282,7 +285,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
             return refuse(error_id::kLatchCount);
     }
     // ECMC autoEnable: a motion command enables the axis (homing 15 was handled above).
-    if (!enable_req_ && p_.auto_enable_timeout_s > 0) {
+    if (!enable_req_ && p_.auto_enable_timeout_s > 0 && auto_enable_on_) {
         AxisCommand on{CommandType::Power};
         on.on = true;
         (void)command(on);
@@ -581,6 +584,24 @@ void Axis::set_trajectory_limits(double v, double a, double d, double j) noexcep
     vars_.traj.targetvel = p_.trajectory.velocity;
     vars_.traj.targetacc = p_.trajectory.acceleration;
     vars_.traj.targetdec = p_.trajectory.deceleration;
+}
+
+uint32_t Axis::set_traj_source(int source) noexcept {
+    int w = source != 0 ? 1 : 0;
+    if (w == traj_source_) return 0;
+    if (st_.enabled && !p_.allow_source_change) return error_id::kNotAllowedWhenEnabled;
+    traj_source_ = w;
+    vars_.traj.source = w; // what take_variables compares with
+    return 0;
+}
+
+uint32_t Axis::set_enc_source(int source) noexcept {
+    int w = source != 0 ? 1 : 0;
+    if (w == enc_source_) return 0;
+    if (st_.enabled && !p_.allow_source_change) return error_id::kNotAllowedWhenEnabled;
+    enc_source_ = w;
+    vars_.enc.source = w;
+    return 0;
 }
 
 void Axis::take_variables() noexcept {
@@ -907,7 +928,7 @@ void Axis::run(double dt) noexcept {
     monitor(dt);
     st_.busy = seq_ != Seq::Idle || has_pending_;
     // ECMC autoEnable.disableTimeout: idle (not busy, enabled, at target if monitored) this long
-    if (p_.auto_disable_timeout_s > 0) {
+    if (p_.auto_disable_timeout_s > 0 && auto_disable_on_) {
         if (st_.busy || !enabled || (p_.target_enable && !st_.at_target)) {
             idle_time_ = 0;
         } else if (idle_time_ > p_.auto_disable_timeout_s && enable_req_) {

@@ -32,7 +32,10 @@ namespace error_id {
 constexpr uint32_t kNone = 0;
 constexpr uint32_t kBusNotOk = 0x14315;        // ERROR_AXIS_HARDWARE_STATUS_NOT_OK: disabled
 constexpr uint32_t kNotEnabled = 0x14316;      // ERROR_AXIS_NOT_ENABLED: motion command refused
+constexpr uint32_t kNotAllowedWhenEnabled = 0x14319; // ERROR_AXIS_COMMAND_NOT_ALLOWED_WHEN_ENABLED
 constexpr uint32_t kBusy = 0x1431C;            // ERROR_AXIS_BUSY: homing while busy
+constexpr uint32_t kSlavedAxisInError = 0x1432B; // ERROR_AXIS_SLAVED_AXIS_IN_ERROR (mc_grp_set_slaved_axis_in_error)
+constexpr uint32_t kSlavedAxisInterlock = 0x1432E; // ERROR_AXIS_SLAVED_AXIS_INTERLOCK (mc_grp_set_slaved_axis_ilocked)
 constexpr uint32_t kAutoEnableTimeout = 0x1432F; // ERROR_AXIS_AUTO_ENABLE_TIMEOUT: not enabled in time
 constexpr uint32_t kDriveAlarm0 = 0x1460E;     // ERROR_DRV_HW_ALARM_0..2: drive error input n
 constexpr uint32_t kDriveTimeout = 0x14613;    // ERROR_DRV_STATE_MACHINE_TIME_OUT (stepper)
@@ -194,6 +197,9 @@ struct AxisStatus {
     bool ext_limited = false;    // the PLC's setpoint was held at a limit this cycle
     bool position_valid = false; // act_pos has been read from a working bus (and, for a PLC-fed
                                  // actual position, after the PLC's first scan)
+    // Requests to the motor record (PLC mc_mr_set_sync/stop, mc_grp_mr_set_*): the record
+    // syncs VAL to the readback / stops when the count changes.
+    uint32_t mr_sync_requests = 0, mr_stop_requests = 0;
     uint64_t cycle = 0;
     // ECMC `Stat` bits: 0 enable, 1 enabled, 2 execute, 3 busy, 4 attarget, 5 moving, 6 limit fwd
     // OK (1 = not on the switch), 7 limit bwd OK, 8 home switch, 9 homed, 14/15 soft limit fwd/bwd
@@ -228,6 +234,29 @@ public:
     // RT: the trajectory's velocity, acceleration, deceleration, jerk for the next moves (ECMC
     // mc_set_traj_*); a value <= 0 or not finite leaves that one as it is.
     void set_trajectory_limits(double v, double a, double d, double j) noexcept;
+
+    // RT, ECMC axis-group operations (mc_grp_*):
+    // The trajectory (0 internal, 1 PLC) or encoder (0 encoder, 1 PLC) source; refused with
+    // kNotAllowedWhenEnabled while enabled unless features.allowSrcChangeWhenEnabled.
+    uint32_t set_traj_source(int source) noexcept;
+    uint32_t set_enc_source(int source) noexcept;
+    void set_allow_source_change(bool on) noexcept { p_.allow_source_change = on; }
+    // An error raised from outside (mc_grp_set_error, a slaved axis in error): the motion stops
+    // and the axis is disabled, as for its own errors.
+    void raise_error(uint32_t id) noexcept { fault(id, true); }
+    // autoEnable/autoDisable switched on or off at run time (the configured times are kept).
+    void set_auto_enable(bool on) noexcept { auto_enable_on_ = on; }
+    void set_auto_disable(bool on) noexcept {
+        auto_disable_on_ = on;
+        idle_time_ = 0;
+    }
+    // ECMC ctrlWithinDeadband: the controller's error within its deadband (internal trajectory),
+    // or what PLC code says (mc_grp_set_ctrl_within_db) while the setpoint comes from the PLC.
+    bool within_controller_deadband() const noexcept { return traj_source_ ? ext_within_deadband_ : ctrl_.in_deadband(); }
+    void set_within_deadband_external(bool on) noexcept { ext_within_deadband_ = on; }
+    // Requests to the axis's motor record (ECMC mc_mr_set_sync/stop): counted in the status.
+    void request_mr_sync() noexcept { ++st_.mr_sync_requests; }
+    void request_mr_stop() noexcept { ++st_.mr_stop_requests; }
 
     const AxisStatus& status() const noexcept { return st_; }
     // ECMC's ax<n>.* variables: PLC code reads and writes them between the axis's cycles.
@@ -284,6 +313,8 @@ private:
     bool has_pending_ = false;
     bool auto_enabling_ = false; // pending_ waits for an auto-enable (times out)
     double auto_enable_time_ = 0, idle_time_ = 0; // [s] enabling, idle while enabled
+    bool auto_enable_on_ = true, auto_disable_on_ = true; // run-time switches (mc_*_autoenable_enable)
+    bool ext_within_deadband_ = false;
     // homing
     int home_seq_ = 0, home_step_ = 0;
     bool last_home_ = false, last_lim_fwd_ = false, last_lim_bwd_ = false;

@@ -1,8 +1,10 @@
 #include "motion/axis_setup.hpp"
 
 #include "core/error.hpp"
+#include "core/paths.hpp"
 
 #include <cstdlib>
+#include <filesystem>
 
 namespace beamctl::motion {
 
@@ -48,6 +50,16 @@ AxisParams make_axis_params(const AxisConfig& c) {
         if (!e.mask.empty()) q.mask = std::strtoull(e.mask.c_str(), nullptr, 0);
         if (e.velocity_filter && e.velocity_filter->enable)
             q.filter_size = int(std::min<int64_t>(e.velocity_filter->size, EncoderParams::kMaxFilter));
+        if (const auto& t = e.lookuptable; t && t->enable) { // the file next to the encoder's file
+            std::string f = resolve_beside(std::filesystem::path(e.where.file).parent_path(), t->filename);
+            try {
+                q.correction = std::make_shared<const LookupTable>(LookupTable::load(f));
+            } catch (const Error& x) {
+                throw Error(SB() << at(e.where) << ": encoder.lookuptable: " << x.what());
+            }
+            q.correction_range = t->range.value_or(0);
+            q.correction_scale = t->scale.value_or(1);
+        }
         return q;
     };
     for (const auto& e : c.encoders) p.encoders.push_back(enc_params(e));

@@ -22,6 +22,8 @@ public:
     Controller() = default;
     explicit Controller(const ControllerParams& p) : p_(p) {}
     // error = setpoint - actual [units]; feed_forward = trajectory velocity [units/s]; dt [s].
+    // The error has stayed within the deadband for longer than its time (ECMC ctrlWithinDeadband).
+    bool in_deadband() const noexcept { return p_.deadband > 0 && in_band_ > p_.deadband_cycles; }
     double step(double error, double feed_forward, double dt) noexcept {
         if (std::fabs(error) < p_.deadband) ++in_band_;
         else in_band_ = 0;

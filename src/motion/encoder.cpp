@@ -1,5 +1,7 @@
 #include "motion/encoder.hpp"
 
+#include <cmath>
+
 #include <algorithm>
 
 namespace beamctl::motion {
@@ -11,6 +13,14 @@ void Encoder::update(double dt) noexcept {
     started_ = true;
     last_raw_ = raw;
     double pos = double(counts_) * p_.numerator / p_.denominator + frame_offset();
+    if (p_.correction && homed()) {
+        double x = pos;
+        if (p_.correction_range > 0) {
+            x = std::fmod(pos, p_.correction_range);
+            if (pos < 0) x += p_.correction_range;
+        }
+        pos -= p_.correction_scale * p_.correction->value(x);
+    }
     if (!first && dt > 0) {
         int n = std::clamp(p_.filter_size, 1, EncoderParams::kMaxFilter);
         double v = (pos - position_) / dt;

@@ -2,14 +2,18 @@
 //   incremental  the counter (`bits` wide) wraps; wraps are tracked into a 64-bit count
 //   absolute     `absBits` valid bits after `mask`; `absOffset` [units] added; wraps tracked too
 //   scaling      position [units] = counts * numerator / denominator (+ offset set by homing)
+//   correction   ECMC `lookuptable:`: once homed (absolute encoders always), scale * table(x) is
+//                subtracted, x the position (modulo `range` into [0, range) when range > 0)
 // Velocity is the filtered difference of positions (moving average over `filter_size` cycles).
 // Threading: RT thread; all calls noexcept, no allocation.
 #pragma once
 
+#include "core/lookup_table.hpp"
 #include "registry/signal.hpp"
 
 #include <array>
 #include <cstdint>
+#include <memory>
 
 namespace beamctl::motion {
 
@@ -21,6 +25,8 @@ struct EncoderParams {
     uint64_t mask = ~uint64_t(0); // applied to the raw value first
     double abs_offset = 0;    // absolute: added to the position [units]
     int filter_size = 10;     // velocity moving average [cycles], 1..kMaxFilter
+    std::shared_ptr<const LookupTable> correction; // lookuptable (null: none)
+    double correction_range = 0, correction_scale = 1; // [units]; factor
     static constexpr int kMaxFilter = 100;
 };
 

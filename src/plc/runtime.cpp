@@ -15,6 +15,7 @@ namespace {
 
 // ECMC error codes returned by the mc_* and ec_* functions (ecmcPLCTask.h, ecmcErrorsList.h).
 constexpr double kAxisIdOutOfRange = 0x20502;   // ERROR_PLC_AXIS_ID_OUT_OF_RANGE
+constexpr double kAxisObjectNull = 0x20508;     // ERROR_PLC_AXIS_OBJECT_NULL (also: no such group)
 constexpr double kEcBitsOutOfRange = 0x20800;   // ERROR_PLC_EC_LIB_BITS_OUT_OF_RANGE
 constexpr uint32_t kEncIndexOutOfRange = 0x14326; // ECMC: encoder index out of range (mc_*_act_pos)
 
@@ -616,6 +617,24 @@ struct Builtins {
         localtime_r(&t, &tm);
         return Field == 1 ? tm.tm_sec : Field == 2 ? tm.tm_min : tm.tm_hour;
     }
+    // ec_get_time_frm_src(clockId): clock_gettime(clockId) [ns], 0 for an invalid id (vDSO: no
+    // system call for the usual clocks); ec_get_time_offset_mono(): ECMC's offset added to the
+    // monotonic clock, 0 here (the cycle's time is its own clock)
+    static double time_from_source(void*, const double* a, int) noexcept {
+        if (!(a[0] >= 0 && a[0] < 16)) return 0;
+        timespec ts{};
+        if (clock_gettime(clockid_t(a[0]), &ts) != 0) return 0;
+        return double(ts.tv_sec) * 1e9 + double(ts.tv_nsec);
+    }
+    static double time_offset_mono(void*, const double*, int) noexcept { return 0; }
+    // ec_get_dom_state(domain): 1 if the bus of that index is OK (a domain per bus here), else 0;
+    // -0x20056 for no such domain
+    static double dom_state(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        if (!(a[0] >= 0 && a[0] < double(rt.opt_.bus_ok.size()))) return -double(0x20056);
+        const registry::BoundSignal& s = rt.opt_.bus_ok[std::size_t(a[0])];
+        return s.bound() && s.get() != 0 ? 1 : 0;
+    }
     static double ec_err_rst(void* c, const double*, int) noexcept {
         static_cast<PlcRuntime*>(c)->ec_error_ = 0;
         return 0;
@@ -722,6 +741,235 @@ struct Builtins {
         return static_cast<PlcRuntime*>(c)->epics_state_.load(std::memory_order_relaxed) >= kAfterIocRunning ? 1 : 0;
     }
 
+    // ---- mc_grp_*: ECMC axis groups (ecmcAxisGroup); a bad group id sets mc_errorCode --------
+    static constexpr int kMaxGroups = 128;
+    static const std::vector<motion::Axis*>* group(PlcRuntime& rt, double g) noexcept {
+        if (!(g >= 0 && g < kMaxGroups)) {
+            rt.mc_error_ = kAxisIdOutOfRange; // ECMC checks groups as axes: 0x20502
+            return nullptr;
+        }
+        if (g >= double(rt.groups_.size())) {
+            rt.mc_error_ = kAxisObjectNull; // 0x20508: no such group
+            return nullptr;
+        }
+        return &rt.groups_[std::size_t(g)];
+    }
+    // "all" (an empty group: false, as ECMC) / "any" of a member predicate; 0 for a bad group
+    template <bool All, typename F> static double grp_test(void* c, const double* a, F f) noexcept {
+        const auto* g = group(*static_cast<PlcRuntime*>(c), a[0]);
+        if (!g || g->empty()) return 0;
+        for (motion::Axis* x : *g)
+            if (f(*x) != All) return All ? 0 : 1;
+        return All ? 1 : 0;
+    }
+    static double grp_get_enable(void* c, const double* a, int) noexcept {
+        return grp_test<true>(c, a, [](motion::Axis& x) { return x.status().enable_cmd; });
+    }
+    static double grp_get_any_enable(void* c, const double* a, int) noexcept {
+        return grp_test<false>(c, a, [](motion::Axis& x) { return x.status().enable_cmd; });
+    }
+    static double grp_get_enabled(void* c, const double* a, int) noexcept {
+        return grp_test<true>(c, a, [](motion::Axis& x) { return x.status().enabled && x.status().enable_cmd; });
+    }
+    static double grp_get_any_enabled(void* c, const double* a, int) noexcept {
+        return grp_test<false>(c, a, [](motion::Axis& x) { return x.status().enabled; });
+    }
+    static double grp_get_busy(void* c, const double* a, int) noexcept {
+        return grp_test<true>(c, a, [](motion::Axis& x) { return x.status().busy; });
+    }
+    static double grp_get_any_busy(void* c, const double* a, int) noexcept {
+        return grp_test<false>(c, a, [](motion::Axis& x) { return x.status().busy; });
+    }
+    static double grp_get_traj_src_ext(void* c, const double* a, int) noexcept {
+        return grp_test<true>(c, a, [](motion::Axis& x) { return x.variables().traj.source != 0; });
+    }
+    static double grp_get_any_traj_src_ext(void* c, const double* a, int) noexcept {
+        return grp_test<false>(c, a, [](motion::Axis& x) { return x.variables().traj.source != 0; });
+    }
+    static double grp_get_any_at_fwd_limit(void* c, const double* a, int) noexcept {
+        return grp_test<false>(c, a, [](motion::Axis& x) { return x.status().limit_fwd; });
+    }
+    static double grp_get_any_at_bwd_limit(void* c, const double* a, int) noexcept {
+        return grp_test<false>(c, a, [](motion::Axis& x) { return x.status().limit_bwd; });
+    }
+    static double grp_get_any_at_limit(void* c, const double* a, int) noexcept {
+        return grp_test<false>(c, a, [](motion::Axis& x) { return x.status().limit_fwd || x.status().limit_bwd; });
+    }
+    static double grp_get_any_ilocked(void* c, const double* a, int) noexcept {
+        return grp_test<false>(c, a, [](motion::Axis& x) { return x.status().ilock_fwd || x.status().ilock_bwd; });
+    }
+    static double grp_get_ctrl_within_db(void* c, const double* a, int) noexcept {
+        return grp_test<true>(c, a, [](motion::Axis& x) { return x.within_controller_deadband(); });
+    }
+    static double grp_get_any_error_id(void* c, const double* a, int) noexcept {
+        const auto* g = group(*static_cast<PlcRuntime*>(c), a[0]);
+        if (g)
+            for (motion::Axis* x : *g)
+                if (x->status().error_id) return x->status().error_id;
+        return 0;
+    }
+    static double grp_axis_in_grp(void* c, const double* a, int) noexcept {
+        return grp_test<false>(c, a, [id = a[1]](motion::Axis& x) { return double(x.params().id) == id; });
+    }
+    static double grp_size(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        const auto* g = group(rt, a[0]);
+        return g ? double(g->size()) : rt.mc_error_;
+    }
+    // Each member in turn; the first error stops it and is returned ("Rerr" functions; a bad
+    // group returns its error code). R0: the same, returning 0 whatever happened.
+    template <bool ReturnsError, typename F> static double grp_each(void* c, const double* a, F f) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        const auto* g = group(rt, a[0]);
+        if (!g) return ReturnsError ? rt.mc_error_ : 0;
+        for (motion::Axis* x : *g)
+            if (uint32_t e = f(*x)) return ReturnsError ? result(rt, e) : 0;
+        return 0;
+    }
+    static uint32_t power(motion::Axis& x, bool on) noexcept {
+        if (x.status().enable_cmd == on) return 0;
+        motion::AxisCommand p{motion::CommandType::Power};
+        p.on = on;
+        return x.command(p);
+    }
+    static double grp_set_enable(void* c, const double* a, int) noexcept {
+        bool on = a[1] != 0;
+        return grp_each<true>(c, a, [on](motion::Axis& x) { return power(x, on); });
+    }
+    static double grp_set_traj_src(void* c, const double* a, int) noexcept {
+        int src = int(a[1]);
+        return grp_each<true>(c, a, [src](motion::Axis& x) { return x.set_traj_source(src); });
+    }
+    static double grp_set_enc_src(void* c, const double* a, int) noexcept {
+        int src = int(a[1]);
+        return grp_each<true>(c, a, [src](motion::Axis& x) { return x.set_enc_source(src); });
+    }
+    static double grp_reset_error(void* c, const double* a, int) noexcept {
+        grp_each<true>(c, a, [](motion::Axis& x) {
+            (void)x.command(motion::AxisCommand{motion::CommandType::Reset});
+            return 0u;
+        });
+        return 0;
+    }
+    static double grp_set_error(void* c, const double* a, int) noexcept {
+        uint32_t id = a[1] > 0 && a[1] < 4294967296.0 ? uint32_t(a[1]) : 0;
+        return grp_each<true>(c, a, [id](motion::Axis& x) {
+            if (id) x.raise_error(id);
+            else (void)x.command(motion::AxisCommand{motion::CommandType::Reset});
+            return 0u;
+        });
+    }
+    template <uint32_t Id, bool ReturnsError> static double grp_raise(void* c, const double* a, int) noexcept {
+        return grp_each<ReturnsError>(c, a, [](motion::Axis& x) {
+            x.raise_error(Id);
+            return 0u;
+        });
+    }
+    static double grp_halt(void* c, const double* a, int) noexcept {
+        return grp_each<true>(c, a, [](motion::Axis& x) {
+            (void)x.command(motion::AxisCommand{motion::CommandType::Halt});
+            return 0u;
+        });
+    }
+    template <typename F> static double grp_set(void* c, const double* a, F f) noexcept {
+        return grp_each<false>(c, a, [&](motion::Axis& x) {
+            f(x, a[1] != 0);
+            return 0u;
+        });
+    }
+    static double grp_set_allow_src_change(void* c, const double* a, int) noexcept {
+        return grp_set(c, a, [](motion::Axis& x, bool on) { x.set_allow_source_change(on); });
+    }
+    static double grp_set_autoenable_enable(void* c, const double* a, int) noexcept {
+        return grp_set(c, a, [](motion::Axis& x, bool on) { x.set_auto_enable(on); });
+    }
+    static double grp_set_autodisable_enable(void* c, const double* a, int) noexcept {
+        return grp_set(c, a, [](motion::Axis& x, bool on) { x.set_auto_disable(on); });
+    }
+    static double grp_set_ctrl_within_db(void* c, const double* a, int) noexcept {
+        return grp_set(c, a, [](motion::Axis& x, bool on) { x.set_within_deadband_external(on); });
+    }
+    // motor-record requests (ECMC: the record's SYNC, STOP, CNEN), acted on when set to 1
+    static double grp_mr_set_sync(void* c, const double* a, int) noexcept {
+        return grp_set(c, a, [](motion::Axis& x, bool on) { if (on) x.request_mr_sync(); });
+    }
+    static double grp_mr_set_stop(void* c, const double* a, int) noexcept {
+        return grp_set(c, a, [](motion::Axis& x, bool on) { if (on) x.request_mr_stop(); });
+    }
+    static double grp_mr_set_cnen(void* c, const double* a, int) noexcept {
+        return grp_set(c, a, [](motion::Axis& x, bool on) { (void)power(x, on); });
+    }
+    static double grp_ignore(void* c, const double* a, int) noexcept { // no status check at disable here
+        return grp_set(c, a, [](motion::Axis&, bool) {});
+    }
+    // mc_mr_set_sync/stop/cnen(ax, value): one axis's motor record (refused while blockcom)
+    template <int Which> static double mr_set(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        motion::Axis& x = *rt.opt_.axes[std::size_t(i)];
+        if (x.variables().blockcom != 0) return result(rt, motion::error_id::kBlockCom);
+        if (x.variables().allowplccmd == 0) return result(rt, motion::error_id::kCommandsBlocked);
+        bool on = a[1] != 0;
+        if (Which == 0 && on) x.request_mr_sync();
+        if (Which == 1 && on) x.request_mr_stop();
+        if (Which == 2) return result(rt, power(x, on));
+        return 0;
+    }
+    static double set_autoenable(void* ctx, const double* a, int) noexcept {
+        return query(ctx, a, [on = a[1] != 0](motion::Axis& x) { x.set_auto_enable(on); return 0.0; });
+    }
+    static double set_autodisable(void* ctx, const double* a, int) noexcept {
+        return query(ctx, a, [on = a[1] != 0](motion::Axis& x) { x.set_auto_disable(on); return 0.0; });
+    }
+
+    // lut_get_value(lut, x): the table's linear interpolation at x; 0 for a missing table
+    static double lut_get_value(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        if (!(a[0] >= 0 && a[0] < PlcRuntime::kMaxLuts)) return 0;
+        const LookupTable* t = rt.lut_by_id_[int(a[0])];
+        return t ? t->value(a[1]) : 0;
+    }
+
+    // ---- m2m_*: values shared with the PLCs of other IOCs (plc/m2m.hpp) -----------------------
+    static double m2m_fail(PlcRuntime& rt, uint32_t code) noexcept {
+        rt.m2m_error_ = code;
+        return code;
+    }
+    static double m2m_write(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        if (!rt.opt_.m2m) return m2m_fail(rt, M2m::kNotValid);
+        uint32_t e = rt.opt_.m2m->write(a[0], a[1]);
+        return e ? m2m_fail(rt, e) : 0;
+    }
+    static double m2m_read(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        if (!rt.opt_.m2m) {
+            m2m_fail(rt, M2m::kNotValid);
+            return 0;
+        }
+        uint32_t e = 0;
+        double v = rt.opt_.m2m->read(a[0], e);
+        if (e) m2m_fail(rt, e);
+        return v;
+    }
+    static double m2m_stat(void* c, const double*, int) noexcept {
+        return static_cast<PlcRuntime*>(c)->opt_.m2m ? 1 : -double(M2m::kNotValid);
+    }
+    static double m2m_get_err(void* c, const double*, int) noexcept { return static_cast<PlcRuntime*>(c)->m2m_error_; }
+    static double m2m_err_rst(void* c, const double*, int) noexcept {
+        static_cast<PlcRuntime*>(c)->m2m_error_ = 0;
+        return 0;
+    }
+    static double m2m_ioc_run(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        return rt.opt_.m2m ? rt.opt_.m2m->ioc_running(a[0]) : -1;
+    }
+    static double m2m_ioc_ec_ok(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        return rt.opt_.m2m ? rt.opt_.m2m->ioc_ec_ok(a[0]) : -1;
+    }
+
     // A plugin function: ctx is the Plugin::Function.
     static double plugin(void* ctx, const double* a, int) noexcept {
         return static_cast<const Plugin::Function*>(ctx)->fn(a);
@@ -767,8 +1015,53 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
         {"ds_append_to_ds", Builtins::ds_append_to_ds, 4, 4, false}, {"ds_get_err", Builtins::ds_get_err, 0, 0, false},
         {"ds_err_rst", Builtins::ds_err_rst, 0, 0, false},
         {"epics_get_state", Builtins::epics_state, 0, 0, false}, {"epics_get_started", Builtins::epics_started, 0, 0, false},
+        {"mc_grp_get_enable", Builtins::grp_get_enable, 1, 1, true},
+        {"mc_grp_get_any_enable", Builtins::grp_get_any_enable, 1, 1, true},
+        {"mc_grp_get_enabled", Builtins::grp_get_enabled, 1, 1, true},
+        {"mc_grp_get_any_enabled", Builtins::grp_get_any_enabled, 1, 1, true},
+        {"mc_grp_get_busy", Builtins::grp_get_busy, 1, 1, true},
+        {"mc_grp_get_any_busy", Builtins::grp_get_any_busy, 1, 1, true},
+        {"mc_grp_get_any_error_id", Builtins::grp_get_any_error_id, 1, 1, true},
+        {"mc_grp_set_enable", Builtins::grp_set_enable, 2, 2, true},
+        {"mc_grp_set_traj_src", Builtins::grp_set_traj_src, 2, 2, true},
+        {"mc_grp_set_enc_src", Builtins::grp_set_enc_src, 2, 2, true},
+        {"mc_grp_reset_error", Builtins::grp_reset_error, 1, 1, true},
+        {"mc_grp_set_error", Builtins::grp_set_error, 2, 2, true},
+        {"mc_grp_set_slaved_axis_in_error", Builtins::grp_raise<motion::error_id::kSlavedAxisInError, true>, 1, 1, true},
+        {"mc_grp_set_slaved_axis_ilocked", Builtins::grp_raise<motion::error_id::kSlavedAxisInterlock, false>, 1, 1, true},
+        {"mc_grp_halt", Builtins::grp_halt, 1, 1, true},
+        {"mc_grp_axis_in_grp", Builtins::grp_axis_in_grp, 2, 2, true},
+        {"mc_grp_size", Builtins::grp_size, 1, 1, true},
+        {"mc_grp_get_traj_src_ext", Builtins::grp_get_traj_src_ext, 1, 1, true},
+        {"mc_grp_get_any_traj_src_ext", Builtins::grp_get_any_traj_src_ext, 1, 1, true},
+        {"mc_grp_set_allow_src_change_when_enabled", Builtins::grp_set_allow_src_change, 2, 2, true},
+        {"mc_grp_mr_set_sync", Builtins::grp_mr_set_sync, 2, 2, true},
+        {"mc_grp_mr_set_stop", Builtins::grp_mr_set_stop, 2, 2, true},
+        {"mc_grp_mr_set_cnen", Builtins::grp_mr_set_cnen, 2, 2, true},
+        {"mc_grp_set_ignore_mr_status_check_at_disable", Builtins::grp_ignore, 2, 2, true},
+        {"mc_grp_get_any_at_fwd_limit", Builtins::grp_get_any_at_fwd_limit, 1, 1, true},
+        {"mc_grp_get_any_at_bwd_limit", Builtins::grp_get_any_at_bwd_limit, 1, 1, true},
+        {"mc_grp_get_any_at_limit", Builtins::grp_get_any_at_limit, 1, 1, true},
+        {"mc_grp_get_any_ilocked", Builtins::grp_get_any_ilocked, 1, 1, true},
+        {"mc_grp_set_autoenable_enable", Builtins::grp_set_autoenable_enable, 2, 2, true},
+        {"mc_grp_set_autodisable_enable", Builtins::grp_set_autodisable_enable, 2, 2, true},
+        {"mc_grp_set_ctrl_within_db", Builtins::grp_set_ctrl_within_db, 2, 2, true},
+        {"mc_grp_get_ctrl_within_db", Builtins::grp_get_ctrl_within_db, 1, 1, true},
+        {"mc_mr_set_sync", Builtins::mr_set<0>, 2, 2, true}, {"mc_mr_set_stop", Builtins::mr_set<1>, 2, 2, true},
+        {"mc_mr_set_cnen", Builtins::mr_set<2>, 2, 2, true},
+        {"mc_set_autoenable_enable", Builtins::set_autoenable, 2, 2, true},
+        {"mc_set_autodisable_enable", Builtins::set_autodisable, 2, 2, true},
+        {"lut_get_value", Builtins::lut_get_value, 2, 2, false},
+        {"ec_get_time_frm_src", Builtins::time_from_source, 1, 1, false},
+        {"ec_get_time_offset_mono", Builtins::time_offset_mono, 0, 0, false},
+        {"ec_get_dom_state", Builtins::dom_state, 1, 1, false},
+        {"m2m_write", Builtins::m2m_write, 2, 2, false},   {"m2m_read", Builtins::m2m_read, 1, 1, false},
+        {"m2m_stat", Builtins::m2m_stat, 0, 0, false},     {"m2m_get_err", Builtins::m2m_get_err, 0, 0, false},
+        {"m2m_err_rst", Builtins::m2m_err_rst, 0, 0, false}, {"m2m_ioc_run", Builtins::m2m_ioc_run, 1, 1, false},
+        {"m2m_ioc_ec_ok", Builtins::m2m_ioc_ec_ok, 1, 1, false},
     };
     std::string n = lower(name);
+    if (n.rfind("m2m_", 0) == 0) rt.uses_m2m_ = true;
     if (n == "ec_print_hex") return FunctionInfo{Builtins::print_bits<true>, this, 3, 3};
     if (n == "ec_print_bin") return FunctionInfo{Builtins::print_bits<false>, this, 3, 3};
     for (const Entry& e : table)
@@ -782,6 +1075,14 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
 // ---- the runtime -----------------------------------------------------------------------------
 
 PlcRuntime::PlcRuntime(Options options) : opt_(std::move(options)), output_(256) {
+    for (const auto& ids : opt_.groups) {
+        groups_.emplace_back();
+        for (int id : ids)
+            for (motion::Axis* a : opt_.axes)
+                if (a->params().id == id) groups_.back().push_back(a);
+    }
+    for (const auto& [id, t] : opt_.luts)
+        if (id >= 0 && id < kMaxLuts) lut_by_id_[id] = t;
     for (daq::DataStorage* d : opt_.storages)
         if (d && d->id() >= 0 && d->id() < daq::kMaxStorages) storage_by_id_[d->id()] = d;
     axis_plcs_.assign(opt_.axes.size(), nullptr);
@@ -878,6 +1179,11 @@ void PlcRuntime::scan(Plc& p, const rt::CycleInfo& c) noexcept {
 }
 
 void PlcRuntime::run(const rt::CycleInfo& c) noexcept {
+    if (opt_.m2m) { // this IOC's state for the others' m2m_ioc_run / m2m_ioc_ec_ok
+        bool ok = true;
+        for (const registry::BoundSignal& s : opt_.bus_ok) ok = ok && (!s.bound() || s.get() != 0);
+        opt_.m2m->set_state(ok);
+    }
     for (auto& p : plcs_)
         if (!p->src.axis_plc) scan(*p, c);
     for (Plugin* p : opt_.plugins) (void)p->realtime(0); // after the general PLCs (plugin.h)

@@ -16,7 +16,8 @@
 //   plugin constants
 // Functions: ExprTk's math (the language), ec_* bit operations and ec_get_time, mc_* motion
 // function blocks (on the axis command API, acting on the rising edge of `execute`, returning
-// ECMC error codes), ds_* data storage functions, epics_get_started/state, and plugin functions.
+// ECMC error codes), mc_grp_* on ECMC axis groups, ds_* data storage functions, lut_get_value,
+// epics_get_started/state, and plugin functions.
 // A run-time fault (index out of range, loop budget) latches the PLC's `error` (cleared when it
 // is enabled again) and the scan's remaining code is skipped; the next scan runs normally.
 //
@@ -26,10 +27,12 @@
 #pragma once
 
 #include "core/macros.hpp"
+#include "core/lookup_table.hpp"
 #include "core/spsc_queue.hpp"
 #include "daq/data_storage.hpp"
 #include "motion/axis.hpp"
 #include "motion/axis_group.hpp"
+#include "plc/m2m.hpp"
 #include "plc/plugin.hpp"
 #include "plc/program.hpp"
 #include "registry/signal.hpp"
@@ -82,7 +85,11 @@ public:
         // check_only: the axis ids that exist (nullopt: any id)
         std::optional<std::vector<int>> known_axis_ids;
         std::vector<Plugin*> plugins;      // functions and constants by name
+        // ECMC axis groups (axis.group): the axis ids of group g, for mc_grp_*(g, ...)
+        std::vector<std::vector<int>> groups;
         std::vector<daq::DataStorage*> storages; // ds<id> by DataStorage::id()
+        std::vector<std::pair<int, const LookupTable*>> luts; // lut_get_value(id, x): id 0..15
+        M2m* m2m = nullptr; // m2m_* (null: their calls report 0x2005A, shared memory not valid)
         // check_only: the storage ids that exist (nullopt: any id 0..31)
         std::optional<std::vector<int>> known_storage_ids;
         std::uint64_t loop_budget = 1000000; // loop iterations per scan before a fault
@@ -132,6 +139,9 @@ public:
     // epics_get_state() and epics_get_started().
     void set_epics_state(int state) noexcept { epics_state_.store(state, std::memory_order_relaxed); }
 
+    // Some PLC's code calls an m2m_* function (the IOC then opens the shared memory).
+    bool uses_m2m() const noexcept { return uses_m2m_; }
+
     // The cells a name is bound to (tests and diagnostics; nullptr if no PLC uses it).
     const double* global(const std::string& name) const;
     const double* static_variable(std::size_t plc, const std::string& name) const;
@@ -147,6 +157,7 @@ private:
     std::vector<std::unique_ptr<Plc>> plcs_;
     std::vector<Plc*> axis_plcs_; // by AxisGroup index
     std::vector<int> axis_by_id_; // axis id (mc_* first argument) -> AxisGroup index, -1 none
+    std::vector<std::vector<motion::Axis*>> groups_; // ECMC axis groups' members
     std::deque<double> globals_cells_;
     std::map<std::string, double*> globals_;
     bool started_ = false; // every bus was OK once
@@ -160,7 +171,11 @@ private:
     double ec_error_ = 0; // last ec_* error (ec_get_err)
     double ds_error_ = 0; // last ds_* error (ds_get_err)
     daq::DataStorage* storage_by_id_[daq::kMaxStorages] = {};
+    static constexpr int kMaxLuts = 16;
+    const LookupTable* lut_by_id_[kMaxLuts] = {};
     std::atomic<int> epics_state_{0};
+    double m2m_error_ = 0;
+    bool uses_m2m_ = false;
     struct Output {
         int plc = 0;
         std::uint16_t len = 0;

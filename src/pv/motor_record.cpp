@@ -326,6 +326,7 @@ public:
     char out_text[64] = {};
     uint16_t scan_field = 0; // SCAN as clients see it (the record is polled by poll_tick)
     bool processing_ = false; // inside process()
+    uint32_t sync_seen_ = 0, stop_seen_ = 0; // the driver's request counts acted on
 
     static std::vector<FieldDesc> fields();
 
@@ -1182,6 +1183,20 @@ void MotorRecordImpl::run(bool work) {
     bool was_done = dmov != 0;
     pact = 1;
     refresh();
+    // the controller's requests (ECMC's SYNC / STOP from PLC code), counted since the first look
+    if (!initialised_) {
+        sync_seen_ = st_.sync_requests;
+        stop_seen_ = st_.stop_requests;
+    }
+    if (st_.stop_requests != stop_seen_) {
+        stop_seen_ = st_.stop_requests;
+        stop = 1;
+        work = true;
+    }
+    if (st_.sync_requests != sync_seen_) {
+        sync_seen_ = st_.sync_requests;
+        if (phase_ == Phase::Idle && dmov) resync();
+    }
     if (st_.valid && !valid_seen_) { // the first real readback: the targets start there
         valid_seen_ = true;
         if (phase_ == Phase::Idle && dmov) resync();

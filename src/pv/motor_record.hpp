@@ -48,6 +48,9 @@ public:
         bool failed = false;
         bool limit_violation = false; // ... for a soft limit (its own or, for a virtual axis, a
                                       // real axis's): the record sets LVIO
+        // Requests from the controller (ECMC mc_mr_set_sync/stop): when a count changes, the
+        // record takes the readback as its target (when idle), or stops as for STOP=1.
+        uint32_t sync_requests = 0, stop_requests = 0;
     };
     virtual Status status() = 0; // latest, cheap; called when the record polls
 };

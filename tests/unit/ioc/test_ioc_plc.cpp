@@ -15,6 +15,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <sys/mman.h>
+#include <unistd.h>
 
 using namespace beamctl;
 
@@ -252,6 +254,168 @@ TEST(IocPlc, EcmcFunctionsOfIssue13) {
     EXPECT_LT(after_1s, 42 - 1.0);
     v.cycles(18000);
     EXPECT_NEAR(v.stat(0, "set"), 7.0, 1e-6);
+}
+
+// ECMC axis groups (axis.group, mc_grp_*): groups numbered in the order the axes name them,
+// GRP_<name>_ID macros in every PLC, all/any tests, enable and sources of every member, halt,
+// an error raised on the group and reset, the motor-record requests, and bad group ids.
+TEST(IocPlc, AxisGroups) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    std::ifstream in(kSource + "/examples/demo/axes/virtual.yaml");
+    std::string axis((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    axis.replace(axis.find("  type: virtual\n"), 16, "  type: virtual\n  group: ${GRP}\n");
+    d.write("grp_axis.yaml", axis);
+    auto ax = [](int id, const char* grp) {
+        return "  - {file: grp_axis.yaml, macros: {AX_ID: " + std::to_string(id) + ", AX_NAME: V" + std::to_string(id) +
+               ", DESC: v, LOW: -100, HIGH: 100, GRP: " + grp + "}}\n";
+    };
+    d.write("main.plc", R"(
+        static.n += 1;
+        if (static.n == 1) {
+          static.real := ${GRP_real_ID}; static.virt := ${GRP_virt_ID};
+          static.size := mc_grp_size(${GRP_real_ID});
+          static.in2 := mc_grp_axis_in_grp(${GRP_real_ID}, 2);
+          static.in3 := mc_grp_axis_in_grp(${GRP_real_ID}, 3);
+          static.enc := mc_grp_set_enc_src(${GRP_real_ID}, 0);
+          static.anyEnable0 := mc_grp_get_any_enable(${GRP_real_ID});
+          static.ena := mc_grp_set_enable(${GRP_real_ID}, 1);
+        };
+        if (static.n == 50) {
+          static.allEnabled := mc_grp_get_enabled(${GRP_real_ID});
+          static.virtAny := mc_grp_get_any_enabled(${GRP_virt_ID});
+          static.src := mc_grp_set_traj_src(${GRP_real_ID}, 1);
+        };
+        if (static.n == 51) {
+          static.srcExt := mc_grp_get_traj_src_ext(${GRP_real_ID});
+          mc_grp_set_traj_src(${GRP_real_ID}, 0);
+        };
+        if (static.n == 52) { static.srcExtAfter := mc_grp_get_any_traj_src_ext(${GRP_real_ID}); mc_move_abs(1, 1, 5, 1, 5, 5); };
+        if (static.n == 100) {
+          static.anyBusy := mc_grp_get_any_busy(${GRP_real_ID});
+          static.allBusy := mc_grp_get_busy(${GRP_real_ID});
+          mc_grp_halt(${GRP_real_ID});
+        };
+        if (static.n == 2000) {
+          static.busyAfterHalt := mc_grp_get_any_busy(${GRP_real_ID});
+          mc_grp_set_slaved_axis_in_error(${GRP_real_ID});
+        };
+        if (static.n == 2002) {
+          static.err := mc_grp_get_any_error_id(${GRP_real_ID});
+          static.enableAfterErr := mc_grp_get_any_enable(${GRP_real_ID});
+          mc_grp_reset_error(${GRP_real_ID});
+          mc_grp_mr_set_sync(${GRP_real_ID}, 1);
+        };
+        if (static.n == 2004) {
+          static.errAfterReset := mc_grp_get_any_error_id(${GRP_real_ID});
+          static.bad := mc_grp_size(7); static.badErr := mc_get_err();
+          static.range := mc_grp_get_busy(200); static.rangeErr := mc_get_err();
+        };
+        ax1.enc.actpos := ax1.traj.setpos; ax2.enc.actpos := ax2.traj.setpos; ax3.enc.actpos := ax3.traj.setpos;
+    )");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("axes:\n" + ax(1, "real") + ax(3, "virt") + ax(2, "real"),
+                                              "plcs:\n  - {id: 0, file: main.plc}\n")));
+    v.cycles(60);
+    EXPECT_EQ(v.stat(0, "real"), 0); // named first
+    EXPECT_EQ(v.stat(0, "virt"), 1);
+    EXPECT_EQ(v.stat(0, "size"), 2);
+    EXPECT_EQ(v.stat(0, "in2"), 1);
+    EXPECT_EQ(v.stat(0, "in3"), 0);
+    EXPECT_EQ(v.stat(0, "enc"), 0);
+    EXPECT_EQ(v.stat(0, "anyEnable0"), 0);
+    EXPECT_EQ(v.stat(0, "ena"), 0);
+    EXPECT_EQ(v.stat(0, "allEnabled"), 1);
+    EXPECT_EQ(v.stat(0, "virtAny"), 0); // axis 3 was not in the group enabled
+    EXPECT_EQ(v.stat(0, "src"), 0);     // allowSrcChangeWhenEnabled: true
+    EXPECT_EQ(v.stat(0, "srcExt"), 1);
+    EXPECT_EQ(v.stat(0, "srcExtAfter"), 0);
+    v.cycles(60);
+    EXPECT_EQ(v.stat(0, "anyBusy"), 1); // axis 1 moves, axis 2 does not
+    EXPECT_EQ(v.stat(0, "allBusy"), 0);
+    v.cycles(1900);
+    EXPECT_EQ(v.stat(0, "busyAfterHalt"), 0);
+    EXPECT_LT(v.axis("V1").status().act_pos, 1.0); // halted long before 5
+    v.cycles(6);
+    EXPECT_EQ(v.stat(0, "err"), 0x1432B);
+    EXPECT_EQ(v.stat(0, "enableAfterErr"), 0); // an error disables, as the axis's own
+    EXPECT_EQ(v.stat(0, "errAfterReset"), 0);
+    EXPECT_EQ(v.axis("V1").status().mr_sync_requests, 1u);
+    EXPECT_EQ(v.axis("V3").status().mr_sync_requests, 0u);
+    EXPECT_EQ(v.stat(0, "bad"), 0x20508);   // no group 7
+    EXPECT_EQ(v.stat(0, "badErr"), 0x20508);
+    EXPECT_EQ(v.stat(0, "range"), 0);
+    EXPECT_EQ(v.stat(0, "rangeErr"), 0x20502);
+}
+
+// m2m between two IOCs (here two in one process, as two processes would: one shared-memory
+// object by name): values written by one PLC are read by the other's; each sees the other
+// running and its EtherCAT state; bad indices give ECMC's codes.
+TEST(IocPlc, M2mBetweenTwoIocs) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    std::string shm = "beamctl_test_m2m_" + std::to_string(::getpid());
+    d.write("a.plc", "static.n += 1;\nm2m_write(3, static.n * 2);\nstatic.bad := m2m_write(120, 1);\n");
+    d.write("b.plc", R"(
+        static.v := m2m_read(3);
+        static.run0 := m2m_ioc_run(0); static.ok0 := m2m_ioc_ec_ok(0);
+        static.run5 := m2m_ioc_run(5); static.okSelf := m2m_ioc_ec_ok(-2); static.runSelf := m2m_ioc_run(-2);
+        static.range := m2m_ioc_run(16); static.stat := m2m_stat();
+        static.r := m2m_read(-1); static.err := m2m_get_err();
+    )");
+    std::string a_yaml = ioc_yaml("", "plcs:\n  - {id: 0, file: a.plc}\n", "m2m: {name: " + shm + "}\n");
+    std::string b_yaml = "ioc: {name: B}\nengine: {rate_hz: 1000}\nplcs:\n  - {id: 0, file: b.plc}\nm2m: {name: " + shm + ", master: -2}\n";
+    {
+        VirtualIoc a(d.write("a.yaml", a_yaml));
+        VirtualIoc b(d.write("b.yaml", b_yaml));
+        a.cycles(10);
+        b.cycles(1);
+        EXPECT_EQ(a.stat(0, "bad"), 0x20059);
+        EXPECT_EQ(b.stat(0, "v"), a.stat(0, "n") * 2);
+        EXPECT_GT(b.stat(0, "v"), 0);
+        EXPECT_EQ(b.stat(0, "run0"), 1);
+        EXPECT_EQ(b.stat(0, "ok0"), 1);
+        EXPECT_EQ(b.stat(0, "run5"), 0);
+        EXPECT_EQ(b.stat(0, "runSelf"), 1);
+        EXPECT_EQ(b.stat(0, "okSelf"), 0); // no master: never EtherCAT OK (ECMC)
+        EXPECT_EQ(b.stat(0, "range"), -1);
+        EXPECT_EQ(b.stat(0, "stat"), 1);
+        EXPECT_EQ(b.stat(0, "r"), 0);
+        EXPECT_EQ(b.stat(0, "err"), 0x20059);
+        a.cycles(5);
+        b.cycles(1);
+        EXPECT_EQ(b.stat(0, "v"), 30);
+    }
+    {   // IOC a stopped: b sees it gone
+        VirtualIoc b(d.write("b.yaml", b_yaml));
+        b.cycles(1);
+        EXPECT_EQ(b.stat(0, "run0"), 0);
+        EXPECT_EQ(b.stat(0, "v"), 30); // the values stay in the shared memory
+    }
+    ::shm_unlink(("/" + shm).c_str());
+}
+
+// lut_get_value on a table of the IOC file's `luts:` (ECMC's LUT file format).
+TEST(IocPlc, LookupTables) {
+    TempDir d;
+    d.write("plant.yaml", kPlant);
+    d.write("corr.lut", "# x y\nPREC=5\n-10, -9\n0 1\n10 21 extra\n");
+    d.write("main.plc", "static.a := lut_get_value(2, 5);\nstatic.b := lut_get_value(2, -50);\n"
+                        "static.c := lut_get_value(2, 10);\nstatic.none := lut_get_value(3, 5);\n");
+    VirtualIoc v(d.write("ioc.yaml", ioc_yaml("", "plcs:\n  - {id: 0, file: main.plc}\n", "luts:\n  - {id: 2, file: corr.lut}\n")));
+    v.cycles(1);
+    EXPECT_DOUBLE_EQ(v.stat(0, "a"), 11);  // halfway between (0, 1) and (10, 21)
+    EXPECT_DOUBLE_EQ(v.stat(0, "b"), -9);  // clamped below
+    EXPECT_DOUBLE_EQ(v.stat(0, "c"), 21);
+    EXPECT_DOUBLE_EQ(v.stat(0, "none"), 0); // no table 3
+    d.write("bad.lut", "0 1\n1 2\n1 3\n");
+    try {
+        VirtualIoc bad(d.write("bad.yaml", ioc_yaml("", "", "luts:\n  - {id: 0, file: bad.lut}\n")));
+        FAIL() << "loaded";
+    } catch (const Error& e) {
+        std::string w = e.what();
+        EXPECT_NE(w.find("bad.yaml:"), std::string::npos) << w;
+        EXPECT_NE(w.find("bad.lut:3: x 1 should be greater"), std::string::npos) << w;
+    }
 }
 
 // ec_* bit operations and ec_get_time (the cycle's time, ns).

@@ -175,6 +175,37 @@ TEST(Encoder, IncrementalWrapsBackwardsAndFiltersVelocity) {
     EXPECT_NEAR(e.velocity(), -5000, 1e-9);
 }
 
+// ECMC's encoder `lookuptable:` correction: scale * table(x) subtracted once homed; with a range,
+// x is the position modulo the range (negative positions wrapped into [0, range)).
+TEST(Encoder, LookupTableCorrection) {
+    uint8_t image[8] = {};
+    BoundSignal raw{image, 0, 32, false, -1};
+    EncoderParams p;
+    p.bits = 32;
+    p.numerator = 1;
+    p.denominator = 100; // 0.01 per count
+    p.correction = std::make_shared<const LookupTable>(LookupTable::parse("0 0\n5 0.5\n10 0\n", "c.lut"));
+    p.correction_scale = 2;
+    Encoder e(p, raw);
+    raw.set(250);
+    e.update(0.001);
+    EXPECT_DOUBLE_EQ(e.position(), 2.5); // incremental, not homed: no correction yet
+    e.set_homed(true);
+    e.update(0.001);
+    EXPECT_DOUBLE_EQ(e.position(), 2.5 - 2 * 0.25);
+    p.correction_range = 10;
+    Encoder r(p, raw);
+    r.set_homed(true);
+    raw.set(0);
+    r.update(0.001);
+    raw.set(uint32_t(-750)); // -7.5 (the counter wrapped backwards): 2.5 in the table
+    r.update(0.001);
+    EXPECT_DOUBLE_EQ(r.position(), -7.5 - 2 * 0.25);
+    raw.set(1250); // 12.5 -> 2.5
+    r.update(0.001);
+    EXPECT_DOUBLE_EQ(r.position(), 12.5 - 2 * 0.25);
+}
+
 TEST(Controller, PidWithFeedForwardLimitsAndDeadband) {
     ControllerParams p;
     p.kp = 10;

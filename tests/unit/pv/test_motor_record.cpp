@@ -1131,3 +1131,27 @@ TEST_F(MotorTest, EventScanIsRefusedAtInit) {
             << e.what();
     }
 }
+
+// The controller's requests (ECMC mc_mr_set_sync / mc_mr_set_stop from PLC code): a changed sync
+// count makes an idle record take the readback as its target; a changed stop count stops a
+// motion as STOP=1 does. Counts seen before the first look are not replayed.
+TEST_F(MotorTest, ControllerSyncAndStopRequests) {
+    drv->st.sync_requests = 4; // before the record looked: not a request to it
+    load(kBasic);
+    EXPECT_DOUBLE_EQ(getd("m.VAL"), 0);
+    drv->st.position = 2.5; // something else moved the axis (a kinematics PLC)
+    drv->st.sync_requests = 5;
+    m->poll();
+    EXPECT_DOUBLE_EQ(getd("m.RBV"), 2.5);
+    EXPECT_DOUBLE_EQ(getd("m.VAL"), 2.5); // synced (an idle record follows the readback anyway)
+    EXPECT_DOUBLE_EQ(getd("m.DVAL"), 2.5);
+    ASSERT_EQ(put("m", 4), PutStatus::Ok);
+    EXPECT_EQ(getd("m.DMOV"), 0);
+    EXPECT_EQ(drv->count("stop"), 0);
+    drv->st.stop_requests = 1;
+    m->poll();
+    EXPECT_EQ(drv->count("stop"), 1);
+    arrive(3.0);
+    EXPECT_EQ(getd("m.DMOV"), 1);
+    EXPECT_DOUBLE_EQ(getd("m.VAL"), 3.0); // stopped where it was, as STOP
+}
