@@ -14,6 +14,7 @@ const char* error_id::text(uint32_t id) noexcept {
     case kBusy: return "Axis busy";
     case kBlockCom: return "Commands blocked (blockcom)";
     case kAutoEnableTimeout: return "Auto enable timeout: axis not enabled in time";
+    case kMotionNotAllowed: return "Motion function not allowed (features.allowedFunctions)";
     case kNotAllowedWhenEnabled: return "Not allowed while enabled (source change)";
     case kSlavedAxisInError: return "An axis of its group is in error";
     case kSlavedAxisInterlock: return "An axis of its group is interlocked";
@@ -76,7 +77,10 @@ Axis::Axis(const AxisParams& p, const AxisIo& io)
     if (p_.trajectory.deceleration <= 0) p_.trajectory.deceleration = p_.trajectory.acceleration;
     st_.homed = p_.encoder.absolute && !p_.virtual_axis; // an absolute encoder is referenced
     for (std::size_t k = 0; k < p_.encoders.size() && k < io_.encoders.size() && k < AxisStatus::kMaxEncoders; ++k)
-        if (int(k) != p_.primary_encoder) others_.emplace_back(p_.encoders[k], io_.encoders[k]);
+        if (int(k) != p_.primary_encoder) {
+            other_index_[others_.size()] = int(k);
+            others_.emplace_back(p_.encoders[k], io_.encoders[k]);
+        }
     st_.enc_count = int(std::min<std::size_t>(p_.encoders.size(), AxisStatus::kMaxEncoders));
     traj_source_ = p_.trajectory_source;
     enc_source_ = p_.virtual_axis && p_.encoder_source == 0 ? 0 : p_.encoder_source;
@@ -114,7 +118,10 @@ void Axis::finish(uint64_t tag) noexcept {
 
 // Ramps the trajectory down; the command finishes when it stands still.
 void Axis::start_stop(double d) noexcept {
-    if (seq_ == Seq::Homing) seq_ = Seq::Stopping;
+    if (seq_ == Seq::Homing) {
+        homing_.abort();
+        seq_ = Seq::Stopping;
+    }
     if (!traj_.busy()) {
         if (seq_ != Seq::Idle) {
             st_.target_pos = traj_.state().position;
@@ -268,6 +275,10 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     // Motion commands. Homing 15/25 (set position) works without enable.
     if (vars_.blockcom != 0) return refuse(error_id::kBlockCom); // ECMC: latched as the axis error
     if (st_.error_id) return refuse(st_.error_id);
+    bool allowed = c.type == CommandType::Home           ? p_.allow_homing
+                 : c.type == CommandType::MoveVelocity   ? p_.allow_constant_velocity
+                                                         : p_.allow_positioning;
+    if (!allowed) return refuse(error_id::kMotionNotAllowed); // features.allowedFunctions
     if (c.type == CommandType::Home) {
         int seq = c.homing_sequence < 0 || c.homing_sequence == 14 ? p_.homing_sequence : c.homing_sequence;
         if (seq == 25) seq = 15;
@@ -279,7 +290,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
             (void)command(set);
             return refuse(0);
         }
-        if (!((seq >= 1 && seq <= 4) || (seq >= 7 && seq <= 12))) return refuse(error_id::kSeqCmdData);
+        if (!Homing::supported(seq)) return refuse(error_id::kSeqCmdData);
         if ((seq == 11 || seq == 12) && (!io_.latch_arm.bound() || !io_.latch_valid.bound() || !io_.latch_position.bound() ||
                                          p_.homing_latch_count < 1))
             return refuse(error_id::kLatchCount);
@@ -319,9 +330,8 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     st_.move_failed = false;
     if (c.type == CommandType::Home) {
         if (c.set_home_position && std::isfinite(c.position)) p_.homing_position = vars_.enc.homepos = c.position;
-        home_seq_ = c.homing_sequence < 0 || c.homing_sequence == 14 ? p_.homing_sequence : c.homing_sequence;
-        if (home_seq_ == 25) home_seq_ = 15;
-        home_step_ = 0;
+        int seq = c.homing_sequence < 0 || c.homing_sequence == 14 ? p_.homing_sequence : c.homing_sequence;
+        homing_.start(seq);
         tag_ = c.tag;
         seq_ = Seq::Homing;
         st_.homed = false;
@@ -331,9 +341,10 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
         st_.at_target = false;
         move_time_ = 0;
         stall_wait_ = -1;
-        homing_step(0);
+        homing_.step();
         return 0;
     }
+    if (p_.auto_mode_motion >= 0 && io_.mode_set.bound()) io_.mode_set.set(p_.auto_mode_motion); // axis.autoMode
     TrajectoryLimits l = p_.trajectory;
     if (c.velocity != 0 && c.type != CommandType::MoveVelocity) l.velocity = std::fabs(c.velocity);
     if (c.acceleration > 0) l.acceleration = c.acceleration;
@@ -390,187 +401,45 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     return 0;
 }
 
-void Axis::homing_step(double) noexcept {
-    // ECMC sequences (ecmcAxisSequencer): all moves are velocity moves; the reference is the
-    // encoder position latched at the sequence's edge, and the axis is re-referenced bumplessly
-    // once it stands still: position = actual - latched + homing position.
-    //   1/2   to the low/high limit at "to", back at "from"; leaving the switch is the edge
-    //   3/4   the same, but the first change of the home switch is the edge
-    //   11/12 the same, then the latchCount-th index mark latched by the encoder terminal
-    //   7/8   backward/forward at "from" to the home switch's rising edge
-    //   9/10  backward/forward at "from" through the cam (both edges), back to its rising edge:
-    //         the reference is the middle of the two latches
-    const int s = home_seq_;
-    const bool bwd = s == 1 || s == 3 || s == 7 || s == 9 || s == 11; // first direction backward
-    const double v_to = p_.homing_velocity_to > 0 ? p_.homing_velocity_to : p_.trajectory.velocity / 10;
-    const double v_from = p_.homing_velocity_from > 0 ? p_.homing_velocity_from : v_to / 2;
-    TrajectoryLimits l = p_.trajectory;
-    if (p_.homing_acceleration > 0) l.acceleration = l.deceleration = p_.homing_acceleration;
-    const double dir = bwd ? -1 : 1;
-    auto go = [&](double v) {
-        l.velocity = std::fabs(v);
-        (void)traj_.move_velocity(v, l);
-    };
-    auto halt = [&] { (void)traj_.stop(l.deceleration, 0); };
-    auto fail = [&](uint32_t id) {
-        fault(id, false);
-        st_.last_interlock = Interlock::UnexpectedLimit;
-        home_step_ = 99;
-    };
-    // the far limit (opposite to the first direction) must never be reached
-    bool far_limit = bwd ? st_.limit_fwd : st_.limit_bwd;
-    bool near_limit = bwd ? st_.limit_bwd : st_.limit_fwd;
-    bool near_last = bwd ? last_lim_bwd_ : last_lim_fwd_;
-    bool home_changed = st_.home_sensor != last_home_;
-    bool home_rising = st_.home_sensor && !last_home_;
-    bool latch_valid = io_.latch_valid.get() != 0;
-    bool latch_new = latch_valid && !last_latch_valid_;
-    last_latch_valid_ = latch_valid;
-    const bool index = s == 11 || s == 12;
-    if (s <= 4 || index) { // to the limit at "to", back off it at "from", then the reference
-        switch (home_step_) {
-        case 0: // towards the limit (or already on it)
-            if (index) io_.latch_arm.set(0);
-            if (near_limit) {
-                home_step_ = 2;
-            } else {
-                go(dir * v_to);
-                home_step_ = 1;
-            }
-            break;
-        case 1:
-            if (near_limit) { // the hard-limit interlock ramps the move down
-                halt();
-                home_step_ = 2;
-            }
-            break;
-        case 2:
-            if (far_limit) return fail(error_id::kSeqFailed);
-            if (!traj_.busy()) {
-                go(-dir * v_from);
-                home_step_ = 3;
-            }
-            break;
-        case 3:
-            if (far_limit) return fail(s <= 2 || index ? error_id::kSeqFailed : error_id::kNoHomeFlank);
-            if (index) {
-                if (near_limit != near_last) { // left the switch: arm the latch
-                    io_.latch_arm.set(1);
-                    latch_count_ = 0;
-                    home_step_ = 4;
-                }
-            } else if (s <= 2 ? near_limit != near_last : home_changed) {
-                home_edge_pos_ = enc_.position();
-                halt();
-                home_step_ = 10;
-            }
-            break;
-        case 4: // index: count latched marks up to latchCount
-            if (far_limit) return fail(error_id::kNoHomeFlank);
-            if (latch_new) {
-                io_.latch_arm.set(0); // disarm; re-armed once the terminal saw it
-                if (++latch_count_ >= p_.homing_latch_count) {
-                    home_edge_pos_ = enc_.position_at_raw(uint64_t(io_.latch_position.get_raw()));
-                    halt();
-                    home_step_ = 10;
-                } else {
-                    home_step_ = 5;
-                }
-            }
-            break;
-        case 5:
-            if (far_limit) return fail(error_id::kNoHomeFlank);
-            if (!latch_valid) {
-                io_.latch_arm.set(1);
-                home_step_ = 4;
-            }
-            break;
-        default: break;
-        }
-    } else if (s <= 8) {
-        switch (home_step_) {
-        case 0:
-            if (near_limit) return fail(error_id::kSeqFailed);
-            go(dir * v_from);
-            home_step_ = 1;
-            break;
-        case 1:
-            if (near_limit) return fail(error_id::kSeqFailed);
-            if (home_rising) {
-                home_edge_pos_ = enc_.position();
-                halt();
-                home_step_ = 10;
-            }
-            break;
-        default: break;
-        }
-    } else { // 9, 10: centre of the cam
-        switch (home_step_) {
-        case 0:
-            if (near_limit) return fail(error_id::kSeqFailed);
-            go(dir * v_from);
-            home_step_ = 1;
-            break;
-        case 1:
-            if (near_limit) return fail(error_id::kNoHomeFlank);
-            if (home_rising) {
-                home_edge_pos_ = enc_.position();
-                home_step_ = 2;
-            }
-            break;
-        case 2:
-            if (near_limit) return fail(error_id::kNoSecondHomeFlank);
-            if (!st_.home_sensor) { // through the cam
-                halt();
-                home_step_ = 3;
-            }
-            break;
-        case 3:
-            if (!traj_.busy()) {
-                go(-dir * v_from);
-                home_step_ = 4;
-            }
-            break;
-        case 4:
-            if (far_limit) return fail(error_id::kNoSecondHomeFlank);
-            if (home_rising) {
-                home_edge2_pos_ = enc_.position();
-                home_edge_pos_ = (home_edge_pos_ + home_edge2_pos_) / 2;
-                halt();
-                home_step_ = 10;
-            }
-            break;
-        default: break;
-        }
+void Axis::rereference_others(double) noexcept {
+    for (std::size_t i = 0; i < others_.size(); ++i) {
+        if (!others_[i].params().ref_at_home) continue;
+        others_[i].set_position(enc_.position()); // ECMC refAtHome: the primary's new position
+        others_[i].set_homed(true);
     }
-    if (home_step_ == 10 && !traj_.busy()) { // standing still past the edge: re-reference
-        double delta = p_.homing_position - home_edge_pos_;
-        enc_.set_position(enc_.position() + delta);
-        traj_.reset({traj_.state().position + delta, 0, 0});
+}
+
+bool Axis::encoder_homed(int index) const noexcept {
+    if (index == p_.primary_encoder) return st_.homed;
+    for (std::size_t i = 0; i < others_.size(); ++i)
+        if (other_index_[i] == index) return others_[i].homed();
+    return false;
+}
+
+uint32_t Axis::select_primary_encoder(int index) noexcept {
+    if (index == p_.primary_encoder) return 0;
+    int k = -1;
+    for (std::size_t i = 0; i < others_.size(); ++i)
+        if (other_index_[i] == index) k = int(i);
+    if (k < 0) return error_id::kPrimaryEncoderOutOfRange;
+    if (st_.busy) return error_id::kPrimaryEncoderWhileBusy;
+    std::swap(enc_, others_[std::size_t(k)]);
+    other_index_[std::size_t(k)] = p_.primary_encoder;
+    p_.primary_encoder = index;
+    p_.encoder = enc_.params();
+    for (std::size_t i = 1; i < others_.size(); ++i) // keep others_ in encoder order
+        for (std::size_t j = i; j > 0 && other_index_[j - 1] > other_index_[j]; --j) {
+            std::swap(others_[j - 1], others_[j]);
+            std::swap(other_index_[j - 1], other_index_[j]);
+        }
+    st_.homed = enc_.homed();
+    if (!p_.virtual_axis && enc_source_ == 0) { // the setpoint starts at the new encoder's position
+        st_.act_pos = enc_.position();
+        traj_.reset({st_.act_pos, 0, 0});
         ctrl_.reset();
-        st_.set_pos = traj_.state().position;
-        st_.act_pos = enc_.position(); // this cycle's status already shows the new reference
-        st_.homed = true;
-        enc_.set_homed(true);
-        st_.target_pos = traj_.state().position;
-        if (p_.homing_post_move_enable) {
-            TrajectoryLimits pl = p_.trajectory;
-            pl.velocity = v_to;
-            (void)traj_.move_to(p_.homing_post_move_position, pl);
-            st_.target_pos = p_.homing_post_move_position;
-            home_step_ = 11;
-        } else {
-            home_step_ = 12;
-        }
-    } else if (home_step_ == 11 && !traj_.busy()) {
-        home_step_ = 12;
+        st_.set_pos = st_.target_pos = st_.act_pos;
     }
-    st_.sequence_state = std::min(home_step_, 7);
-    if (home_step_ == 12) {
-        seq_ = Seq::Idle;
-        st_.sequence_state = 0;
-        finish(tag_);
-    }
+    return 0;
 }
 
 void Axis::set_trajectory_limits(double v, double a, double d, double j) noexcept {
@@ -788,14 +657,10 @@ void Axis::run(double dt) noexcept {
     read_inputs();
     if (!p_.virtual_axis) {
         enc_.update(dt);
-        std::size_t o = 0;
-        for (int k = 0; k < st_.enc_count; ++k) {
-            if (k == p_.primary_encoder) {
-                st_.enc_pos[std::size_t(k)] = enc_.position();
-            } else if (o < others_.size()) {
-                others_[o].update(dt);
-                st_.enc_pos[std::size_t(k)] = others_[o++].position();
-            }
+        if (p_.primary_encoder < st_.enc_count) st_.enc_pos[std::size_t(p_.primary_encoder)] = enc_.position();
+        for (std::size_t o = 0; o < others_.size(); ++o) {
+            others_[o].update(dt);
+            if (other_index_[o] < st_.enc_count) st_.enc_pos[std::size_t(other_index_[o])] = others_[o].position();
         }
     }
     // The actual position is valid once the bus has been OK for a cycle (a PLC-fed one a cycle
@@ -876,7 +741,7 @@ void Axis::run(double dt) noexcept {
     }
 
     // Sequencer and trajectory.
-    if (seq_ == Seq::Homing) homing_step(dt);
+    if (seq_ == Seq::Homing) homing_.step();
     bool was_busy = seq_ != Seq::Idle;
     TrajectoryResult r = traj_.step(dt);
     if (r == TrajectoryResult::Finished && (seq_ == Seq::Moving || seq_ == Seq::Stopping)) {
@@ -885,6 +750,7 @@ void Axis::run(double dt) noexcept {
         finish(tag_);
     }
     if (!enabled && seq_ != Seq::Idle) { // a disabled axis does not move: the command ends
+        if (seq_ == Seq::Homing) homing_.abort();
         if (seq_ != Seq::Stopping) st_.move_failed = true;
         seq_ = Seq::Idle;
         finish(tag_);

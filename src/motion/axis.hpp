@@ -15,6 +15,7 @@
 #include "motion/controller.hpp"
 #include "motion/drive.hpp"
 #include "motion/encoder.hpp"
+#include "motion/homing.hpp"
 #include "motion/trajectory.hpp"
 #include "registry/signal.hpp"
 
@@ -53,6 +54,11 @@ constexpr uint32_t kNoSecondHomeFlank = 0x14D0D; // ERROR_SEQ_NO_SECOND_HOME_SWI
 constexpr uint32_t kLatchCount = 0x14D14;     // ERROR_SEQ_LATCH_COUNT_OUT_OF_RANGE (or no latch)
 constexpr uint32_t kVelocityZero = 0x14D12;    // ERROR_SEQ_VELOCITY_ZERO (also bad parameters)
 constexpr uint32_t kHomeNotAllowed = 0x14D1A;  // ERROR_SEQ_HOME_NOT_ALLOWED (sequence 0)
+constexpr uint32_t kAbsBitsOutOfRange = 0x14D0E; // ERROR_SEQ_ERROR_ABS_BIT_OUT_OF_RANGE (homing 21/22)
+constexpr uint32_t kHomeSeqNotSupported = 0x14D19; // ERROR_SEQ_HOME_SEQ_NOT_SUPPORTED (26 without trigg/ready)
+constexpr uint32_t kPrimaryEncoderOutOfRange = 0x14327; // ERROR_AXIS_PRIMARY_ENC_ID_OUT_OF_RANGE
+constexpr uint32_t kPrimaryEncoderWhileBusy = 0x14328;  // ERROR_AXIS_SWITCH_PRIMARY_ENC_NOT_ALLOWED_WHEN_BUSY
+constexpr uint32_t kMotionNotAllowed = 0x14D16; // ERROR_SEQ_MOTION_CMD_NOT_ENABLED (allowedFunctions)
 // refusals that do not latch an axis error (ECMC returns them to the caller only)
 constexpr uint32_t kTrajSourceNotInternal = 0x20052; // ERROR_MAIN_TRAJ_SOURCE_NOT_INTERNAL
 constexpr uint32_t kCommandsBlocked = 0x20053;       // ERROR_MAIN_AXIS_COM_BLOCKED (allowplccmd 0)
@@ -118,6 +124,9 @@ struct AxisParams {
     bool external_commands = false;  // plc.externalCommands: traj.* commands from PLC code
     bool block_com = false; // features.blockCom at start (ax<n>.blockcom): motion and enable refused
     bool allow_source_change = true; // features.allowSrcChangeWhenEnabled (else only when disabled)
+    // features.allowedFunctions: positioning (absolute/relative moves), constantVelocity (velocity
+    // moves, jogs), homing; a command of a function not allowed is refused with kMotionNotAllowed
+    bool allow_positioning = true, allow_constant_velocity = true, allow_homing = true;
     bool limit_fwd_plc = false, limit_bwd_plc = false, home_plc = false;
     // homing defaults (ECMC encoder.homing)
     int homing_sequence = 0;
@@ -131,6 +140,8 @@ struct AxisParams {
     int primary_encoder = 0;
     bool homing_post_move_enable = false;
     double homing_post_move_position = 0;
+    // axis.autoMode: the drive mode for motion (modeCmdMotion) and homing (modeCmdHome); -1 none
+    int auto_mode_motion = -1, auto_mode_home = -1;
 };
 
 // Where the axis reads and writes (bound signals; unbound ones are not used).
@@ -142,6 +153,10 @@ struct AxisIo {
     registry::BoundSignal brake;      // output: 1 = brake open (released); unbound: no brake
     // encoder latch (index homing 11/12): latched counter, arm bit (encoder control), valid bit
     registry::BoundSignal latch_position, latch_arm, latch_valid;
+    // drive-internal homing (sequence 26): start output, done input (encoder homing.trigg/ready)
+    registry::BoundSignal homing_trigg, homing_ready;
+    // axis.autoMode: the drive's mode of operation, written and read back
+    registry::BoundSignal mode_set, mode_act;
     std::vector<registry::BoundSignal> encoders; // raw counters of AxisParams::encoders
 };
 
@@ -211,6 +226,8 @@ struct AxisStatus {
 class Axis {
 public:
     Axis(const AxisParams& p, const AxisIo& io);
+    Axis(const Axis&) = delete; // its Homing refers to it
+    Axis& operator=(const Axis&) = delete;
 
     // RT: one cycle of `dt` seconds. Reads inputs from the image, writes drive outputs.
     void run(double dt) noexcept;
@@ -241,6 +258,17 @@ public:
     uint32_t set_traj_source(int source) noexcept;
     uint32_t set_enc_source(int source) noexcept;
     void set_allow_source_change(bool on) noexcept { p_.allow_source_change = on; }
+    // The control (primary) encoder, by index from 0 (ECMC mc_set_prim_enc, from 1 there):
+    // refused while busy; the setpoint takes the new encoder's position.
+    uint32_t select_primary_encoder(int index) noexcept;
+    // Encoder `index` (from 0) is referenced (homed, or absolute); false if there is none.
+    bool encoder_homed(int index) const noexcept;
+    // features.allowedFunctions at run time (ECMC mc_set_enable_motion_funcs).
+    void set_allowed_functions(bool positioning, bool constant_velocity, bool homing) noexcept {
+        p_.allow_positioning = positioning;
+        p_.allow_constant_velocity = constant_velocity;
+        p_.allow_homing = homing;
+    }
     // An error raised from outside (mc_grp_set_error, a slaved axis in error): the motion stops
     // and the axis is disabled, as for its own errors.
     void raise_error(uint32_t id) noexcept { fault(id, true); }
@@ -271,7 +299,7 @@ private:
     void take_variables() noexcept;    // PLC writes -> commands, sources, interlocks
     void publish_variables() noexcept; // status -> ax<n>.* variables
     void monitor(double dt) noexcept;
-    void homing_step(double dt) noexcept;
+    void rereference_others(double delta) noexcept; // homing: encoders with refAtHome follow
     void fault(uint32_t id, bool disable) noexcept;
     void finish(uint64_t tag) noexcept;
     void start_stop(double decel) noexcept;
@@ -315,12 +343,11 @@ private:
     double auto_enable_time_ = 0, idle_time_ = 0; // [s] enabling, idle while enabled
     bool auto_enable_on_ = true, auto_disable_on_ = true; // run-time switches (mc_*_autoenable_enable)
     bool ext_within_deadband_ = false;
-    // homing
-    int home_seq_ = 0, home_step_ = 0;
+    // homing (motion/homing.hpp): the running sequence, and the inputs of the last cycle
+    friend class Homing;
+    Homing homing_{*this};
     bool last_home_ = false, last_lim_fwd_ = false, last_lim_bwd_ = false;
-    double home_edge_pos_ = 0, home_edge2_pos_ = 0;
-    int latch_count_ = 0;
-    bool last_latch_valid_ = false;
+    std::array<int, AxisStatus::kMaxEncoders> other_index_{}; // encoder index of others_[i]
 };
 
 } // namespace beamctl::motion

@@ -36,6 +36,13 @@ AxisParams make_axis_params(const AxisConfig& c) {
     p.external_commands = c.plc && c.plc->external_commands;
     p.allow_source_change = c.axis.features.allow_src_change_when_enabled;
     p.block_com = c.axis.features.block_com;
+    if (const auto& am = c.axis.auto_mode) {
+        p.auto_mode_motion = am->mode_cmd_motion ? int(*am->mode_cmd_motion) : -1;
+        p.auto_mode_home = am->mode_cmd_home ? int(*am->mode_cmd_home) : -1;
+    }
+    p.allow_positioning = c.axis.features.allow_positioning;
+    p.allow_constant_velocity = c.axis.features.allow_constant_velocity;
+    p.allow_homing = c.axis.features.allow_homing;
     p.limit_fwd_plc = c.input.limit_forward.plc_override;
     p.limit_bwd_plc = c.input.limit_backward.plc_override;
     p.home_plc = c.input.home && c.input.home->plc_override;
@@ -45,9 +52,10 @@ AxisParams make_axis_params(const AxisConfig& c) {
         q.denominator = double(e.denominator);
         q.absolute = e.type == EncoderType::Absolute;
         q.bits = e.bits;
-        q.abs_bits = e.type == EncoderType::Absolute ? e.abs_bits : 0;
+        q.abs_bits = e.abs_bits; // the wrap width of an absolute encoder; homing 21/22's single-turn bits for any
         q.abs_offset = e.abs_offset;
         if (!e.mask.empty()) q.mask = std::strtoull(e.mask.c_str(), nullptr, 0);
+        q.ref_at_home = e.homing && e.homing->ref_at_home != 0;
         if (e.velocity_filter && e.velocity_filter->enable)
             q.filter_size = int(std::min<int64_t>(e.velocity_filter->size, EncoderParams::kMaxFilter));
         if (const auto& t = e.lookuptable; t && t->enable) { // the file next to the encoder's file
@@ -162,6 +170,14 @@ std::vector<SignalRef> axis_signal_refs(const AxisConfig& c) {
             v.push_back(*e->status);
         }
     }
+    if (const EncoderConfig* e = primary(c); e && e->homing && e->homing->trigg && e->homing->ready) {
+        v.push_back(*e->homing->trigg);
+        v.push_back(*e->homing->ready);
+    }
+    if (const auto& am = c.axis.auto_mode) {
+        if (am->mode_set) v.push_back(*am->mode_set);
+        if (am->mode_act) v.push_back(*am->mode_act);
+    }
     if (c.drive) {
         v.push_back(c.drive->control);
         v.push_back(c.drive->status);
@@ -187,6 +203,14 @@ AxisIo bind_axis_io(const AxisConfig& c, const SignalResolver& resolve) {
         io.latch_position = resolve(e->latch->position);
         io.latch_arm = resolve(e->control->with_bit(e->latch->control_bit));
         io.latch_valid = resolve(e->status->with_bit(e->latch->status_bit));
+    }
+    if (e && e->homing && e->homing->trigg && e->homing->ready) {
+        io.homing_trigg = resolve(*e->homing->trigg);
+        io.homing_ready = resolve(*e->homing->ready);
+    }
+    if (const auto& am = c.axis.auto_mode) {
+        if (am->mode_set) io.mode_set = resolve(*am->mode_set);
+        if (am->mode_act) io.mode_act = resolve(*am->mode_act);
     }
     if (c.drive) {
         io.drive_control = resolve(c.drive->control);

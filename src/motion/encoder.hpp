@@ -27,6 +27,7 @@ struct EncoderParams {
     int filter_size = 10;     // velocity moving average [cycles], 1..kMaxFilter
     std::shared_ptr<const LookupTable> correction; // lookuptable (null: none)
     double correction_range = 0, correction_scale = 1; // [units]; factor
+    bool ref_at_home = false; // homing.refAtHome: a non-primary encoder set with the primary's homing
     static constexpr int kMaxFilter = 100;
 };
 
@@ -39,6 +40,7 @@ public:
     double position() const noexcept { return position_; } // [units]
     double velocity() const noexcept { return velocity_; } // [units/s]
     int64_t counts() const noexcept { return counts_; }
+    uint64_t last_raw() const noexcept { return last_raw_; } // the counter as last read (masked)
     bool valid() const noexcept { return started_; }
     // The position [units] at which the counter read `raw` (a latched value): the difference to
     // the last reading in the counter's width, so wraps in between are fine.

@@ -469,10 +469,17 @@ struct Builtins {
     }
     static double get_enc_homed(void* ctx, const double* a, int) noexcept { // (ax, enc from 1)
         int enc = int(a[1]);
-        return query(ctx, a, [enc](motion::Axis& x) {
-            // the primary encoder's homed state; the others are not referenced (none homes them yet)
-            return enc == x.params().primary_encoder + 1 ? (x.status().homed ? 1.0 : 0.0) : 0.0;
-        });
+        return query(ctx, a, [enc](motion::Axis& x) { return x.encoder_homed(enc - 1) ? 1.0 : 0.0; });
+    }
+    // mc_set_prim_enc(ax, enc from 1): the control encoder (0x14328 while busy)
+    static double set_prim_enc(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        motion::Axis& x = *rt.opt_.axes[std::size_t(i)];
+        if (x.variables().blockcom != 0) return result(rt, motion::error_id::kBlockCom);
+        if (!(a[1] >= 1 && a[1] <= motion::AxisStatus::kMaxEncoders)) return result(rt, motion::error_id::kPrimaryEncoderOutOfRange);
+        return result(rt, x.select_primary_encoder(int(a[1]) - 1));
     }
     static double get_hw_ready(void* ctx, const double* a, int) noexcept {
         return query(ctx, a, [](motion::Axis& x) { return x.status().position_valid && x.status().error_id == 0 ? 1.0 : 0.0; });
@@ -916,6 +923,16 @@ struct Builtins {
         if (Which == 2) return result(rt, power(x, on));
         return 0;
     }
+    // mc_set_enable_motion_funcs(ax, positioning, constantVelocity, homing): allowedFunctions
+    static double set_motion_funcs(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        motion::Axis& x = *rt.opt_.axes[std::size_t(i)];
+        if (x.variables().blockcom != 0) return result(rt, motion::error_id::kBlockCom);
+        x.set_allowed_functions(a[1] != 0, a[2] != 0, a[3] != 0);
+        return 0;
+    }
     static double set_autoenable(void* ctx, const double* a, int) noexcept {
         return query(ctx, a, [on = a[1] != 0](motion::Axis& x) { x.set_auto_enable(on); return 0.0; });
     }
@@ -1052,6 +1069,8 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
         {"mc_set_autoenable_enable", Builtins::set_autoenable, 2, 2, true},
         {"mc_set_autodisable_enable", Builtins::set_autodisable, 2, 2, true},
         {"lut_get_value", Builtins::lut_get_value, 2, 2, false},
+        {"mc_set_enable_motion_funcs", Builtins::set_motion_funcs, 4, 4, true},
+        {"mc_set_prim_enc", Builtins::set_prim_enc, 2, 2, true},
         {"ec_get_time_frm_src", Builtins::time_from_source, 1, 1, false},
         {"ec_get_time_offset_mono", Builtins::time_offset_mono, 0, 0, false},
         {"ec_get_dom_state", Builtins::dom_state, 1, 1, false},

@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include <functional>
+
 #include <cmath>
 
 using namespace beamctl;
@@ -92,6 +94,15 @@ struct AxisBus {
     double dt = 0.001;
     explicit AxisBus(AxisParams p = stepper_params())
         : ax(p, switch_io(b)) {
+        cycles(3);
+    }
+    // With signals added to the usual ones (signals the test itself plays the other end of).
+    AxisBus(AxisParams p, const std::function<void(AxisIo&)>& more)
+        : ax(p, [&] {
+              AxisIo io = switch_io(b);
+              more(io);
+              return io;
+          }()) {
         cycles(3);
     }
     void cycles(int n) {
@@ -343,6 +354,207 @@ TEST(Axis, VirtualAxisFollowsItsTrajectory) {
     }
     EXPECT_DOUBLE_EQ(ax.status().act_pos, 3.0);
     EXPECT_DOUBLE_EQ(ax.status().pos_err, 0.0);
+}
+
+// Homing 5/6 (ECMC): to the low/high limit, then through the home cam and back into it: the
+// reference is the cam's centre (-30), whichever side the sequence comes from.
+TEST(Axis, HomingSequences5And6FindTheCamCentreAfterTheLimit) {
+    for (int seq : {5, 6}) {
+        AxisParams p = stepper_params();
+        p.homing_sequence = seq;
+        p.homing_position = 7;
+        p.homing_velocity_from = 4;
+        AxisBus a(p);
+        a.enable();
+        ASSERT_EQ(a.cmd(CommandType::Home), 0u) << seq;
+        bool reached_limit = false;
+        a.until([&] {
+            reached_limit = reached_limit || (seq == 5 ? a.ax.status().limit_bwd : a.ax.status().limit_fwd);
+            return !a.ax.status().busy;
+        }, 120000);
+        EXPECT_TRUE(reached_limit) << seq;
+        EXPECT_EQ(a.ax.status().error_id, 0u) << seq;
+        EXPECT_TRUE(a.ax.status().homed) << seq;
+        EXPECT_NEAR(a.ax.status().act_pos - a.stage(), 7 - (-30.0), 0.02) << seq; // one cycle at 4 mm/s
+    }
+}
+
+// Homing 21/22 (ECMC, resolvers and single-turn absolute encoders): off the limit, the
+// latchCount-th overflow of the encoder's absolute bits (here 12 of the 16-bit counter: every
+// 4096 counts, 0.32 mm) beyond where the axis stopped is the homing position. Checked by moving on
+// slowly and reading the position where the absolute bits overflow.
+TEST(Axis, HomingSequences21And22ReferenceTheAbsoluteBitsOverflow) {
+    for (int seq : {21, 22}) {
+        for (int count : {1, 2}) {
+            AxisParams p = stepper_params();
+            p.encoder.abs_bits = 12;
+            p.homing_sequence = seq;
+            p.homing_position = 3;
+            p.homing_latch_count = count;
+            AxisBus a(p);
+            a.enable();
+            ASSERT_EQ(a.cmd(CommandType::Home), 0u);
+            a.until([&] { return !a.ax.status().busy; }, 60000);
+            ASSERT_EQ(a.ax.status().error_id, 0u) << seq;
+            ASSERT_TRUE(a.ax.status().homed);
+            // on in the sequence's direction off the switch, at 0.2 mm/s, to the count-th overflow
+            double v = seq == 21 ? 0.2 : -0.2;
+            ASSERT_EQ(a.cmd(CommandType::MoveVelocity, 0, v), 0u);
+            uint64_t last = a.ax.encoder().last_raw() & 4095;
+            int overflows = 0;
+            double at = NAN;
+            a.until([&] {
+                uint64_t r = a.ax.encoder().last_raw() & 4095;
+                bool wrapped = seq == 21 ? r < last : r > last;
+                last = r;
+                if (wrapped && ++overflows == count) at = a.ax.status().act_pos;
+                return overflows == count;
+            }, 20000);
+            ASSERT_EQ(overflows, count) << seq << " " << count;
+            // the position where the counter reads 0 in its absolute bits, within one cycle's travel
+            EXPECT_NEAR(at, 3.0, 0.0003 + 1.0 / 12800) << seq << " latchCount " << count;
+        }
+    }
+    AxisParams p = stepper_params();
+    p.encoder.abs_bits = 20; // more than the counter's 16 bits
+    p.homing_sequence = 21;
+    AxisBus a(p);
+    a.enable();
+    (void)a.cmd(CommandType::Home);
+    a.cycles(2);
+    EXPECT_EQ(a.ax.status().error_id, error_id::kAbsBitsOutOfRange);
+}
+
+// Homing 26 (ECMC): the drive homes itself. With axis.autoMode the drive is put in its homing
+// mode first (the sequence waits until it reports it), `trigg` starts it, `ready` rising ends it:
+// the position there becomes the homing position; the drive goes back to its motion mode before
+// the command ends. Without trigg/ready the sequence is refused (0x14D19).
+TEST(Axis, HomingSequence26IsTheDrivesOwnWithAutoMode) {
+    uint8_t img[4] = {}; // [0] trigg, [1] ready, [2] mode set, [3] mode act
+    auto at = [&](uint32_t byte) { return registry::BoundSignal{img, byte * 8, 8, false, -1}; };
+    AxisParams p = stepper_params();
+    p.homing_sequence = 26;
+    p.homing_position = 12.5;
+    p.auto_mode_motion = 8; // CSP
+    p.auto_mode_home = 6;   // homing mode
+    AxisBus a(p, [&](AxisIo& io) {
+        io.homing_trigg = at(0);
+        io.homing_ready = at(1);
+        io.mode_set = at(2);
+        io.mode_act = at(3);
+    });
+    a.enable();
+    // the test is the drive: its mode follows the request 5 cycles later; homing takes 40 cycles
+    int mode_delay = 0, homing = 0, trigg_cycles = 0;
+    uint8_t requested = 0;
+    auto drive = [&] {
+        if (img[2] != requested) {
+            requested = img[2];
+            mode_delay = 5;
+        }
+        if (mode_delay > 0 && --mode_delay == 0) img[3] = requested;
+        if (img[0]) {
+            ++trigg_cycles;
+            if (img[3] != 6) ADD_FAILURE() << "triggered before the drive was in its homing mode";
+            if (++homing == 40) img[1] = 1;
+        } else {
+            homing = 0;
+            img[1] = 0;
+        }
+    };
+    ASSERT_EQ(a.cmd(CommandType::MoveRelative, 1), 0u);
+    EXPECT_EQ(img[2], 8); // a motion command writes the motion mode
+    a.until([&] { drive(); return !a.ax.status().busy; }, 5000);
+    ASSERT_EQ(a.cmd(CommandType::Home), 0u);
+    EXPECT_EQ(img[2], 6);
+    int n = a.until([&] { drive(); return !a.ax.status().busy; }, 5000);
+    EXPECT_EQ(a.ax.status().error_id, 0u);
+    EXPECT_TRUE(a.ax.status().homed);
+    EXPECT_NEAR(a.ax.status().act_pos, 12.5, 1e-9);
+    EXPECT_EQ(img[0], 0);     // trigg cleared
+    EXPECT_EQ(img[2], 8);     // back in the motion mode ...
+    EXPECT_EQ(img[3], 8);     // ... reported before the command ended
+    EXPECT_GE(trigg_cycles, 40);
+    EXPECT_GE(n, 5 + 40 + 5); // homing mode reported, the drive homing, motion mode reported
+    AxisParams q = stepper_params();
+    q.homing_sequence = 26;
+    AxisBus b(q);
+    b.enable();
+    (void)b.cmd(CommandType::Home);
+    b.cycles(2);
+    EXPECT_EQ(b.ax.status().error_id, error_id::kHomeSeqNotSupported);
+}
+
+// A second encoder with homing.refAtHome takes the primary's position when the axis homes, and
+// can be made the control encoder while the axis is not busy (ECMC SelectAxisEncPrimary /
+// mc_set_prim_enc): the axis then reads and closes its loop on it.
+TEST(Axis, SecondEncoderReferencedAtHomingAndSelectable) {
+    AxisParams p = stepper_params();
+    p.homing_sequence = 7;
+    p.homing_position = 0;
+    p.homing_velocity_from = 4;
+    EncoderParams second = p.encoder;
+    second.numerator = 2; // twice the primary's scale (a different gearing)
+    second.ref_at_home = true;
+    p.encoders = {p.encoder, second};
+    p.primary_encoder = 0;
+    AxisBus a(p, [&](AxisIo& io) { io.encoders = {io.encoder, io.encoder}; });
+    a.enable();
+    EXPECT_FALSE(a.ax.encoder_homed(1));
+    ASSERT_EQ(a.cmd(CommandType::Home), 0u);
+    a.until([&] { return !a.ax.status().busy; }, 60000);
+    ASSERT_TRUE(a.ax.status().homed);
+    EXPECT_TRUE(a.ax.encoder_homed(1));
+    a.cycles(1);
+    EXPECT_NEAR(a.ax.status().enc_pos[1], a.ax.status().enc_pos[0], 1e-9); // set with the primary
+    ASSERT_EQ(a.cmd(CommandType::MoveRelative, 1), 0u);
+    EXPECT_EQ(a.ax.select_primary_encoder(1), error_id::kPrimaryEncoderWhileBusy);
+    a.until([&] { return !a.ax.status().busy; }, 5000);
+    double e0 = a.ax.status().enc_pos[0], e1 = a.ax.status().enc_pos[1];
+    EXPECT_NEAR(e1 - e0, 1.0, 0.02); // 1 mm of stage is 2 mm on the second encoder
+    EXPECT_EQ(a.ax.select_primary_encoder(5), error_id::kPrimaryEncoderOutOfRange);
+    ASSERT_EQ(a.ax.select_primary_encoder(1), 0u);
+    EXPECT_EQ(a.ax.params().primary_encoder, 1);
+    a.cycles(1);
+    EXPECT_NEAR(a.ax.status().act_pos, e1, 0.01);
+    double stage = a.stage();
+    ASSERT_EQ(a.cmd(CommandType::MoveRelative, 1), 0u); // 1 mm on the second encoder: 0.5 of stage
+    a.until([&] { return !a.ax.status().busy; }, 5000);
+    EXPECT_NEAR(a.stage() - stage, 0.5, 0.02);
+    EXPECT_NEAR(a.ax.status().enc_pos[0], e0 + 0.5, 0.02); // the first goes on reading
+}
+
+// features.allowedFunctions (ECMC): a command of a function not allowed is refused with
+// 0x14D16, latched as the axis error; the others run; mc_set_enable_motion_funcs changes them.
+TEST(Axis, AllowedFunctions) {
+    AxisParams p;
+    p.virtual_axis = true;
+    p.trajectory = {2, 4, 4, 0};
+    p.allow_positioning = false;
+    p.allow_homing = false;
+    Axis ax(p, AxisIo{});
+    AxisCommand on{CommandType::Power};
+    on.on = true;
+    (void)ax.command(on);
+    ax.run(0.001);
+    EXPECT_EQ(ax.command(AxisCommand{CommandType::MoveAbsolute, 3}), error_id::kMotionNotAllowed);
+    EXPECT_EQ(ax.status().error_id, error_id::kMotionNotAllowed);
+    EXPECT_TRUE(ax.status().move_failed);
+    (void)ax.command(AxisCommand{CommandType::Reset});
+    AxisCommand home{CommandType::Home};
+    home.homing_sequence = 15;
+    EXPECT_EQ(ax.command(home), error_id::kMotionNotAllowed);
+    (void)ax.command(AxisCommand{CommandType::Reset});
+    AxisCommand vel{CommandType::MoveVelocity, 0, 1};
+    EXPECT_EQ(ax.command(vel), 0u); // constantVelocity still allowed
+    ax.run(0.001);
+    EXPECT_TRUE(ax.status().busy);
+    (void)ax.command(AxisCommand{CommandType::Halt});
+    for (int i = 0; i < 1000 && ax.status().busy; ++i) ax.run(0.001);
+    ax.set_allowed_functions(true, false, true);
+    EXPECT_EQ(ax.command(vel), error_id::kMotionNotAllowed);
+    (void)ax.command(AxisCommand{CommandType::Reset});
+    EXPECT_EQ(ax.command(AxisCommand{CommandType::MoveAbsolute, 3}), 0u);
 }
 
 TEST(Axis, HomingSequencesOnTheHomeCam) {
