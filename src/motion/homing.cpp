@@ -40,6 +40,14 @@ void Homing::halt() noexcept {
     (void)a_.traj_.stop(d, 0);
 }
 
+// The cam's second edge: the reference is the middle of both; stop there.
+void Homing::centre_reached() noexcept {
+    edge2_ = a_.enc_.position();
+    edge_ = (edge_ + edge2_) / 2;
+    halt();
+    step_ = 10;
+}
+
 void Homing::fail(uint32_t id) noexcept {
     a_.fault(id, false);
     a_.st_.last_interlock = Interlock::UnexpectedLimit;
@@ -175,12 +183,7 @@ void Homing::limit_family() noexcept {
         break;
     case 9: // 5/6: back into the cam: its centre is the middle of both edges
         if (near_limit) return fail(error_id::kNoSecondHomeFlank);
-        if (home_changed) {
-            edge2_ = a_.enc_.position();
-            edge_ = (edge_ + edge2_) / 2;
-            halt();
-            step_ = 10;
-        }
+        if (home_changed) centre_reached();
         break;
     default: break;
     }
@@ -227,12 +230,7 @@ void Homing::cam_family() noexcept {
         break;
     case 4:
         if (far_limit) return fail(error_id::kNoSecondHomeFlank);
-        if (home_rising) {
-            edge2_ = a_.enc_.position();
-            edge_ = (edge_ + edge2_) / 2;
-            halt();
-            step_ = 10;
-        }
+        if (home_rising) centre_reached();
         break;
     default: break;
     }

@@ -46,6 +46,7 @@ private:
     void external() noexcept;
     void finish() noexcept; // re-reference (step 10), post move (11), motion mode (12), done (13)
     void fail(uint32_t id) noexcept;
+    void centre_reached() noexcept;
     void go(double velocity) noexcept;
     void halt() noexcept;
     bool motion_mode_reached() noexcept; // autoMode: motion mode written and reported
