@@ -69,6 +69,13 @@ public:
         c.on = on;
         axes_.send(i_, c);
     }
+    // ECMC's motor driver: PCOF/ICOF/DCOF in 0..0.99 are the controller's Kp/Ki/Kd / 100.
+    bool set_gain(int which, double value) override {
+        if (!(value >= 0 && value <= 0.99)) return false;
+        motion::AxisCommand c{motion::CommandType::SetGain, value * 100};
+        c.gain = which;
+        return axes_.send(i_, c) != 0;
+    }
     Status status() override {
         const motion::AxisStatus& s = axes_.status(i_);
         const motion::AxisParams& p = axes_.params(i_);
@@ -382,6 +389,33 @@ void IocAxes::attach_motor_drivers() {
     for (std::size_t i = 0; i < axes_.size(); ++i)
         if (axes_[i].cfg.epics.motor_record.enable)
             if (pv::MotorRecord* m = pv::MotorRecord::from(db_.find(axes_[i].pv))) m->set_driver(std::make_shared<AxisMotorDriver>(*this, i));
+}
+
+void IocAxes::attach_asyn_motors() {
+    for (pv::Record* r : db_.records()) {
+        pv::MotorRecord* m = pv::MotorRecord::from(r);
+        if (!m || r->dtyp != 1 || std::dynamic_pointer_cast<AxisMotorDriver>(m->driver())) continue; // ours already
+        std::string out(m->out());
+        if (!out.empty() && out[0] == '@') out.erase(0, 1);
+        // asyn(PORT,ADDR[,TIMEOUT])
+        std::size_t comma = out.find(','), close = out.find(')');
+        if (out.rfind("asyn(", 0) != 0 || comma == std::string::npos || close == std::string::npos || comma > close)
+            throw Error(SB() << "record " << r->name() << ": OUT '" << m->out() << "' should be @asyn(PORT,ADDR) for DTYP asynMotor");
+        std::string addr = out.substr(comma + 1, close - comma - 1);
+        addr = addr.substr(0, addr.find(','));
+        char* end = nullptr;
+        long id = std::strtol(addr.c_str(), &end, 10);
+        int found = -1;
+        std::string ids;
+        for (std::size_t i = 0; i < axes_.size(); ++i) {
+            if (params(i).id == id && end && *end == '\0') found = int(i);
+            ids += (ids.empty() ? "" : ", ") + std::to_string(params(i).id);
+        }
+        if (found < 0)
+            throw Error(SB() << "record " << r->name() << ": OUT '" << m->out() << "': no axis " << addr
+                             << (ids.empty() ? std::string(" (the IOC has no axes)") : " (axes: " + ids + ")"));
+        m->set_driver(std::make_shared<AxisMotorDriver>(*this, std::size_t(found)));
+    }
 }
 
 uint64_t IocAxes::send(std::size_t i, motion::AxisCommand c) {

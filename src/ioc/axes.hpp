@@ -79,6 +79,10 @@ public:
     // IOC loop: the soft limits of axis i's motor record (DLLM/DHLM, dial) become [lo, hi]: a
     // virtual axis's range as its kinematics group derives it. No-op without a motor record.
     void set_derived_limits(std::size_t i, double lo, double hi);
+    // Motor records of the IOC's .db files with DTYP "asynMotor" and OUT "@asyn(PORT,ADDR)" (the
+    // stock synApps asyn_motor.db, ECMC's port MC_CPU1): driven by axis ADDR (its id), as ECMC's
+    // motor driver. Throws Error naming the record when there is no such axis.
+    void attach_asyn_motors();
 
 private:
     struct Axis {

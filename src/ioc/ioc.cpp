@@ -176,6 +176,26 @@ bool parse_asyn_address(std::string_view a, std::string& name, int& bit, std::st
 }
 
 
+// A driver parameter that is only kept (asyn_motor.db's MOTOR_REC_*): writes are taken, reads
+// give the last one.
+class KeptValueDevice : public pv::LinkDevice {
+public:
+    explicit KeptValueDevice(std::string name) : name_(std::move(name)) {}
+    bool read(double& v) override {
+        v = value_;
+        return true;
+    }
+    bool write(double v) override {
+        value_ = v;
+        return true;
+    }
+    std::string describe() const override { return name_ + " (kept by the driver)"; }
+
+private:
+    std::string name_;
+    double value_ = 0;
+};
+
 // Sets an array record's elements (and NORD) and processes it, if they differ from `v`.
 void set_array_if_changed(pv::Database& db, pv::Record& r, const double* v, uint32_t n) {
     const pv::FieldDesc* f = r.type().find("VAL");
@@ -276,7 +296,14 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
-    for (const auto& d : cfg_.db) db_.load(pv::load_db_file(d.file, d.macros));
+    for (const auto& d : cfg_.db) {
+        db_.load(pv::load_db_file(d.file, d.macros));
+        try {
+            axes_->attach_asyn_motors(); // synApps asyn_motor.db: DTYP asynMotor, @asyn(PORT,ADDR)
+        } catch (const Error& e) {
+            throw Error(SB() << d.file_where << ": " << d.file << ": " << e.what());
+        }
+    }
 }
 
 void Ioc::declare_bus_signals() {
@@ -411,6 +438,12 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
     const registry::Signal* sig = nullptr;
     std::string asyn_name, asyn_why;
     int asyn_bit = -1;
+    if (parse_asyn_address(name, asyn_name, asyn_bit, asyn_why) && asyn_name.rfind("MOTOR_REC_", 0) == 0) {
+        // asyn_motor.db's MOTOR_REC_DIRECTION/OFFSET/RESOLUTION: the motor record converts user
+        // and dial units itself, so the driver only keeps them
+        devices_.push_back(std::make_unique<KeptValueDevice>(asyn_name));
+        return devices_.back().get();
+    }
     if (parse_asyn_address(name, asyn_name, asyn_bit, asyn_why)) { // an ecmccfg record
         sig = registry_.find_with_bit(asyn_name, bit);
         if (sig && asyn_bit >= 0) {

@@ -254,6 +254,10 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     case CommandType::Stop:
         start_stop(emergency_decel());
         return refuse(0);
+    case CommandType::SetGain: // the PLC variables are what the controller takes every cycle
+        if (!std::isfinite(c.position)) return refuse(0);
+        (c.gain == 0 ? vars_.ctrl.kp : c.gain == 1 ? vars_.ctrl.ki : vars_.ctrl.kd) = c.position;
+        return refuse(0);
     case CommandType::SetPosition:
         if (seq_ != Seq::Idle) return refuse(error_id::kBusy);
         if (!std::isfinite(c.position)) return refuse(error_id::kVelocityZero);

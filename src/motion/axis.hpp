@@ -167,6 +167,7 @@ enum class CommandType : uint8_t {
     Power = 22,      // enable (on) or disable
     Reset = 23,      // clear errors whose cause is gone; reset the drive
     SetPosition = 24, // the actual position reads `position` (no motion)
+    SetGain = 25,     // controller gain `gain` (0 Kp, 1 Ki, 2 Kd) := `position` (motor record PCOF..)
 };
 
 struct AxisCommand {
@@ -177,6 +178,7 @@ struct AxisCommand {
     int homing_sequence = -1; // Home: -1 or 14 = the configured sequence (ECMC: 14 = encoder's)
     bool on = false;         // Power
     bool set_home_position = false; // Home: `position` is the new homing position (mc_home_pos)
+    int gain = 0;            // SetGain: 0 Kp, 1 Ki, 2 Kd
     uint64_t tag = 0;        // echoed as AxisStatus::done_tag when this command has finished
 };
 

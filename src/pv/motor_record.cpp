@@ -22,9 +22,9 @@
 // target that was waiting for SPMG=Go; refused HOMF/HOMR (at the switch) and JOGF/JOGR (while
 // busy or at the switch) reset the button and never leave it stuck at 1 (HOMF pulses DMOV so
 // ophyd's home() completes); HLSV's soft-limit part applies only when soft limits are enabled;
-// URIP=Yes is refused (no readback link). Not implemented: OMSL/DOL, RDBL/RLNK, FRAC (fixed
-// at 1), RMOD (Default only), NTM, S/SBAS/SMAX/SBAK (rev/s), ACCS/ACCU, HIHI..LLSV, MDEL/ADEL,
-// STUP, SYNC, DISA/DISV/DISP, PCOF/ICOF/DCOF, INIT/PREM/POST, VERS, HOPR/LOPR.
+// URIP=Yes needs an RDBL link; NTM is always on (a new target retargets at once); HIHI..LOLO
+// alarm on RBV. Kept but not acting: MDEL/ADEL (every change posts), INIT/PREM/POST (no driver
+// strings). OMSL closed_loop reads DOL when the record is processed (not when it polls).
 #include "pv/motor_record.hpp"
 
 #include "core/error.hpp"
@@ -231,9 +231,13 @@ const Menu kMenuMotorSpmg{"motorSPMG", {"Stop", "Pause", "Move", "Go"}};
 const Menu kMenuMotorTorq{"motorTORQ", {"Disable", "Enable"}};
 const Menu kMenuMotorRstm{"motorRSTM", {"Never", "Always", "NearZero", "Conditional"}};
 const Menu kMenuMotorDtyp{"DTYP", {"Sim Motor", "asynMotor"}};
+const Menu kMenuMotorAccu{"motorACCSUSED", {"Use ACCL", "Use ACCS"}};
+const Menu kMenuMotorRmod{"motorRMOD", {"Default", "Arithmetic", "Geometric", "In-Position"}};
+const Menu kMenuMotorStup{"motorSTUP", {"OFF", "ON", "BUSY"}};
 
 enum : uint16_t { kSpmgStop = 0, kSpmgPause = 1, kSpmgMove = 2, kSpmgGo = 3 };
 enum : uint16_t { kRstmNever = 0, kRstmAlways = 1, kRstmNearZero = 2, kRstmConditional = 3 };
+enum : uint16_t { kRmodDefault = 0, kRmodArithmetic = 1, kRmodGeometric = 2, kRmodInPosition = 3 };
 
 // MSTA bits (motor.h).
 enum : uint32_t {
@@ -323,6 +327,21 @@ public:
     double lval = 0, ldvl = 0;
     int32_t lrvl = 0;
     uint16_t rstm = kRstmNearZero;
+    // speeds in revolutions per second (UREV per revolution), acceleration in EGU/s^2
+    double s = 0, sbas = 0, smax = 0, sbak = 0, accs = 0;
+    uint16_t accu = 0;                 // ACCU: which of ACCL and ACCS was set last
+    float frac = 1;                    // FRAC: fraction of the final (backlash) approach
+    uint16_t rmod = kRmodDefault;      // RMOD: retry fractions
+    uint16_t ntm = 1, ntmf = 2;        // NTM/NTMF (new targets retarget at once here)
+    double hihi = 0, lolo = 0, high = 0, low = 0, hopr = 0, lopr = 0, mdel = 0, adel = 0;
+    uint16_t hhsv = 0, llsv = 0, hsv = 0, lsv = 0;
+    uint16_t stup = 0;                 // STUP: a status update on request
+    int16_t sync_field = 0;            // SYNC: targets := readbacks
+    double pcof = 0, icof = 0, dcof = 0; // PCOF/ICOF/DCOF: the driver's PID gains
+    uint16_t omsl = 0;                 // OMSL closed_loop: VAL from DOL when processed
+    Link dol, rdbl, rlnk;              // DOL; RDBL (URIP: readback, RRES per unit); RLNK (RBV out)
+    char init_text[40] = {}, prem[40] = {}, post_text[40] = {};
+    float vers = 7.3f;
     char out_text[64] = {};
     uint16_t scan_field = 0; // SCAN as clients see it (the record is polled by poll_tick)
     bool processing_ = false; // inside process()
@@ -371,6 +390,8 @@ public:
     void init() override;
     ProcessResult process() override {
         if (!initialised_) return ProcessResult::Done;
+        if (omsl == 1 && dol.is_db() && read_link(dol, *type().find("VAL"))) // closed_loop: VAL from DOL
+            failed_ = false;
         processing_ = true;
         run(true);
         processing_ = false;
@@ -436,6 +457,34 @@ private:
     static void range_check(double& v, double lo, double hi) {
         if (v < lo) v = lo;
         if (hi != 0 && v > hi) v = hi;
+    }
+    // FRAC: the final approach from `from` covers this much of the way to DVAL (the retries the
+    // rest), as motorRecord's backlash leg.
+    double final_approach(double from) const {
+        double f = frac > 0 ? frac : 1;
+        return from + f * (dval - from);
+    }
+    // RMOD: the part of the remaining distance a retry moves (retry RCNT of RTRY).
+    double retry_fraction() const {
+        if (rmod == kRmodArithmetic && rtry > 0) return double(rtry - rcnt + 1) / rtry;
+        if (rmod == kRmodGeometric) return std::ldexp(1.0, -std::max(0, rcnt - 1));
+        return 1;
+    }
+    // S/SBAS/SMAX/SBAK from VELO/VBAS/VMAX/BVEL, and ACCL/ACCS from each other (ACCU says which
+    // was given), as motorRecord does after any speed or resolution change.
+    void derived_speeds() {
+        double u = std::fabs(urev);
+        if (u > 0) {
+            s = velo / u;
+            sbas = vbas / u;
+            smax = vmax / u;
+            sbak = bvel / u;
+        }
+        double dv = velo - vbas > 0 ? velo - vbas : velo;
+        if (accu == 1 && accs > 0 && dv > 0)
+            accl = dv / accs;
+        else if (accl > 0)
+            accs = dv / accl;
     }
     void clamp_speeds() {
         range_check(velo, vbas, vmax);
@@ -605,6 +654,41 @@ std::vector<FieldDesc> MotorRecordImpl::fields() {
         BEAMCTL_FIELD(R, LRVL, lrvl, Long, kReadOnly),
         BEAMCTL_MENU(R, RSTM, rstm, kMenuMotorRstm, 0),
         BEAMCTL_FIELD(R, OUT, out_text, String, kInitOnly),
+        BEAMCTL_FIELD(R, S, s, Double, 0),
+        BEAMCTL_FIELD(R, SBAS, sbas, Double, kProp),
+        BEAMCTL_FIELD(R, SMAX, smax, Double, kProp),
+        BEAMCTL_FIELD(R, SBAK, sbak, Double, 0),
+        BEAMCTL_FIELD(R, ACCS, accs, Double, 0),
+        BEAMCTL_MENU(R, ACCU, accu, kMenuMotorAccu, 0),
+        BEAMCTL_FIELD(R, FRAC, frac, Float, 0),
+        BEAMCTL_MENU(R, RMOD, rmod, kMenuMotorRmod, 0),
+        BEAMCTL_MENU(R, NTM, ntm, kMenuYesNo, 0),
+        BEAMCTL_FIELD(R, NTMF, ntmf, UShort, 0),
+        BEAMCTL_FIELD(R, HIHI, hihi, Double, kProcess | kProp),
+        BEAMCTL_FIELD(R, LOLO, lolo, Double, kProcess | kProp),
+        BEAMCTL_FIELD(R, HIGH, high, Double, kProcess | kProp),
+        BEAMCTL_FIELD(R, LOW, low, Double, kProcess | kProp),
+        BEAMCTL_MENU(R, HHSV, hhsv, kMenuAlarmSevr, kProcess | kProp),
+        BEAMCTL_MENU(R, LLSV, llsv, kMenuAlarmSevr, kProcess | kProp),
+        BEAMCTL_MENU(R, HSV, hsv, kMenuAlarmSevr, kProcess | kProp),
+        BEAMCTL_MENU(R, LSV, lsv, kMenuAlarmSevr, kProcess | kProp),
+        BEAMCTL_FIELD(R, HOPR, hopr, Double, kProp),
+        BEAMCTL_FIELD(R, LOPR, lopr, Double, kProp),
+        BEAMCTL_FIELD(R, MDEL, mdel, Double, 0),
+        BEAMCTL_FIELD(R, ADEL, adel, Double, 0),
+        BEAMCTL_MENU(R, STUP, stup, kMenuMotorStup, kAsl0),
+        BEAMCTL_FIELD(R, SYNC, sync_field, Short, kAsl0),
+        BEAMCTL_FIELD(R, PCOF, pcof, Double, 0),
+        BEAMCTL_FIELD(R, ICOF, icof, Double, 0),
+        BEAMCTL_FIELD(R, DCOF, dcof, Double, 0),
+        BEAMCTL_MENU(R, OMSL, omsl, kMenuOmsl, 0),
+        BEAMCTL_FIELD(R, DOL, dol, InLink, 0),
+        BEAMCTL_FIELD(R, RDBL, rdbl, InLink, 0),
+        BEAMCTL_FIELD(R, RLNK, rlnk, OutLink, 0),
+        BEAMCTL_FIELD(R, INIT, init_text, String, 0),
+        BEAMCTL_FIELD(R, PREM, prem, String, 0),
+        BEAMCTL_FIELD(R, POST, post_text, String, 0),
+        BEAMCTL_FIELD(R, VERS, vers, Float, kReadOnly),
         BEAMCTL_FIELD(R, DMOV, dmov, Short, kReadOnly), // last: posted after all others
     };
     v.insert(v.end(), add.begin(), add.end());
@@ -637,10 +721,13 @@ void MotorRecordImpl::init() {
         range_check(hvel, vbas, vmax);
     if (eres == 0) eres = mres;
     rdbd = std::max(rdbd, std::fabs(mres));
-    if (urip) {
-        LOG_WARN(lg, "motor " << name() << ": URIP=Yes is not supported (no RDBL link); using No");
+    if (urip && !rdbl.is_db()) {
+        LOG_WARN(lg, "motor " << name() << ": URIP=Yes without an RDBL link; using No");
         urip = 0;
     }
+    if (rres == 0) rres = 1;
+    frac = std::clamp(frac > 0 ? frac : 1.0f, 0.1f, 1.5f);
+    derived_speeds();
     spmg = lspg = kSpmgGo;
     udf = 0;
     if (!driver_) {
@@ -684,7 +771,11 @@ void MotorRecordImpl::refresh() {
     rmp = nint(s.position / mres);
     rep = s.has_encoder ? nint(s.encoder / eres) : 0;
     if (ueip && !s.has_encoder) ueip = 0;
-    if (ueip) {
+    double linked = 0;
+    if (urip && rdbl.is_db() && read_link(rdbl, linked)) { // URIP: the readback link, RRES per unit
+        drbv = linked * rres;
+        rrbv = nint(drbv / mres);
+    } else if (ueip) {
         rrbv = rep;
         drbv = rrbv * eres;
     } else {
@@ -769,7 +860,7 @@ void MotorRecordImpl::on_stopped(double now) {
         if (phase_ == Phase::Moving && backlash_pending_) {
             backlash_pending_ = false;
             cdir = nint((dval - drbv) / mres) >= 0;
-            drive(dval, bvel, accel_for(bvel, bacc, vbas));
+            drive(final_approach(dval - bdst), bvel, accel_for(bvel, bacc, vbas));
             phase_ = Phase::Backlash;
             return;
         }
@@ -848,7 +939,7 @@ void MotorRecordImpl::after_settle(Then then) {
     phase_ = Phase::Idle;
     if (then == Then::Finish) return finish();
     if (std::fabs(dval - drbv) >= rdbd && !ls_hit_) {
-        if (rtry <= 0) return finish();
+        if (rtry <= 0 || rmod == kRmodInPosition) return finish(); // In-Position: the controller retries
         if (++rcnt > rtry) {
             miss = 1;
             return finish();
@@ -918,9 +1009,9 @@ void MotorRecordImpl::start_move(bool retry) {
         std::fabs(bdst) >= std::fabs(mres) && !(preferred && bvel == velo && bacc == accl);
     backlash_pending_ = false;
     if (!need_backlash) {
-        drive(dval, velo, a);
+        drive(retry ? drbv + retry_fraction() * (dval - drbv) : dval, velo, a);
     } else if (preferred && std::fabs(dval - prev) <= std::fabs(bdst) + std::fabs(mres)) {
-        drive(dval, bvel, ab); // already within the backlash distance: approach slowly
+        drive(final_approach(retry ? drbv : prev), bvel, ab); // within the backlash distance: approach slowly
     } else {
         drive(dval - bdst, velo, a);
         backlash_pending_ = true;
@@ -1158,6 +1249,11 @@ void MotorRecordImpl::publish() {
         if (st_.comm_error) set_sevr(kStatComm, kInvalid);
         if (st_.slip_stall || st_.problem) set_sevr(kStatState, kMajor);
         if (lvio_refused_) set_sevr(kStatSoft, kMinor); // a move refused for a soft limit
+        // HIHI/HIGH/LOW/LOLO on the readback, with their severities (none by default)
+        if (hhsv && rbv >= hihi) set_sevr(kStatHihi, hhsv);
+        else if (llsv && rbv <= lolo) set_sevr(kStatLolo, llsv);
+        else if (hsv && rbv >= high) set_sevr(kStatHigh, hsv);
+        else if (lsv && rbv <= low) set_sevr(kStatLow, lsv);
     }
     stamp_time();
     unsigned alarm = reset_alarms();
@@ -1203,6 +1299,7 @@ void MotorRecordImpl::run(bool work) {
     }
     track(clock_());
     if (work) do_work();
+    if (rlnk.is_db()) (void)write_link(rlnk, rbv); // the readback out (motorRecord: every processing)
     publish();
     // the forward link when a motion ends, or a processing (a put, PROC) ends with nothing to move
     if (dmov && (!was_done || processing_)) fwd_link(flnk);
@@ -1223,7 +1320,34 @@ PutStatus MotorRecordImpl::special(const FieldDesc& f) {
     // Refusals first: a refused put changes nothing.
     if ((n == "MRES" && mres == 0) || (n == "UREV" && urev == 0)) return PutStatus::BadValue;
     if ((n == "HOMF" || n == "HOMR") && phase_ == Phase::Homing) return PutStatus::Failed;
-    if (n == "URIP" && urip) return PutStatus::Failed; // no readback link
+    if (n == "URIP" && urip && !rdbl.is_db()) return PutStatus::Failed; // no readback link
+    if ((n == "PCOF" || n == "ICOF" || n == "DCOF") &&
+        !driver_->set_gain(n == "PCOF" ? 0 : n == "ICOF" ? 1 : 2, *static_cast<double*>(f.addr(*this))))
+        return PutStatus::BadValue; // the driver refused the gain (ECMC: 0..0.99)
+    if (n == "S" || n == "SBAS" || n == "SMAX" || n == "SBAK") {
+        double u = std::fabs(urev);
+        if (u == 0) return PutStatus::BadValue;
+        if (n == "S") velo = s * u;
+        else if (n == "SBAS") vbas = std::max(0.0, sbas * u);
+        else if (n == "SMAX") vmax = std::max(0.0, smax * u);
+        else bvel = sbak * u;
+        if (n == "SBAS" && vmax != 0 && vbas > vmax) vmax = vbas;
+        if (n == "SMAX" && vmax != 0 && vmax < vbas) vbas = vmax;
+    }
+    if (n == "ACCL") accu = 0;
+    if (n == "ACCS") {
+        if (!(accs > 0)) return PutStatus::BadValue;
+        accu = 1;
+    }
+    if (n == "FRAC") frac = std::clamp(frac, 0.1f, 1.5f);
+    if (n == "SYNC" && sync_field) { // the targets take the readbacks (when nothing moves)
+        sync_field = 0;
+        if (phase_ == Phase::Idle && dmov) resync();
+    }
+    if (n == "STUP" && stup == 1) { // one status update now
+        refresh();
+        stup = 0;
+    }
     if (n == "JOGF" && jogf && (phase_ != Phase::Idle || jogr || hls)) return PutStatus::Failed;
     if (n == "JOGR" && jogr && (phase_ != Phase::Idle || jogf || lls)) return PutStatus::Failed;
 
@@ -1306,7 +1430,10 @@ PutStatus MotorRecordImpl::special(const FieldDesc& f) {
             hlm = -dllm + off;
     } else if (n == "CNEN") {
         driver_->set_closed_loop(cnen != 0);
+    } else if (n == "S" || n == "SBAS" || n == "SMAX" || n == "SBAK") {
+        clamp_speeds();
     }
+    derived_speeds();
     if (&f != type().find("VAL")) sync(f); // the database posts the written field itself
     if (!(f.flags & kProcess)) {           // no processing follows: post what changed now
         const auto& fs = type().fields();
@@ -1356,6 +1483,16 @@ void MotorRecordImpl::metadata(const FieldDesc& f, Metadata& md) const {
             limits(dllm / mres, dhlm / mres);
     } else if (n == "VELO")
         limits(vmax, vbas);
+    else if (n == "S")
+        limits(smax, sbas);
+    if (n == "VAL" || n == "RBV") { // get_alarm_double: the alarm limits of the user values
+        md.alarm_hihi = hihi;
+        md.alarm_high = high;
+        md.alarm_low = low;
+        md.alarm_lolo = lolo;
+    }
+    if (n == "S" || n == "SBAS" || n == "SMAX" || n == "SBAK") md.units = "rev/sec";
+    else if (n == "ACCS") md.units = with(units_per_s2_, sizeof units_per_s2_, "/s/s");
 }
 
 } // namespace

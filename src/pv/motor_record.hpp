@@ -31,6 +31,12 @@ public:
     virtual void stop(double acceleration) = 0;
     virtual void set_position(double dial_position) = 0; // SET/calibration: no motion
     virtual void set_closed_loop(bool on) = 0;           // CNEN
+    // PCOF (0), ICOF (1), DCOF (2): the controller's gains; false refuses the value.
+    virtual bool set_gain(int which, double value) {
+        (void)which;
+        (void)value;
+        return true;
+    }
     struct Status {
         double position = 0; // dial readback [EGU]
         double encoder = 0;  // dial encoder readback [EGU], valid when has_encoder

@@ -2,13 +2,14 @@
 ophyd's EpicsMotor uses: moves with wait, soft limits refusing a move, set_position, tweak, stop,
 homing, and the DMOV 1->0->1 edge with RBV at NO_ALARM after a good move."""
 
+import subprocess
 import time
 
 import epics
 import pytest
 from epics import ca
 
-from conftest import connect, running_ioc, wait_for
+from conftest import BEAMCTL, connect, running_ioc, wait_for
 from test_axes import DATA
 
 IOC = """
@@ -185,3 +186,95 @@ def test_auto_enable_timeout_fails_the_move(tmp_path, prefix):
         with ca_raw.Circuit("127.0.0.1", ioc.port) as c:
             ch = c.create(prefix + "X")
             assert c.write_notify(ch, [2.0], dtype=ca_raw.DOUBLE, timeout=30).p1 == ca_raw.ECA_PUTFAIL
+
+
+ASYN_IOC = """
+ioc: {{name: {name}, prefix: "{prefix}"}}
+engine: {{rate_hz: 1000}}
+buses:
+  - id: 0
+    link: {{type: sim, plant: plant.yaml}}
+    slaves:
+      - {{position: 0, type: EK1100}}
+      - {{position: 1, type: EL1008}}
+      - {{position: 2, type: EL7041}}
+      - {{position: 3, type: EL2008}}
+axes:
+  - {{file: stepper.yaml, macros: {{AX_NAME: X, DRV_SLAVE: 2, MR: "false"}}}}
+plcs:
+  - {{id: 0, file: kp.plc}}
+db:
+  - file: asyn_motor_like.db
+    macros: {{P: "{prefix}", M: "m1", DESC: "stage x", DTYP: asynMotor, PORT: MC_CPU1, ADDR: 1, VELO: 4, ACCL: 0.2,
+              MRES: 0.0001, EGU: mm, DHLM: 40, DLLM: -40}}
+"""
+
+# the controller's Kp, seen on two outputs (PLC code reads ax1.ctrl.kp; records do not)
+KP_PLC = "ec0.s3.binaryOutput01 := ax1.ctrl.kp == 10;\nec0.s3.binaryOutput02 := ax1.ctrl.kp == 20;\n"
+
+
+
+def test_synapps_asyn_motor_db_drives_the_axis(tmp_path, prefix):
+    """The stock synApps asyn_motor.db shape (DTYP asynMotor, @asyn(MC_CPU1,1)) loads as it is
+    and drives axis 1, as ECMC's motor driver does; its speed fields in rev/s, the enable record
+    on DISP, PCOF..DCOF, SYNC and STUP act."""
+    files = {"stepper.yaml": DATA / "stepper.yaml", "plant.yaml": DATA / "plant.yaml",
+             "asyn_motor_like.db": DATA.parent / "db" / "asyn_motor_like.db", "kp.plc": KP_PLC}
+    with running_ioc(tmp_path, prefix, ASYN_IOC, files):
+        assert not epics.PV(prefix + "X").wait_for_connection(1)  # MR false: no motor record of its own
+        m = epics.Motor(prefix + "m1", timeout=5)
+        assert m.get("DESC") == "stage x"
+        m.put("CNEN", 1, wait=True)
+        assert wait_for(lambda: ca.get(connect(prefix + "X-EnaAct")) == 1, timeout=5)
+        assert m.move(3, wait=True, timeout=20) == 0
+        assert abs(m.get("RBV") - 3) < 0.01
+        assert abs(ca.get(connect(prefix + "X-PosAct")) - 3) < 0.01  # the engine's axis 1 moved
+        # the driver's copies: resolution, direction, offset
+        assert wait_for(lambda: abs(ca.get(connect(prefix + "m1Resolution")) - 0.0001) < 1e-9, timeout=5)
+        # S [rev/s] = VELO / UREV; writing S sets VELO
+        urev = m.get("UREV")
+        assert abs(m.get("S") - 4 / urev) < 1e-9
+        epics.caput(prefix + "m1.S", 5 / urev, wait=True)
+        assert abs(m.get("VELO") - 5) < 1e-6
+        # ACCS [EGU/s^2] and ACCL [s] follow each other
+        epics.caput(prefix + "m1.ACCS", 50, wait=True)
+        assert abs(m.get("ACCL") - 0.1) < 1e-9 and m.get("ACCU") == 1
+        # PCOF is the controller's Kp / 100 (ECMC's driver); above 0.99 it is refused
+        kp10, kp20 = connect(prefix + "m0s003-BO01"), connect(prefix + "m0s003-BO02")
+        assert wait_for(lambda: ca.get(kp10) == 1, timeout=5)  # PCOF 0.1 at init: Kp 10
+        assert epics.caput(prefix + "m1.PCOF", 0.2, wait=True) == 1
+        assert wait_for(lambda: ca.get(kp20) == 1, timeout=5)
+        epics.caput(prefix + "m1.PCOF", 1.5, wait=True)
+        assert abs(m.get("PCOF") - 0.2) < 1e-9  # refused: the old value stays
+        time.sleep(0.2)
+        assert ca.get(kp20) == 1
+        # the enable record (asyn_motor.db's _able on DISP): disabled, a put is refused
+        epics.caput(prefix + "m1_able", 1, wait=True)
+        assert m.get("DISP") == 1
+        epics.caput(prefix + "m1.VAL", 1, wait=True, timeout=5)
+        time.sleep(0.3)
+        assert abs(m.get("VAL") - 3) < 0.01 and abs(m.get("RBV") - 3) < 0.01  # refused: DISP
+        epics.caput(prefix + "m1_able", 0, wait=True)
+        assert m.move(1, wait=True, timeout=20) == 0
+        # SYNC and STUP return to 0 and leave the record idle at its readback
+        epics.caput(prefix + "m1.SYNC", 1, wait=True)
+        assert m.get("SYNC") == 0 and abs(m.get("VAL") - m.get("RBV")) < 0.01
+        epics.caput(prefix + "m1.STUP", 1, wait=True)
+        assert m.get("STUP", as_string=True) == "OFF"
+        # HIGH with HSV: the readback beyond it is a HIGH alarm
+        epics.caput(prefix + "m1.HIGH", 0.5, wait=True)
+        epics.caput(prefix + "m1.HSV", "MINOR", wait=True)
+        assert wait_for(lambda: epics.caget(prefix + "m1.SEVR") == 1, timeout=5)
+
+
+def test_asyn_motor_db_naming_a_missing_axis_is_an_error(tmp_path, prefix):
+    files = {"stepper.yaml": DATA / "stepper.yaml", "plant.yaml": DATA / "plant.yaml",
+             "asyn_motor_like.db": DATA.parent / "db" / "asyn_motor_like.db"}
+    for name, content in files.items():
+        (tmp_path / name).write_bytes(content.read_bytes())
+    (tmp_path / "kp.plc").write_text(KP_PLC)
+    cfg = tmp_path / "ioc.yaml"
+    cfg.write_text(ASYN_IOC.format(name="T", prefix="T:").replace("ADDR: 1", "ADDR: 7"))
+    r = subprocess.run([str(BEAMCTL), "check", str(cfg)], capture_output=True, text=True, timeout=60)
+    assert r.returncode != 0
+    assert "record T:m1: OUT '@asyn(MC_CPU1,7)': no axis 7 (axes: 1)" in r.stdout + r.stderr, r.stdout + r.stderr

@@ -105,8 +105,9 @@ struct MotorTest : ::testing::Test {
         for (auto& w : watches) db.unsubscribe(*w);
     }
     // Loads record "m" with the given fields; with `fake`, the fake driver is attached first.
-    void load(const std::string& fields, bool fake = true) {
-        db.load(parse_db("record(motor, \"m\") {" + fields + "}", "m.db", {}));
+    // `others`: more records of the same file (link targets).
+    void load(const std::string& fields, bool fake = true, const std::string& others = "") {
+        db.load(parse_db(others + "record(motor, \"m\") {" + fields + "}", "m.db", {}));
         m = MotorRecord::from(db.find("m"));
         ASSERT_NE(m, nullptr);
         m->set_clock([this] { return now; });
@@ -1154,4 +1155,110 @@ TEST_F(MotorTest, ControllerSyncAndStopRequests) {
     arrive(3.0);
     EXPECT_EQ(getd("m.DMOV"), 1);
     EXPECT_DOUBLE_EQ(getd("m.VAL"), 3.0); // stopped where it was, as STOP
+}
+
+// FRAC: the final (backlash) approach covers that fraction of the way; retries do the rest.
+TEST_F(MotorTest, FracShortensTheFinalApproach) {
+    load(std::string(kBasic) + R"(field(BDST, "0.5") field(BVEL, "0.2") field(FRAC, "0.5") field(RDBD, "0.01"))");
+    put("m", -3.0);
+    EXPECT_DOUBLE_EQ(drv->last("move").a, -3.5);
+    arrive(-3.5);
+    EXPECT_DOUBLE_EQ(drv->last("move").a, -3.25); // half of the 0.5 approach
+    arrive(-3.25);
+    EXPECT_EQ(getd("m.DMOV"), 0); // a retry follows
+    EXPECT_EQ(getd("m.RCNT"), 1);
+    EXPECT_DOUBLE_EQ(drv->last("move").a, -3.125);
+    EXPECT_FLOAT_EQ(float(getd("m.FRAC")), 0.5f);
+    put("m.FRAC", 3);
+    EXPECT_FLOAT_EQ(float(getd("m.FRAC")), 1.5f); // clamped to 0.1..1.5
+}
+
+// RMOD: Arithmetic retries move (RTRY-RCNT+1)/RTRY of what is left, Geometric 1/2^(RCNT-1);
+// In-Position leaves retries to the controller (the record does none).
+TEST_F(MotorTest, RetryModes) {
+    load(std::string(kBasic) + R"(field(RTRY, "4") field(RDBD, "0.01") field(RMOD, "Arithmetic"))");
+    put("m", 1.0);
+    arrive(0.6);
+    EXPECT_DOUBLE_EQ(drv->last("move").a, 1.0); // retry 1 of 4: all of it
+    arrive(0.8);
+    EXPECT_DOUBLE_EQ(drv->last("move").a, 0.8 + 0.75 * 0.2);
+    arrive(1.0);
+    put_str("m.RMOD", "Geometric");
+    put("m", 2.0);
+    arrive(1.2);
+    EXPECT_DOUBLE_EQ(drv->last("move").a, 2.0);
+    arrive(1.6);
+    EXPECT_DOUBLE_EQ(drv->last("move").a, 1.6 + 0.5 * 0.4);
+    arrive(2.0);
+    put_str("m.RMOD", "In-Position");
+    int moves = drv->count("move");
+    put("m", 3.0);
+    arrive(2.9);
+    EXPECT_EQ(drv->count("move"), moves + 1); // no retry
+    EXPECT_EQ(getd("m.DMOV"), 1);
+}
+
+// S/SBAS/SMAX/SBAK are VELO/VBAS/VMAX/BVEL in revolutions per second (UREV per revolution), and
+// ACCS (EGU/s^2) and ACCL (s) follow each other, ACCU saying which was set.
+TEST_F(MotorTest, SpeedsInRevolutionsAndAccelerationInUnits) {
+    load(std::string(kBasic) + R"(field(UREV, "0.5") field(VMAX, "4"))"); // VELO 2, ACCL 0.5
+    EXPECT_DOUBLE_EQ(getd("m.S"), 4.0);
+    EXPECT_DOUBLE_EQ(getd("m.SMAX"), 8.0);
+    EXPECT_DOUBLE_EQ(getd("m.ACCS"), 4.0); // 2 mm/s in 0.5 s
+    EXPECT_EQ(gets("m.ACCU"), "Use ACCL");
+    ASSERT_EQ(put("m.S", 6), PutStatus::Ok);
+    EXPECT_DOUBLE_EQ(getd("m.VELO"), 3.0);
+    ASSERT_EQ(put("m.S", 100), PutStatus::Ok); // beyond SMAX: VELO clamped to VMAX
+    EXPECT_DOUBLE_EQ(getd("m.VELO"), 4.0);
+    EXPECT_DOUBLE_EQ(getd("m.S"), 8.0);
+    ASSERT_EQ(put("m.ACCS", 16), PutStatus::Ok);
+    EXPECT_DOUBLE_EQ(getd("m.ACCL"), 0.25);
+    EXPECT_EQ(gets("m.ACCU"), "Use ACCS");
+    ASSERT_EQ(put("m.VELO", 2), PutStatus::Ok); // ACCS kept: ACCL follows
+    EXPECT_DOUBLE_EQ(getd("m.ACCL"), 0.125);
+    EXPECT_EQ(put("m.ACCS", 0), PutStatus::BadValue);
+    put("m", 1.0);
+    EXPECT_DOUBLE_EQ(drv->last("move").c, 16.0); // the driver gets EGU/s^2
+}
+
+// OMSL closed_loop: processing the record reads its target from DOL; RLNK: the readback goes out.
+TEST_F(MotorTest, DolAndRlnkLinks) {
+    load(std::string(kBasic) + R"(field(OMSL, "closed_loop") field(DOL, "target") field(RLNK, "copy PP"))", true,
+         R"(record(ao, "target") { field(VAL, "2.5") } record(ao, "copy") {})");
+    put("m.PROC", 1);
+    EXPECT_DOUBLE_EQ(drv->last("move").a, 2.5);
+    arrive(2.5);
+    EXPECT_DOUBLE_EQ(getd("copy"), 2.5);
+}
+
+// URIP: the readback comes from RDBL (times RRES) instead of the driver.
+TEST_F(MotorTest, UripReadsTheReadbackLink) {
+    load(std::string(kBasic) + R"(field(URIP, "Yes") field(RDBL, "rb") field(RRES, "0.25"))", true,
+         R"(record(ao, "rb") { field(VAL, "8") })");
+    EXPECT_DOUBLE_EQ(getd("m.DRBV"), 2.0); // 8 x 0.25
+    put("rb", 12);
+    m->poll();
+    EXPECT_DOUBLE_EQ(getd("m.DRBV"), 3.0);
+}
+
+// SYNC and STUP act once and return to 0; HIHI..LOLO with their severities alarm on RBV and are
+// the VAL/RBV alarm limits clients see.
+TEST_F(MotorTest, SyncStupAndAlarmLimits) {
+    load(std::string(kBasic) + R"(field(HIGH, "1") field(HSV, "MINOR") field(HIHI, "2") field(HHSV, "MAJOR"))");
+    ASSERT_EQ(put("m.SYNC", 1), PutStatus::Ok);
+    EXPECT_EQ(getd("m.SYNC"), 0);
+    ASSERT_EQ(put("m.STUP", 1), PutStatus::Ok);
+    EXPECT_EQ(gets("m.STUP"), "OFF");
+    EXPECT_EQ(gets("m.SEVR"), "NO_ALARM");
+    put("m", 1.5);
+    arrive(1.5);
+    EXPECT_EQ(gets("m.SEVR"), "MINOR");
+    EXPECT_EQ(gets("m.STAT"), "HIGH");
+    put("m", 2.5);
+    arrive(2.5);
+    EXPECT_EQ(gets("m.SEVR"), "MAJOR");
+    EXPECT_EQ(gets("m.STAT"), "HIHI");
+    Metadata md = meta("m.RBV");
+    EXPECT_DOUBLE_EQ(md.alarm_high, 1);
+    EXPECT_DOUBLE_EQ(md.alarm_hihi, 2);
 }
