@@ -74,7 +74,10 @@ std::optional<plc::PlcSource> axis_plc_source(const motion::AxisConfig& a) {
 IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisConfig>& axes, registry::Registry& signals,
                  pv::Database& db)
     : cycle_s_(1.0 / cfg.rate_hz), signals_(signals), db_(db) {
-    for (const auto& a : axes) axis_ids_.push_back(a.axis.id.value_or(1));
+    for (const auto& a : axes) {
+        axis_ids_.push_back(a.axis.id.value_or(1));
+        axis_names_[a.axis.id.value_or(1)] = a.epics.name;
+    }
     for (const auto& st : cfg.storages) storage_ids_.push_back(st.id);
     for (const auto& l : cfg.luts) {
         try {
@@ -190,11 +193,34 @@ static const PvTable& plc_table() {
     return t;
 }
 
+// An axis PLC's PVs, as ecmccfg's ecmcAxis.db names them ($(P) = "<prefix><axis name>-PLC").
+static const PvTable& axis_plc_table() {
+    static const PvTable t{"axis plc", {
+        {"-EnaCmd", "bo", "enable", {{"DESC", "$(DESC)"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}, {"VAL", "$(ENABLE)"}}, true},
+        {"-EnaCmd-RB", "bi", "enable", {{"DESC", "Plc enable"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}}},
+        {"-FirstScan", "bi", "firstscan", {{"DESC", "Plc firstscan"}, {"ZNAM", "No"}, {"ONAM", "Yes"}}},
+        {"-ScanTime", "ai", "scantime", {{"DESC", "Scan period"}, {"EGU", "s"}, {"PREC", "4"}}},
+        {"-Err", "longin", "error", {{"DESC", "Plc error (run-time fault, 0 none)"}, {"HIGH", "1"}, {"HSV", "MAJOR"}}},
+        {"-Faults", "longin", "faults", {{"DESC", "Scans that faulted"}}},
+        {"-Scans", "longin", "scans", {{"DESC", "Scans run"}}},
+    }};
+    return t;
+}
+
 void IocPlcs::make_pvs(const std::string& prefix, registry::Registry& signals) {
     pv::DbFile f;
     for (std::size_t i = 0; i < sources_.size(); ++i) {
         const auto& s = sources_[i];
-        if (s.axis_plc) continue;
+        if (s.axis_plc) { // served under the axis's name, as ecmccfg does
+            auto name = axis_names_.find(s.id);
+            if (name == axis_names_.end()) continue;
+            std::string desc = SB() << "ax" << s.id << " plc " << std::filesystem::path(s.file).filename().string();
+            PvInstance in{prefix + name->second + "-PLC", owners_[i] + ".",
+                          {{"DESC", desc.substr(0, 40)}, {"ENABLE", s.enable ? "1" : "0"}}};
+            pv::merge_db(f, make_records(axis_plc_table(), in, signals));
+            name_pvs(axis_plc_table(), in, signals);
+            continue;
+        }
         std::string desc = SB() << "plc" << s.id << " " << std::filesystem::path(s.file).filename().string();
         PvInstance in{prefix + "PLC" + two_digits(s.id), owners_[i] + ".",
                       {{"DESC", desc.substr(0, 40)}, {"ENABLE", s.enable ? "1" : "0"}}};
@@ -211,7 +237,7 @@ namespace {
 // status in the IOC loop; a write of plc<n>.enable starts or stops the PLC. IOC loop only.
 class PlcItemDevice : public pv::LinkDevice {
 public:
-    enum class Item { Enable, Error, ScanTime, Scans, Faults };
+    enum class Item { Enable, Error, ScanTime, Scans, Faults, FirstScan };
     PlcItemDevice(IocPlcs& plcs, std::size_t i, Item item, std::string name)
         : plcs_(plcs), i_(i), item_(item), name_(std::move(name)) {}
     bool read(double& v) override {
@@ -252,6 +278,7 @@ private:
         case Item::ScanTime: v = s.scantime_s; break;
         case Item::Scans: v = double(s.scans); break;
         case Item::Faults: v = double(s.faults); break;
+        case Item::FirstScan: v = s.firstscan ? 1 : 0; break;
         }
         return true;
     }
@@ -272,7 +299,7 @@ std::unique_ptr<pv::LinkDevice> IocPlcs::make_device(std::string_view name, int 
         using Item = PlcItemDevice::Item;
         static const std::pair<const char*, Item> items[] = {{"enable", Item::Enable}, {"error", Item::Error},
                                                              {"scantime", Item::ScanTime}, {"scans", Item::Scans},
-                                                             {"faults", Item::Faults}};
+                                                             {"faults", Item::Faults}, {"firstscan", Item::FirstScan}};
         for (const auto& [n, it] : items) {
             if (item != n) continue;
             if (bit >= 0) {
@@ -286,7 +313,7 @@ std::unique_ptr<pv::LinkDevice> IocPlcs::make_device(std::string_view name, int 
             return std::make_unique<PlcItemDevice>(*this, i, it, std::string(name));
         }
         why = SB() << "'" << name << "' lives in the cycle only (PLC code reads and writes it); records reach " << o
-                   << ".enable, .error, .scantime, .scans and .faults";
+                   << ".enable, .error, .scantime, .firstscan, .scans and .faults";
         return nullptr;
     }
     why = SB() << "no PLC for '" << name << "'";

@@ -10,6 +10,8 @@
 // Axis groups: each `axis.group` name of the axis files is a group, numbered from 0 in the order
 // the axes name them (ECMC AddAxisToGroupByName); every PLC gets the macro GRP_<name>_ID with its
 // number, as ecmccfg sets the environment variable, for mc_grp_*(group, ...).
+// An axis PLC's PVs, as ecmccfg's ecmcAxis.db: $(P)<axis name>-PLC-EnaCmd (bo), -EnaCmd-RB (bi),
+// -FirstScan (bi), -ScanTime (ai), -Err, -Faults, -Scans (longin).
 // println/print output goes to the IOC's standard output ("plc0: text"); faults are logged with
 // their location.
 // Threading: everything here on the IOC loop thread, except the runtime's RT side.
@@ -72,6 +74,7 @@ private:
     double cycle_s_;
     const registry::Registry& signals_;
     std::vector<int> axis_ids_;
+    std::map<int, std::string> axis_names_; // axis id -> epics.name (axis PLC PVs)
     std::vector<int> storage_ids_; // `storages:` of the IOC file
     std::vector<std::vector<int>> groups_; // ECMC axis groups (axis.group), in order of appearance: axis ids
     std::vector<std::pair<int, std::unique_ptr<LookupTable>>> luts_; // `luts:` of the IOC file

@@ -231,3 +231,50 @@ def test_data_storage_config_errors(tmp_path):
     assert "ioc.yaml:3:" in out and "'circular' is not a buffer type" in out, out
     assert "data storage id 0 used twice" in out, out
     assert "2 is less than the size 5" in out, out
+
+
+AXIS_PLC_IOC = """
+ioc: {{name: {name}, prefix: "{prefix}"}}
+engine: {{rate_hz: 1000}}
+buses:
+  - id: 0
+    link: {{type: sim}}
+    slaves:
+      - {{position: 0, type: EK1100}}
+axes:
+  - {{file: vx.yaml}}
+"""
+
+VX = """
+axis: {id: 4, type: virtual}
+epics: {name: VX, precision: 3, unit: mm}
+encoder: {numerator: 1, denominator: 1, type: 1, bits: 32, source: 1}
+trajectory: {axis: {velocity: 1, acceleration: 5}}
+input:
+  limit: {forward: ec0.s0.ONE.0, backward: ec0.s0.ONE.0}
+  home: ec0.s0.ONE.0
+  interlock: ec0.s0.ONE.0
+monitoring:
+  lag: {enable: false, tolerance: 1, time: 100}
+  target: {enable: true, tolerance: 0.01, time: 10}
+plc:
+  enable: true
+  code:
+    - "static.n += 1;"
+    - "ax4.enc.actpos := ax4.traj.setpos;"
+    - "if (static.n == 500) { ax4.plc.enable := 0; };"
+"""
+
+
+def test_axis_plc_pvs(tmp_path, prefix):
+    """An axis PLC is served as ecmccfg's ecmcAxis.db does, under the axis's name."""
+    with running_ioc(tmp_path, prefix, AXIS_PLC_IOC, {"vx.yaml": VX}):
+        p = prefix + "VX-PLC-"
+        assert abs(ca.get(connect(p + "ScanTime")) - 0.001) < 1e-9
+        assert ca.get(connect(p + "FirstScan")) == 0  # long past its first scan once the IOC serves
+        assert wait_for(lambda: ca.get(connect(p + "EnaCmd-RB")) == 0, timeout=5)  # it disabled itself
+        scans = ca.get(connect(p + "Scans"))
+        assert 490 <= scans <= 510, scans
+        assert ca.get(connect(p + "Err")) == 0
+        epics.caput(p + "EnaCmd", 1, wait=True)
+        assert wait_for(lambda: ca.get(connect(p + "Scans")) > scans + 100, timeout=5)

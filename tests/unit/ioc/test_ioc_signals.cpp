@@ -99,7 +99,7 @@ TEST(IocSignals, DeviceSupportNamesUnknownSignalsAndInputs) {
     TempDir d;
     d.write("x.db", "record(bo, \"T:A\") {\n  field(DTYP, \"beamctl\")\n  field(OUT, \"@ec0.s1.binaryInput01\")\n}\n"
                     "record(bi, \"T:B\") {\n  field(DTYP, \"beamctl\")\n  field(INP, \"@ec0.s7.nothing\")\n}\n"
-                    "record(ai, \"T:C\") {\n  field(DTYP, \"beamctl\")\n  field(INP, \"@plc0.firstscan\")\n}\n"
+                    "record(ai, \"T:C\") {\n  field(DTYP, \"beamctl\")\n  field(INP, \"@plc0.dbg\")\n}\n"
                     "record(bi, \"T:D\") {\n  field(DTYP, \"beamctl\")\n  field(INP, \"@ec0.s1.binaryInput9\")\n}\n");
     d.write("a.plc", "static.x := 1;\n");
     std::string e = load_error(d.write("ioc.yaml", ioc_yaml("plcs:\n  - {id: 0, file: a.plc}\n", "db:\n  - {file: x.db}\n")));
@@ -109,7 +109,7 @@ TEST(IocSignals, DeviceSupportNamesUnknownSignalsAndInputs) {
     EXPECT_NE(e.find("no signal 'ec0.s1.binaryInput9' in this IOC (ec0.s1.* has: ONE, ZERO, binaryInput01, binaryInput02,"),
               std::string::npos)
         << e;
-    EXPECT_NE(e.find("'plc0.firstscan' lives in the cycle only (PLC code reads and writes it); records reach plc0.enable,"),
+    EXPECT_NE(e.find("'plc0.dbg' lives in the cycle only (PLC code reads and writes it); records reach plc0.enable,"),
               std::string::npos)
         << e;
 }
