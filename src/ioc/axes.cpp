@@ -563,6 +563,11 @@ void IocAxes::set_message(Axis& a, const char* text) {
 }
 
 void IocAxes::set_derived_limits(std::size_t i, double lo, double hi) {
+    axes_.at(i).derived = true;
+    put_dial_limits(i, lo, hi);
+}
+
+void IocAxes::put_dial_limits(std::size_t i, double lo, double hi) {
     pv::Record* m = db_.find(axes_.at(i).pv);
     if (!pv::MotorRecord::from(m)) return;
     auto put = [&](const char* field, double v) {
@@ -592,6 +597,20 @@ void IocAxes::publish() {
     if (!group_) return;
     const auto& st = group_->snapshot();
     look_ = st; // the records' device support reads this look (scan_io_intr); MsgTxt is text
+    for (std::size_t i = 0; i < axes_.size() && i < st.size(); ++i) {
+        // soft limits moved by PLC code: the motor record's DHLM/DLLM follow, as ECMC's driver
+        Axis& a = axes_[i];
+        const motion::AxisStatus& s = st[i];
+        if (std::isnan(a.soft_fwd)) { // what the record was configured with
+            a.soft_fwd = a.params.soft_fwd;
+            a.soft_bwd = a.params.soft_bwd;
+        }
+        if (!a.derived && s.soft_fwd_enabled && s.soft_bwd_enabled && (s.soft_fwd != a.soft_fwd || s.soft_bwd != a.soft_bwd)) {
+            a.soft_fwd = s.soft_fwd;
+            a.soft_bwd = s.soft_bwd;
+            if (s.soft_bwd <= s.soft_fwd) put_dial_limits(i, s.soft_bwd, s.soft_fwd);
+        }
+    }
     for (std::size_t i = 0; i < axes_.size() && i < st.size(); ++i) {
         Axis& a = axes_[i];
         if (st[i].error_id == a.last_error) continue;

@@ -92,11 +92,16 @@ private:
         AxisCommandState cmd;
         pv::Record* msg = nullptr; // -MsgTxt: the text of the last error or refusal
         uint32_t last_error = ~0u;
+        // soft limits as the motor record last got them from the axis (PLC code may move them,
+        // as ecmccfg's slit include does); a kinematics group's derived limits take over
+        double soft_fwd = NAN, soft_bwd = NAN;
+        bool derived = false;
     };
     void make_pvs(Axis& a, registry::Registry& signals);
     void make_motor_record(Axis& a, pv::DbFile& f);
     void attach_motor_drivers();
     void set_message(Axis& a, const char* text);
+    void put_dial_limits(std::size_t i, double lo, double hi); // DLLM/DHLM of axis i's motor record
 
     pv::Database& db_;
     std::string prefix_;

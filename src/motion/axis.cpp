@@ -523,6 +523,8 @@ void Axis::take_variables() noexcept {
     p_.soft_bwd_enable = v.mon.lowsoftlimenable != 0;
     st_.soft_fwd_enabled = p_.soft_fwd_enable;
     st_.soft_bwd_enabled = p_.soft_bwd_enable;
+    st_.soft_fwd = p_.soft_fwd;
+    st_.soft_bwd = p_.soft_bwd;
     ControllerParams& k = ctrl_.params();
     k.kp = v.ctrl.kp;
     k.ki = v.ctrl.ki;

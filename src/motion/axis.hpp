@@ -194,6 +194,7 @@ struct AxisStatus {
     bool home_sensor = false, homed = false;
     bool soft_limit_fwd = false, soft_limit_bwd = false; // at/beyond an enabled soft limit
     bool soft_fwd_enabled = false, soft_bwd_enabled = false;
+    double soft_fwd = 0, soft_bwd = 0; // the soft limits now [units] (PLC code may move them)
     bool brake_open = false;
     static constexpr int kMaxEncoders = 8;
     std::array<double, kMaxEncoders> enc_pos{}; // every encoder's position (Enc01..) [units]

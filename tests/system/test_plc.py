@@ -257,11 +257,13 @@ input:
 monitoring:
   lag: {enable: false, tolerance: 1, time: 100}
   target: {enable: true, tolerance: 0.01, time: 10}
+softlimits: {enable: true, forward: 10, forwardEnable: true, backward: -10, backwardEnable: true}
 plc:
   enable: true
   code:
     - "static.n += 1;"
     - "ax4.enc.actpos := ax4.traj.setpos;"
+    - "if (static.n == 300) { ax4.mon.highsoftlim := 12.5; ax4.mon.lowsoftlim := -3; };"
     - "if (static.n == 500) { ax4.plc.enable := 0; };"
 """
 
@@ -278,3 +280,7 @@ def test_axis_plc_pvs(tmp_path, prefix):
         assert ca.get(connect(p + "Err")) == 0
         epics.caput(p + "EnaCmd", 1, wait=True)
         assert wait_for(lambda: ca.get(connect(p + "Scans")) > scans + 100, timeout=5)
+        # soft limits moved by PLC code (as ecmccfg's slit include does every scan): the motor
+        # record's limits follow them
+        assert wait_for(lambda: epics.caget(prefix + "VX.DHLM") == 12.5, timeout=5), epics.caget(prefix + "VX.DHLM")
+        assert epics.caget(prefix + "VX.DLLM") == -3 and epics.caget(prefix + "VX.HLM") == 12.5
