@@ -413,6 +413,12 @@ void Axis::rereference_others(double) noexcept {
     }
 }
 
+double Axis::csp_drive_frame_offset() const noexcept {
+    for (std::size_t i = 0; i < others_.size(); ++i)
+        if (other_index_[i] == p_.csp_drive_encoder) return others_[i].frame_offset();
+    return enc_.frame_offset();
+}
+
 bool Axis::encoder_homed(int index) const noexcept {
     if (index == p_.primary_encoder) return st_.homed;
     for (std::size_t i = 0; i < others_.size(); ++i)
@@ -817,7 +823,12 @@ void Axis::run(double dt) noexcept {
 
     // Controller and drive.
     double out = 0;
-    if (p_.csp) out = st_.set_pos - enc_.frame_offset(); // the drive's loop follows the position
+    if (p_.csp && p_.csp_pc) { // CSP_PC: the setpoint plus the PID's correction from the primary encoder
+        if (!enabled) csp_correction_ = 0;
+        else if (st_.busy || !ctrl_.in_deadband()) csp_correction_ = ctrl_.step(st_.pos_err, 0, dt);
+        else ctrl_.track(st_.pos_err); // holding the correction while within the deadband
+        out = st_.set_pos + csp_correction_ - csp_drive_frame_offset();
+    } else if (p_.csp) out = st_.set_pos - enc_.frame_offset(); // the drive's loop follows the position
     else if (enabled && !p_.virtual_axis) out = ctrl_.step(st_.pos_err, st_.set_vel, dt);
     st_.drive_output = out;
     if (!p_.virtual_axis) drive_.step(drive_enable, out, !st_.busy, dt);

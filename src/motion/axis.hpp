@@ -86,6 +86,11 @@ struct AxisParams {
     bool virtual_axis = false; // no drive, no encoder: actual = setpoint
     bool csp = false;          // cyclic synchronous position: the drive gets the setpoint position
                                // (in the primary encoder's frame), no axis position loop
+    // CSP_PC: CSP with the axis's PID on top: the drive gets setpoint + a position correction from
+    // the primary encoder's error (while busy or outside the deadband), in the frame of encoder
+    // `csp_drive_encoder` (encoder.useAsCSPDrvEnc: the drive's own)
+    bool csp_pc = false;
+    int csp_drive_encoder = -1;
     EncoderParams encoder;
     DriveParams drive;
     ControllerParams controller;
@@ -346,6 +351,8 @@ private:
     double auto_enable_time_ = 0, idle_time_ = 0; // [s] enabling, idle while enabled
     bool auto_enable_on_ = true, auto_disable_on_ = true; // run-time switches (mc_*_autoenable_enable)
     bool ext_within_deadband_ = false;
+    double csp_correction_ = 0; // CSP_PC: the PID's position correction [units]
+    double csp_drive_frame_offset() const noexcept; // the drive encoder's frame offset
     // homing (motion/homing.hpp): the running sequence, and the inputs of the last cycle
     friend class Homing;
     Homing homing_{*this};

@@ -28,9 +28,15 @@ AxisParams make_axis_params(const AxisConfig& c) {
     p.id = c.axis.id.value_or(1);
     p.name = c.epics.name;
     p.virtual_axis = c.is_virtual();
-    if (c.drive && c.axis.mode == DriveMode::CSP_PC)
-        throw Error(SB() << c.file << ": axis.mode CSP_PC is not supported yet (use CSV or CSP)");
-    p.csp = c.drive && c.axis.mode == DriveMode::CSP;
+    p.csp = c.drive && (c.axis.mode == DriveMode::CSP || c.axis.mode == DriveMode::CSP_PC);
+    if (c.drive && c.axis.mode == DriveMode::CSP_PC) {
+        p.csp_pc = true;
+        for (std::size_t k = 0; k < c.encoders.size(); ++k)
+            if (c.encoders[k].use_as_csp_drive_encoder) p.csp_drive_encoder = int(k);
+        if (p.csp_drive_encoder < 0)
+            throw Error(SB() << c.file << ": axis.mode CSP_PC needs the drive's own encoder marked "
+                                          "encoder.useAsCSPDrvEnc: true (its frame is the drive's)");
+    }
     // PLC connection: sources, external commands, switches written by PLC code
     p.trajectory_source = c.trajectory.source == TrajectorySource::PLC ? 1 : 0;
     p.external_commands = c.plc && c.plc->external_commands;

@@ -24,9 +24,13 @@ public:
     // error = setpoint - actual [units]; feed_forward = trajectory velocity [units/s]; dt [s].
     // The error has stayed within the deadband for longer than its time (ECMC ctrlWithinDeadband).
     bool in_deadband() const noexcept { return p_.deadband > 0 && in_band_ > p_.deadband_cycles; }
-    double step(double error, double feed_forward, double dt) noexcept {
+    // Counts the cycles the error stayed within the deadband (step() does it too).
+    void track(double error) noexcept {
         if (std::fabs(error) < p_.deadband) ++in_band_;
         else in_band_ = 0;
+    }
+    double step(double error, double feed_forward, double dt) noexcept {
+        track(error);
         double pid = 0;
         if (p_.deadband <= 0 || in_band_ <= p_.deadband_cycles) {
             integral_ = std::clamp(integral_ + p_.ki * error * dt, p_.min_integral, p_.max_integral);

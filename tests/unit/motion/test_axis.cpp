@@ -937,6 +937,65 @@ stages:
     EXPECT_NEAR(n * 0.001, 1.0 + 0.35, 0.2); // S-curve 90 deg at 90 deg/s, 360 deg/s^2
 }
 
+// CSP_PC (ECMC): CSP with the axis PID on top. The drive closes its loop on its own encoder
+// (useAsCSPDrvEnc), whose scale is 2 % off the primary (an external scale, the truth); the PID on
+// the primary's error corrects the drive's setpoint so the axis ends at target on the primary.
+// Plain CSP on the same setup ends 2 % short.
+TEST(Axis, CspWithPositionControllerOnTheExternalEncoder) {
+    for (bool pc : {false, true}) {
+        SimBus b(R"(
+slaves:
+  - {position: 0, type: EK1100}
+  - {position: 1, type: EL7211-0010_CSP}
+stages:
+  - {name: r, drive: s1, pitch: 360, mass: 0.2, friction: 0.2, start: 0}
+)");
+        AxisParams p;
+        p.csp = true;
+        p.csp_pc = pc;
+        EncoderParams drive_enc;
+        drive_enc.numerator = 360;
+        drive_enc.denominator = 1048576;
+        drive_enc.bits = 32;
+        drive_enc.absolute = true;
+        drive_enc.abs_bits = 32;
+        EncoderParams external = drive_enc;
+        external.numerator = 360 * 1.02; // reads 2 % more than the drive's encoder
+        p.encoder = external;
+        p.encoders = {external, drive_enc};
+        p.primary_encoder = 0;
+        p.csp_drive_encoder = 1;
+        p.drive.type = DriveParams::Type::Ds402;
+        p.drive.position_mode = true;
+        p.drive.numerator = 360;
+        p.drive.denominator = 1048576;
+        p.controller.kp = 0.5; // a correction of the position: a loop gain below 1
+        p.controller.ki = 2;
+        p.trajectory = {90, 360, 360, 3600};
+        p.target_enable = true;
+        p.target_tolerance = 0.05;
+        p.target_time_cycles = 10;
+        AxisIo io = drive_io(b, 1);
+        io.drive_setpoint = b.m->bind("ec0.s1.positionSetpoint01");
+        io.encoders = {io.encoder, io.encoder};
+        Axis ax(p, io);
+        AxisCommand on{CommandType::Power};
+        on.on = true;
+        (void)ax.command(on);
+        for (int i = 0; i < 20; ++i) b.cycle([&] { ax.run(0.001); });
+        ASSERT_TRUE(ax.status().enabled);
+        ASSERT_EQ(ax.command(AxisCommand{CommandType::MoveAbsolute, 90}), 0u);
+        for (int n = 0; n < 4000; ++n) b.cycle([&] { ax.run(0.001); });
+        if (pc) {
+            EXPECT_NEAR(ax.status().act_pos, 90, 0.05) << "CSP_PC";
+            EXPECT_TRUE(ax.status().at_target);
+            EXPECT_NEAR(b.plant->find_stage("r")->position(), 90 / 1.02, 0.05);
+        } else {
+            EXPECT_NEAR(ax.status().act_pos, 90 * 1.02, 0.1) << "plain CSP: the drive's frame"; // 1.8 off
+        }
+    }
+}
+
 TEST(AxisVariables, NamesAndWritability) {
     const AxisVariableInfo* v = find_axis_variable("traj.extsetpos");
     ASSERT_NE(v, nullptr);
