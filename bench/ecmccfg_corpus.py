@@ -145,7 +145,7 @@ def collect_calls(root):
                        for p in resolve_env(args.get("INC", "."), root).split(":") if p]
                 plc_calls[path].append((pm, inc, []))
             elif m.group(1) == "loadYamlAxis":
-                last_axis = (macros, [], [])
+                last_axis = (macros, [d], [])  # [d]: the IOC's directory (ECMC's working directory)
                 axis_calls[path].append(last_axis)
             elif last_axis is not None:  # loadYamlEnc: belongs to the axis before it
                 last_axis[2].append(path)
@@ -155,13 +155,14 @@ def collect_calls(root):
 UNDEFINED = re.compile(r"undefined macro '([A-Za-z0-9_]+)'")
 
 
-def run(cmd, macros=""):
-    """Runs a check; a macro the traced startup scripts leave undefined (set by an included
-    script or computed at run time) is taken as 1, as the run-time values above."""
+def run(cmd, macros="", cwd=None):
+    """Runs a check (in `cwd`: the IOC's directory, against which ECMC resolves relative file
+    names); a macro the traced startup scripts leave undefined (set by an included script or
+    computed at run time) is taken as 1, as the run-time values above."""
     extra = []
     for _ in range(12):
         m = ",".join(x for x in [macros] + [f"{k}=1" for k in extra] if x.strip())
-        p = subprocess.run(cmd[:3] + (["-m", m] if m else []) + cmd[3:], capture_output=True, text=True)
+        p = subprocess.run(cmd[:3] + (["-m", m] if m else []) + cmd[3:], capture_output=True, text=True, cwd=cwd)
         msg = (p.stderr or p.stdout).strip()
         u = UNDEFINED.search(msg)
         if p.returncode == 0 or not u or u.group(1) in extra:
@@ -250,11 +251,11 @@ def main():
     for f in axes:
         calls = axis_calls.get(f) or [({}, [], [])]
         errs = []
-        for macros, _, encs in calls:
-            cmd = [a.beamctl, "axis", "check"]
+        for macros, dirs, encs in calls:
+            cmd = [os.path.abspath(a.beamctl), "axis", "check"]
             for e in encs:
                 cmd += ["-e", e]
-            ok, msg = run(cmd + [f], macro_arg(macros))
+            ok, msg = run(cmd + [f], macro_arg(macros), dirs[0] if dirs else None)
             if not ok:
                 errs.append(msg)
         results[f] = (not errs, errs[0] if errs else "")
