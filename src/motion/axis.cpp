@@ -426,6 +426,20 @@ bool Axis::encoder_homed(int index) const noexcept {
     return false;
 }
 
+bool Axis::set_encoder_homed(int index, bool homed) noexcept {
+    if (index == p_.primary_encoder) {
+        enc_.set_homed(homed);
+        st_.homed = enc_.homed();
+        return true;
+    }
+    for (std::size_t i = 0; i < others_.size(); ++i)
+        if (other_index_[i] == index) {
+            others_[i].set_homed(homed);
+            return true;
+        }
+    return false;
+}
+
 uint32_t Axis::select_primary_encoder(int index) noexcept {
     if (index == p_.primary_encoder) return 0;
     int k = -1;

@@ -271,6 +271,8 @@ public:
     uint32_t select_primary_encoder(int index) noexcept;
     // Encoder `index` (from 0) is referenced (homed, or absolute); false if there is none.
     bool encoder_homed(int index) const noexcept;
+    // Marks encoder `index` (from 0) referenced or not (ECMC mc_set_enc_homed); false if none.
+    bool set_encoder_homed(int index, bool homed) noexcept;
     // features.allowedFunctions at run time (ECMC mc_set_enable_motion_funcs).
     void set_allowed_functions(bool positioning, bool constant_velocity, bool homing) noexcept {
         p_.allow_positioning = positioning;

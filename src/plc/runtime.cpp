@@ -471,6 +471,34 @@ struct Builtins {
         int enc = int(a[1]);
         return query(ctx, a, [enc](motion::Axis& x) { return x.encoder_homed(enc - 1) ? 1.0 : 0.0; });
     }
+    // mc_set_enc_homed(ax, enc from 1, homed): 0, or 0x14326 for no such encoder
+    static double set_enc_homed(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        bool ok = a[1] >= 1 && a[1] <= motion::AxisStatus::kMaxEncoders &&
+                  rt.opt_.axes[std::size_t(i)]->set_encoder_homed(int(a[1]) - 1, a[2] > 0);
+        return ok ? 0 : result(rt, kEncIndexOutOfRange);
+    }
+    // mc_set_axis_error(ax, id): the axis error (it stops and disables, as its own); returns id.
+    // mc_set_slaved_axis_in_error(ax): the same with 0x1432B; returns 0.
+    static double set_axis_error(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        uint32_t id = a[1] > 0 && a[1] < 4294967296.0 ? uint32_t(a[1]) : 0;
+        motion::Axis& x = *rt.opt_.axes[std::size_t(i)];
+        if (id) x.raise_error(id);
+        else (void)x.command(motion::AxisCommand{motion::CommandType::Reset});
+        return id;
+    }
+    static double set_slaved_axis_in_error(void* ctx, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(ctx);
+        int i = axis_index(rt, a[0]);
+        if (i < 0) return result(rt, uint32_t(kAxisIdOutOfRange));
+        rt.opt_.axes[std::size_t(i)]->raise_error(motion::error_id::kSlavedAxisInError);
+        return 0;
+    }
     // mc_set_prim_enc(ax, enc from 1): the control encoder (0x14328 while busy)
     static double set_prim_enc(void* ctx, const double* a, int) noexcept {
         auto& rt = *static_cast<PlcRuntime*>(ctx);
@@ -1071,6 +1099,9 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
         {"lut_get_value", Builtins::lut_get_value, 2, 2, false},
         {"mc_set_enable_motion_funcs", Builtins::set_motion_funcs, 4, 4, true},
         {"mc_set_prim_enc", Builtins::set_prim_enc, 2, 2, true},
+        {"mc_set_enc_homed", Builtins::set_enc_homed, 3, 3, true},
+        {"mc_set_axis_error", Builtins::set_axis_error, 2, 2, true},
+        {"mc_set_slaved_axis_in_error", Builtins::set_slaved_axis_in_error, 1, 1, true},
         {"ec_get_time_frm_src", Builtins::time_from_source, 1, 1, false},
         {"ec_get_time_offset_mono", Builtins::time_offset_mono, 0, 0, false},
         {"ec_get_dom_state", Builtins::dom_state, 1, 1, false},

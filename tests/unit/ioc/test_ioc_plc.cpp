@@ -310,7 +310,18 @@ TEST(IocPlc, AxisGroups) {
           static.errAfterReset := mc_grp_get_any_error_id(${GRP_real_ID});
           static.bad := mc_grp_size(7); static.badErr := mc_get_err();
           static.range := mc_grp_get_busy(200); static.rangeErr := mc_get_err();
+          static.homedBefore := mc_get_enc_homed(3, 1);
+          static.sh := mc_set_enc_homed(3, 1, 1);
+          static.shBad := mc_set_enc_homed(3, 4, 1);
+          static.ae := mc_set_axis_error(3, 4660);
         };
+        if (static.n == 2006) {
+          static.homedAfter := mc_get_enc_homed(3, 1);
+          static.err3 := mc_get_axis_err(3);
+          mc_reset(3);
+          mc_set_slaved_axis_in_error(2);
+        };
+        if (static.n == 2008) { static.err2 := mc_get_axis_err(2); static.err3b := mc_get_axis_err(3); };
         ax1.enc.actpos := ax1.traj.setpos; ax2.enc.actpos := ax2.traj.setpos; ax3.enc.actpos := ax3.traj.setpos;
     )");
     VirtualIoc v(d.write("ioc.yaml", ioc_yaml("axes:\n" + ax(1, "real") + ax(3, "virt") + ax(2, "real"),
@@ -345,6 +356,15 @@ TEST(IocPlc, AxisGroups) {
     EXPECT_EQ(v.stat(0, "badErr"), 0x20508);
     EXPECT_EQ(v.stat(0, "range"), 0);
     EXPECT_EQ(v.stat(0, "rangeErr"), 0x20502);
+    // mc_set_enc_homed, mc_set_axis_error, mc_set_slaved_axis_in_error
+    v.cycles(4);
+    EXPECT_EQ(v.stat(0, "sh"), 0);
+    EXPECT_EQ(v.stat(0, "shBad"), 0x14326);
+    EXPECT_EQ(v.stat(0, "ae"), 4660);
+    EXPECT_EQ(v.stat(0, "homedAfter"), 1);
+    EXPECT_EQ(v.stat(0, "err3"), 4660);
+    EXPECT_EQ(v.stat(0, "err3b"), 0); // mc_reset cleared it
+    EXPECT_EQ(v.stat(0, "err2"), 0x1432B);
 }
 
 // m2m between two IOCs (here two in one process, as two processes would: one shared-memory
