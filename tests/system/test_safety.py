@@ -140,8 +140,10 @@ def test_a_blade_record_follows_the_move_the_plc_makes(demo):
 
 def test_val_starts_at_the_readback_and_a_tweak_goes_forward(demo):
     x = epics.Motor(P + "SampleX", timeout=5)
+    # the absolute encoder reads 1.5 mm at start (the record's first poll after the bus is OK
+    # brings the readback, up to 0.1 s after the bus status PV says OK)
+    assert wait_for(lambda: abs(x.get("RBV") - 1.5) < 1e-3, timeout=5), x.get("RBV")
     rbv = x.get("RBV")
-    assert abs(rbv - 1.5) < 1e-3  # the absolute encoder reads 1.5 mm at start
     assert abs(x.get("VAL") - rbv) < 1e-3 and abs(x.get("DVAL") - x.get("DRBV")) < 1e-3
     epics.caput(P + "SampleX-EnaCmd", 1, wait=True)
     assert wait_for(lambda: get("SampleX-EnaAct") == 1, timeout=5)
