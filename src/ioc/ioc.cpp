@@ -207,11 +207,7 @@ void set_array_if_changed(pv::Database& db, pv::Record& r, const double* v, uint
         pv::get_element(r, *f, e, i, pv::Prim::Double, &cur);
         same = cur == v[i];
     }
-    if (same) return;
-    for (uint32_t i = 0; i < n; ++i) pv::put_element(r, *f, e, i, pv::Prim::Double, &v[i]);
-    r.set_count(*f, n);
-    r.udf = 0;
-    db.process(r);
+    if (!same) set_array(db, r, v, n);
 }
 
 } // namespace

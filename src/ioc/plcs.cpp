@@ -32,11 +32,6 @@ plc::EcEntry::Kind kind_of(const std::string& datatype) {
     return plc::EcEntry::Kind::Integer;
 }
 
-std::string two_digits(int id) {
-    char b[16];
-    std::snprintf(b, sizeof b, "%02d", id);
-    return b;
-}
 
 } // namespace
 

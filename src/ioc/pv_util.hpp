@@ -6,6 +6,7 @@
 #include "pv/db_file.hpp"
 
 #include <cstdint>
+#include <cstdio>
 #include <string>
 #include <utility>
 #include <vector>
@@ -31,6 +32,24 @@ inline void set_value(pv::Database& db, pv::Record& r, double v, bool comm_alarm
     r.udf = 0;
     if (comm_alarm) r.set_sevr(pv::kStatComm, pv::kInvalid);
     db.process(r);
+}
+
+// Sets an array record's elements (and NORD) from the owner of the values, and processes it.
+inline void set_array(pv::Database& db, pv::Record& r, const double* v, uint32_t n) {
+    const pv::FieldDesc* f = r.type().find("VAL");
+    pv::Elements e = r.elements(*f);
+    n = n < e.capacity ? n : e.capacity;
+    for (uint32_t i = 0; i < n; ++i) pv::put_element(r, *f, e, i, pv::Prim::Double, &v[i]);
+    r.set_count(*f, n);
+    r.udf = 0;
+    db.process(r);
+}
+
+// An instance number as ecmccfg's PV names write it: "03" (PLC03-..., DS03-...).
+inline std::string two_digits(int id) {
+    char b[16];
+    std::snprintf(b, sizeof b, "%02d", id);
+    return b;
 }
 
 // A counter as a 32-bit LONG PV value: saturates instead of wrapping.

@@ -33,22 +33,6 @@ const PvTable& storage_table() {
     return t;
 }
 
-std::string two_digits(int id) {
-    char b[16];
-    std::snprintf(b, sizeof b, "%02d", id);
-    return b;
-}
-
-void set_array(pv::Database& db, pv::Record& r, const double* v, uint32_t n) {
-    const pv::FieldDesc* f = r.type().find("VAL");
-    pv::Elements e = r.elements(*f);
-    n = std::min(n, e.capacity);
-    for (uint32_t i = 0; i < n; ++i) pv::put_element(r, *f, e, i, pv::Prim::Double, &v[i]);
-    r.set_count(*f, n);
-    r.udf = 0;
-    db.process(r);
-}
-
 void set_if_changed(pv::Database& db, pv::Record* r, double v) {
     if (r && (r->udf || get_value(*r) != v)) set_value(db, *r, v, false);
 }

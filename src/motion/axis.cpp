@@ -405,7 +405,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     return 0;
 }
 
-void Axis::rereference_others(double) noexcept {
+void Axis::rereference_others() noexcept {
     for (std::size_t i = 0; i < others_.size(); ++i) {
         if (!others_[i].params().ref_at_home) continue;
         others_[i].set_position(enc_.position()); // ECMC refAtHome: the primary's new position

@@ -309,7 +309,7 @@ private:
     void take_variables() noexcept;    // PLC writes -> commands, sources, interlocks
     void publish_variables() noexcept; // status -> ax<n>.* variables
     void monitor(double dt) noexcept;
-    void rereference_others(double delta) noexcept; // homing: encoders with refAtHome follow
+    void rereference_others() noexcept; // homing: encoders with refAtHome follow
     void fault(uint32_t id, bool disable) noexcept;
     void finish(uint64_t tag) noexcept;
     void start_stop(double decel) noexcept;

@@ -271,7 +271,7 @@ void Homing::finish() noexcept {
         st.homed = true;
         a_.enc_.set_homed(true);
         st.target_pos = a_.traj_.state().position;
-        a_.rereference_others(delta);
+        a_.rereference_others();
         step_ = 11;
     }
     if (step_ == 11) { // the drive back in its motion mode (autoMode), then the post move

@@ -184,8 +184,8 @@ struct PlcRuntime::Plc : Host {
 
     // "ds0.append": a cell of data storage 0 (ECMC's ecmcPLCDataIF for storages).
     std::optional<Binding> ds_variable(const std::string& n, int id, std::string_view rest) {
-        if (auto it = ds_names.find(n); it != ds_names.end())
-            return Binding{&it->second->value, it->second->item != DsItem::Full && it->second->item != DsItem::Error, 1};
+        auto writable = [](DsItem i) { return i != DsItem::Full && i != DsItem::Error; };
+        if (auto it = ds_names.find(n); it != ds_names.end()) return Binding{&it->second->value, writable(it->second->item), 1};
         std::optional<DsItem> item = ds_item(rest);
         if (!item || id < 0 || id >= daq::kMaxStorages) return std::nullopt;
         daq::DataStorage* storage = rt.storage_by_id_[id];
@@ -195,7 +195,7 @@ struct PlcRuntime::Plc : Host {
         }
         ds.push_back(DsCell{storage, *item});
         ds_names[n] = &ds.back();
-        return Binding{&ds.back().value, *item != DsItem::Full && *item != DsItem::Error, 1};
+        return Binding{&ds.back().value, writable(*item), 1};
     }
 
     // "ec0.s3.binaryInput01[.bit]", "ec0.masterstatus": a cell copied from/to the image.
