@@ -3,8 +3,10 @@
 // the mirror's ten output expressions (five jacks from the pose, five pose values from the
 // jacks) written out as one expression over bound variables and evaluated by our PLC
 // (`r := <expr>;`, one scan) and, when built with BEAMCTL_BENCH_MUPARSER, by muparser
-// (Parser::Eval) with the same variables bound. Issue target: beamctl faster than muparser on
-// every expression.
+// (Parser::Eval) with the same variables bound, and, when built with BEAMCTL_BENCH_EXPRTK, by
+// ExprTk as ECMC runs it (exprtk_reference.hpp): every expression and every scan, with a
+// `bit_equal` counter saying whether ExprTk's results equal beamctl's bit for bit. Issue targets:
+// faster than muparser (issue 9) and than ExprTk (issue 18) on every expression and scan.
 #include "daq/data_storage.hpp"
 #include "plc/program.hpp"
 #include "plc/runtime.hpp"
@@ -14,8 +16,13 @@
 #ifdef BEAMCTL_BENCH_MUPARSER
 #include <muParser.h>
 #endif
+#ifdef BEAMCTL_BENCH_EXPRTK
+#include "exprtk_reference.hpp"
+#include "plc/source.hpp"
+#endif
 
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -37,6 +44,7 @@ const std::filesystem::path kExamples =
 class MapHost : public Host {
 public:
     double& operator[](const std::string& name) { return vars_[name]; }
+    const std::map<std::string, double>& vars() const { return vars_; }
     std::optional<Binding> resolve(std::string_view name) override {
         return Binding{&vars_[std::string(name)], true, 1};
     }
@@ -141,22 +149,69 @@ void BM_Expr_muparser(benchmark::State& state) {
 BENCHMARK(BM_Expr_muparser)->DenseRange(0, 9);
 #endif
 
+#ifdef BEAMCTL_BENCH_EXPRTK
+bool same_bits(double a, double b) {
+    return std::memcmp(&a, &b, sizeof a) == 0;
+}
+
+// 1 when every variable both engines hold has the same bits.
+double agree(const std::map<std::string, double>& ours, const std::map<std::string, double>& theirs) {
+    for (const auto& [name, v] : theirs)
+        if (auto it = ours.find(name); it != ours.end() && !same_bits(it->second, v)) {
+            std::fprintf(stderr, "ExprTk differs on %s: %.17g vs beamctl %.17g\n", name.c_str(), v, it->second);
+            return 0;
+        }
+    return 1;
+}
+
+std::unique_ptr<exprtk_reference::Expression> exprtk_compile(const std::string& text,
+                                                             std::map<std::string, double>& vars) {
+    std::string error;
+    auto e = exprtk_reference::Expression::compile(text, vars, error);
+    if (!e) throw std::runtime_error("ExprTk refuses the code: " + error);
+    return e;
+}
+
+void BM_Expr_exprtk(benchmark::State& state) {
+    const Expr& e = mirror_exprs()[std::size_t(state.range(0))];
+    state.SetLabel(e.name);
+    std::map<std::string, double> vars;
+    MapHost h;
+    for (const auto& [n, v] : kInputs) vars[n] = h[n] = v;
+    const std::string code = "r := " + e.text + ";";
+    auto x = exprtk_compile(code, vars);
+    Program p = Program::compile(code, "expr.plc", h);
+    for (auto _ : state) benchmark::DoNotOptimize(x->value());
+    p.run();
+    state.counters["bit_equal"] = agree(h.vars(), vars);
+}
+BENCHMARK(BM_Expr_exprtk)->DenseRange(0, 9);
+#endif
+
 // ---- whole scans --------------------------------------------------------------------------------
 
-// A shipped kinematics PLC with its axes at a pose; `busy` puts it in state 1 (inverse running).
-void scan_example(benchmark::State& state, const char* file, const char* busy_axis) {
-    MapHost h;
+// The axes of a shipped kinematics PLC at a pose; `busy` puts it in state 1 (inverse running).
+template <typename Vars> void set_pose(Vars& v, const char* busy_axis) {
+    const double jacks[] = {7.3, 3.9, -4.8, -6.4, -9.4};
+    for (int j = 0; j < 5; ++j) {
+        v["ax" + std::to_string(j + 1) + ".enc.actpos"] = jacks[j];
+        v["ax" + std::to_string(j + 1) + ".traj.setpos"] = jacks[j];
+        v["ax" + std::to_string(j + 6) + ".traj.setpos"] = kInputs[j].second;
+    }
+    if (busy_axis) v[std::string(busy_axis) + ".traj.busy"] = 1;
+}
+
+CompileOptions example_options() {
     CompileOptions o;
     o.macros = {{"SELF", "plc0"}, {"SELF_ID", "0"}};
     o.include_path = {(kExamples / "plc_lib").string()};
-    Program p = Program::compile_file((kExamples / "kinematics" / file).string(), h, o);
-    const double jacks[] = {7.3, 3.9, -4.8, -6.4, -9.4};
-    for (int j = 0; j < 5; ++j) {
-        h["ax" + std::to_string(j + 1) + ".enc.actpos"] = jacks[j];
-        h["ax" + std::to_string(j + 1) + ".traj.setpos"] = jacks[j];
-        h["ax" + std::to_string(j + 6) + ".traj.setpos"] = kInputs[j].second;
-    }
-    if (busy_axis) h[std::string(busy_axis) + ".traj.busy"] = 1;
+    return o;
+}
+
+void scan_example(benchmark::State& state, const char* file, const char* busy_axis) {
+    MapHost h;
+    Program p = Program::compile_file((kExamples / "kinematics" / file).string(), h, example_options());
+    set_pose(h, busy_axis);
     for (int i = 0; i < 2; ++i) p.run(); // first scan, state change
     for (auto _ : state) {
         if (p.run() != 0) state.SkipWithError("scan failed");
@@ -174,6 +229,50 @@ BENCHMARK(BM_Scan_mirror_trig_S0);
 BENCHMARK(BM_Scan_mirror_matrix_S1);
 BENCHMARK(BM_Scan_mirror_matrix_S0);
 BENCHMARK(BM_Scan_spiral_S1);
+
+#ifdef BEAMCTL_BENCH_EXPRTK
+// The same scans by ExprTk: the file preprocessed as ecmccfg does (macros, includes, `#`
+// comments), as ECMC hands it to ExprTk.
+std::string preprocessed(const std::string& path) {
+    namespace d = beamctl::plc::detail;
+    d::Diagnostics diags(10);
+    d::Source src;
+    beamctl::MacroMap macros = example_options().macros;
+    d::preprocess(src, d::read_file(path), path, macros, example_options().include_path, diags);
+    if (!diags.empty()) throw std::runtime_error(diags.messages().front());
+    std::string text;
+    for (const d::SourceLine& l : src.lines) text += l.text + "\n";
+    return text;
+}
+
+void scan_example_exprtk(benchmark::State& state, const char* file, const char* busy_axis) {
+    const std::string path = (kExamples / "kinematics" / file).string();
+    std::map<std::string, double> vars;
+    auto x = exprtk_compile(preprocessed(path), vars);
+    set_pose(vars, busy_axis);
+    for (int i = 0; i < 2; ++i) x->value();
+    for (auto _ : state) {
+        benchmark::DoNotOptimize(x->value());
+        benchmark::ClobberMemory();
+    }
+    // beamctl from the same pose, as many scans: the same values?
+    MapHost h;
+    Program p = Program::compile_file(path, h, example_options());
+    set_pose(h, busy_axis);
+    for (benchmark::IterationCount i = 0; i < state.iterations() + 2; ++i) p.run();
+    state.counters["bit_equal"] = agree(h.vars(), vars);
+}
+void BM_Scan_mirror_trig_S1_exprtk(benchmark::State& s) { scan_example_exprtk(s, "mirror.plc", "ax6"); }
+void BM_Scan_mirror_trig_S0_exprtk(benchmark::State& s) { scan_example_exprtk(s, "mirror.plc", nullptr); }
+void BM_Scan_mirror_matrix_S1_exprtk(benchmark::State& s) { scan_example_exprtk(s, "mirror_matrix.plc", "ax6"); }
+void BM_Scan_mirror_matrix_S0_exprtk(benchmark::State& s) { scan_example_exprtk(s, "mirror_matrix.plc", nullptr); }
+void BM_Scan_spiral_S1_exprtk(benchmark::State& s) { scan_example_exprtk(s, "spiral.plc", "ax3"); }
+BENCHMARK(BM_Scan_mirror_trig_S1_exprtk);
+BENCHMARK(BM_Scan_mirror_trig_S0_exprtk);
+BENCHMARK(BM_Scan_mirror_matrix_S1_exprtk);
+BENCHMARK(BM_Scan_mirror_matrix_S0_exprtk);
+BENCHMARK(BM_Scan_spiral_S1_exprtk);
+#endif
 
 // 100 statements in four kinds, 25 of each: arithmetic, math functions, if/else, min/max with a
 // comparison; over 2 inputs and 100 statics, each reading an earlier result.
@@ -220,6 +319,26 @@ void BM_Scan_100_statements(benchmark::State& state) {
 }
 BENCHMARK(BM_Scan_100_statements);
 
+#ifdef BEAMCTL_BENCH_EXPRTK
+void BM_Scan_100_statements_exprtk(benchmark::State& state) {
+    std::map<std::string, double> vars;
+    vars["x"] = 0.25;
+    vars["y"] = -1.5;
+    auto x = exprtk_compile(hundred_statements(), vars);
+    for (auto _ : state) {
+        benchmark::DoNotOptimize(x->value());
+        benchmark::ClobberMemory();
+    }
+    MapHost h;
+    h["x"] = 0.25;
+    h["y"] = -1.5;
+    Program p = Program::compile(hundred_statements(), "hundred.plc", h);
+    for (benchmark::IterationCount i = 0; i < state.iterations(); ++i) p.run();
+    state.counters["bit_equal"] = agree(h.vars(), vars);
+}
+BENCHMARK(BM_Scan_100_statements_exprtk);
+#endif
+
 // ---- data storage (issue 13: "data storage append per value") ----------------------------------
 
 // The buffer alone: one value appended to a 1000-value ring (arg 1) or FIFO (arg 2).
@@ -265,4 +384,14 @@ BENCHMARK(BM_DsAppend_plc)->Arg(0)->Arg(1);
 
 } // namespace
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+#ifndef BEAMCTL_BENCH_EXPRTK
+    std::fprintf(stderr, "bench_plc: the ExprTk reference was not measured (configure with "
+                         "-DBEAMCTL_EXPRTK_DIR=<directory holding exprtk.hpp>)\n");
+#endif
+    benchmark::Initialize(&argc, argv);
+    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+    benchmark::RunSpecifiedBenchmarks();
+    benchmark::Shutdown();
+    return 0;
+}

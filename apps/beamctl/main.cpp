@@ -82,6 +82,7 @@ struct PlcCheckOptions {
     std::vector<std::string> macros, include_path, files;
     std::string ioc_file;
     double rate_ms = -1;
+    bool strict = false; // --strict: also report what ECMC's ExprTk would refuse
 };
 
 int run_plc_check(const PlcCheckOptions& o) {
@@ -120,6 +121,7 @@ int run_plc_check(const PlcCheckOptions& o) {
         src.macros = macros;
         src.include_path = include_path;
         src.rate_ms = o.rate_ms;
+        src.strict = o.strict;
         try {
             check.add(src);
             std::printf("%s: OK\n", f.c_str());
@@ -543,6 +545,8 @@ int main(int argc, char** argv) {
         ->allow_extra_args(false)
         ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
     plccheck->add_option("--ioc", plco.ioc_file, "Bind names against this IOC configuration (buses, axes, plugins)");
+    plccheck->add_flag("--strict", plco.strict,
+                       "Also report every construct beamctl accepts but ECMC's ExprTk refuses, with its ECMC spelling");
     plccheck->add_option("files", plco.files, "PLC files")->required();
 
     std::vector<std::string> axis_macros, axis_encoders;

@@ -212,7 +212,8 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         const auto plcs = root["plcs"].list();
         for (std::size_t i = 0; i < plcs.size(); ++i) {
             const YamlNode& p = plcs[i];
-            if (!p.keys({"id", "file", "rate_ms", "enable", "macros", "include", "libraries"})) continue;
+            if (!p.keys({"id", "file", "rate_ms", "enable", "macros", "include", "libraries", "strict"}))
+                continue;
             PlcEntry e;
             e.id = int_of(p["id"], int(i), 0, 99);
             if (!ids.insert(e.id).second) p.error(SB() << "PLC id " << e.id << " used twice");
@@ -225,6 +226,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
                     p["rate_ms"].error(SB() << *r << " should be > 0, or -1 (every cycle)");
             }
             e.enable = p["enable"].boolean().value_or(true);
+            e.strict = p["strict"].boolean().value_or(false);
             e.macros = macros_of(p["macros"]);
             e.include = paths_of(p["include"], dir);
             e.libraries = paths_of(p["libraries"], dir);

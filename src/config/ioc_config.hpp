@@ -66,12 +66,13 @@ struct AxisEntry {
 };
 
 // A PLC file (ecmccfg loadPLCFile.cmd): `plcs: [{id, file, rate_ms, enable, macros, include,
-// libraries}]`.
+// libraries, strict}]`.
 struct PlcEntry {
     int id = 0;              // plc<id>, PV PLC<id as 2 digits>-...
     std::string file;        // resolved path
     double rate_ms = -1;     // scan period [ms]; -1 = every cycle
     bool enable = true;
+    bool strict = false;     // refuse what ECMC's ExprTk would refuse (plc::CompileOptions::strict)
     MacroMap macros;
     std::vector<std::string> include;   // resolved directories searched by `include`
     std::vector<std::string> libraries; // resolved files of `function` definitions

@@ -42,6 +42,7 @@ plc::PlcSource plc_source(const config::PlcEntry& e) {
     s.text = read_text(e.file, e.where);
     s.rate_ms = e.rate_ms;
     s.enable = e.enable;
+    s.strict = e.strict;
     s.macros = e.macros;
     s.include_path = e.include;
     s.libraries = e.libraries;

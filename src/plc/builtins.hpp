@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <string_view>
 
 namespace beamctl::plc::detail {
@@ -81,6 +82,68 @@ inline double apply(BinOp op, double a, double b) noexcept {
         return from_bool(is_true(a) == is_true(b));
     }
     return a;
+}
+
+// `x ^ c` for a literal integer c with |c| <= 60, as ExprTk compiles it (its cardinal-pow
+// optimisation, numeric::fast_exp): the same multiplications in the same order, so a PLC's
+// powers agree bit for bit with ECMC's. They differ from std::pow by the rounding of each
+// multiplication (a few ulp at most for n <= 10) and where an intermediate overflows: 1 / x^n
+// is 0 where pow(x, -n) would still be subnormal.
+constexpr double kMaxIntPow = 60;
+inline double int_pow(double v, std::uint32_t n) noexcept {
+    switch (n) {
+    case 0:
+        return 1.0;
+    case 1:
+        return v;
+    case 2:
+        return v * v;
+    case 3:
+        return v * v * v;
+    case 4: {
+        const double v2 = v * v;
+        return v2 * v2;
+    }
+    case 5:
+        return int_pow(v, 4) * v;
+    case 6: {
+        const double v3 = v * v * v;
+        return v3 * v3;
+    }
+    case 7:
+        return int_pow(v, 6) * v;
+    case 8: {
+        const double v4 = int_pow(v, 4);
+        return v4 * v4;
+    }
+    case 9:
+        return int_pow(v, 8) * v;
+    case 10: {
+        const double v5 = int_pow(v, 5);
+        return v5 * v5;
+    }
+    default: { // square and multiply
+        double l = 1.0;
+        while (n) {
+            if (n % 2 == 1) {
+                l *= v;
+                --n;
+            }
+            v *= v;
+            n /= 2;
+        }
+        return l;
+    }
+    }
+}
+// True when `x ^ c` is compiled to int_pow (or its reciprocal), as ExprTk decides.
+inline bool is_int_pow_exponent(double c) noexcept {
+    return std::fabs(c) <= kMaxIntPow && std::fmod(c, 1.0) == 0.0;
+}
+// `x ^ 0.5` (beamctl's own reduction, ExprTk calls pow): sqrt, which is correctly rounded,
+// with pow's results at -0 (+0) and -inf (+inf).
+inline double pow_half(double v) noexcept {
+    return v == -HUGE_VAL ? HUGE_VAL : std::sqrt(v) + 0.0;
 }
 
 inline double logical_not(double v) noexcept {

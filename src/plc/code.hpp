@@ -25,6 +25,10 @@ enum class Op : std::uint8_t {
     div,
     mod,
     pow,
+    sqr,      // *d = *a * *a            (x ^ 2)
+    powi,     // *d = int_pow(*a, n)     (x ^ n, n a literal integer 3..60)
+    powi_inv, // *d = 1 / int_pow(*a, n) (x ^ -n)
+    pow_half, // *d = pow_half(*a)       (x ^ 0.5)
     lt,
     le,
     gt,

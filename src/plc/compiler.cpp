@@ -2,6 +2,7 @@
 
 #include "plc/parser.hpp"
 
+#include <cmath>
 #include <cstring>
 #include <limits>
 #include <map>
@@ -582,8 +583,35 @@ private:
         }
         const std::vector<Ref> args = gen_args(n.kids);
         const Ref d = to(dst);
-        emit(binary_op(op), d, args[0], args[1]);
+        emit_binary(op, d, args[0], args[1]);
         return d;
+    }
+
+    // `a op b`; a power with a literal exponent is strength-reduced: integers as ExprTk does
+    // (int_pow, bit for bit with ECMC), 0.5 to a square root (pow_half).
+    void emit_binary(BinOp op, Ref d, Ref a, Ref b) {
+        if (op == BinOp::pow && b.kind == Ref::konst) {
+            const double c = consts_[b.index];
+            if (is_int_pow_exponent(c)) {
+                const auto p = static_cast<std::uint32_t>(std::fabs(c));
+                if (p == 0)
+                    emit(Op::mov, d, konst(1.0));
+                else if (c < 0)
+                    emit(Op::powi_inv, d, a).n = p;
+                else if (p == 1)
+                    emit(Op::mov, d, a);
+                else if (p == 2)
+                    emit(Op::sqr, d, a);
+                else
+                    emit(Op::powi, d, a).n = p;
+                return;
+            }
+            if (c == 0.5) {
+                emit(Op::pow_half, d, a);
+                return;
+            }
+        }
+        emit(binary_op(op), d, a, b);
     }
 
     // ---- places (assignment targets) ----------------------------------------------------------
@@ -701,7 +729,7 @@ private:
             const Ref a = gen_elem(*n.kids[0], i, scalars);
             const Ref b = gen_elem(*n.kids[1], i, scalars);
             const Ref t = temp();
-            emit(binary_op(static_cast<BinOp>(n.op)), t, a, b);
+            emit_binary(static_cast<BinOp>(n.op), t, a, b);
             return t;
         }
         case NK::builtin: {

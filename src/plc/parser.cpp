@@ -79,6 +79,8 @@ public:
         , diags_(diags)
         , unit_(unit) {}
 
+    void strict(bool on) { strict_ = on; }
+
     // Registers the `function` signatures of a token stream (so calls may precede definitions).
     void declare_functions(const std::vector<Token>& toks) {
         int depth = 0;
@@ -141,17 +143,27 @@ public:
         pos_ = 0;
         auto block = make(NK::block, cur());
         if (!check_brackets()) return block;
+        bool ended = true; // the last statement has its ';' (or there is none yet)
         while (!is(Tok::end)) {
             if (is(Tok::semicolon)) {
+                if (ended) empty_statement(cur());
+                ended = true;
                 next();
                 continue;
             }
             const std::size_t start = pos_;
             try {
                 if (is_word(cur(), "function")) {
+                    if (!library)
+                        ecmc_refuses(cur(), "a 'function' definition in PLC code",
+                                     "define it in a library file (ecmccfg loadPLCLib.cmd; "
+                                     "'libraries:' of the PLC here)");
                     parse_function_def();
+                    ended = true;
                     continue;
                 }
+                if (!ended) juxtaposed_numbers();
+                ended = false;
                 if (library)
                     fail(cur(), SB() << "expected a function definition in a library, found "
                                      << describe(cur()));
@@ -384,27 +396,58 @@ private:
         unit_.functions[id].defined = true;
     }
 
-    // `{ a; b; ... }` with its own scope; the value is the last statement's.
-    NodePtr parse_braces() {
+    // `{ a; b; ... }` with its own scope; the value is the last statement's. `bare`: not the
+    // body of a statement, where ExprTk reads `{` as a bracket around one expression.
+    NodePtr parse_braces(bool bare = false) {
         const Token open = cur();
         expect(Tok::lbrace, "");
         auto block = make(NK::block, open);
         ScopeGuard scope(*this);
+        bool statements = false; // a ';' inside: a sequence, not one bracketed expression
+        bool ended = true;       // the last statement has its ';'
         while (!is(Tok::rbrace)) {
             if (is(Tok::semicolon)) {
+                empty_statement(cur());
                 next();
                 continue;
             }
             if (is(Tok::end)) fail(open, "'{' is never closed");
+            if (!ended) juxtaposed_numbers();
             block->kids.push_back(parse_expression(0));
+            ended = false;
             if (is(Tok::semicolon)) {
+                statements = ended = true;
                 next();
             } else if (is(Tok::rparen) || is(Tok::rbracket)) {
                 fail(cur(), SB() << "unexpected " << describe(cur()) << " (expected ';' or '}')");
             }
         }
         next();
+        if (bare && (statements || block->kids.empty()))
+            ecmc_refuses(open,
+                         block->kids.empty() ? "an empty '{}' block"
+                                             : "a bare '{ ...; }' block of statements (ExprTk reads "
+                                               "a bare '{' as a bracket around one expression)",
+                         "'~{ ... }'");
         return block;
+    }
+
+    // ---- strict ECMC mode: what beamctl accepts and ECMC's ExprTk refuses ---------------------
+
+    void ecmc_refuses(const Token& at, const std::string& what, const std::string& spelling) {
+        if (strict_)
+            error(at, SB() << "strict ECMC: ExprTk refuses " << what << "; ECMC spelling: "
+                           << spelling);
+    }
+    // A number right after a number (`x := 1 2`) starts a new statement here; ExprTk refuses
+    // the token pair.
+    void juxtaposed_numbers() {
+        if (pos_ > 0 && is(Tok::number) && (*toks_)[pos_ - 1].type == Tok::number)
+            ecmc_refuses(cur(), "two numbers side by side", "an operator or ';' between them");
+    }
+    void empty_statement(const Token& at) {
+        ecmc_refuses(at, "an empty statement (a ';' with no statement before it)",
+                     "remove the ';'");
     }
 
     // ExprTk's multi-sequence: `{a; b}` or `(a, b)`.
@@ -682,7 +725,7 @@ private:
             expect(Tok::rbracket, "to close '['");
             break;
         case Tok::lbrace:
-            n = parse_braces();
+            n = parse_braces(true);
             break;
         case Tok::sub: {
             next();
@@ -1118,6 +1161,9 @@ private:
         ScopeGuard scope(*this);
         expect(Tok::lparen, "after 'for'");
         NodePtr init, condition, increment;
+        if (is(Tok::semicolon))
+            ecmc_refuses(cur(), "'for' without an initialiser",
+                         "'for (var i := 0; ...)', or 'while (condition) { ... }'");
         if (!is(Tok::semicolon)) {
             if (is_word(cur(), "var")) {
                 next();
@@ -1158,6 +1204,7 @@ private:
         bool has_default = false;
         while (!is(Tok::rbrace)) {
             if (is(Tok::semicolon)) {
+                empty_statement(cur());
                 next();
                 continue;
             }
@@ -1176,7 +1223,13 @@ private:
             expect(Tok::colon, is_case ? "after the case condition" : "after 'default'");
             n->kids.push_back(is(Tok::lbrace) ? parse_braces() : parse_expression(0));
             no_string(*n->kids.back());
-            if (is(Tok::semicolon)) next();
+            if (is(Tok::semicolon))
+                next();
+            else
+                ecmc_refuses(cur(), SB() << "a '" << (is_case ? "case" : "default")
+                                         << "' without ';' after its statement",
+                             SB() << "'" << (is_case ? "case c : ...;" : "default : ...;")
+                                  << "' (a ';' also after a '{ }' body)");
         }
         next();
         n->op = has_default ? 1 : 0;
@@ -1333,6 +1386,7 @@ private:
     int loop_depth_ = 0;
     int placeholder_var_ = -1;
     int nesting_ = 0;
+    bool strict_ = false; // report what ECMC's ExprTk refuses (CompileOptions::strict)
     static constexpr int kMaxNesting = 400;
     std::map<std::string, int> functions_; // lower-case name -> Unit::functions
     std::map<std::string, int> host_functions_;
@@ -1342,9 +1396,11 @@ private:
 } // namespace
 
 Unit parse(const Source& src, const std::vector<Token>& program,
-           const std::vector<std::vector<Token>>& libraries, Host& host, Diagnostics& diags) {
+           const std::vector<std::vector<Token>>& libraries, Host& host, Diagnostics& diags,
+           bool strict) {
     Unit unit;
     Parser p(src, host, diags, unit);
+    p.strict(strict);
     for (const auto& lib : libraries) p.declare_functions(lib);
     p.declare_functions(program);
     for (const auto& lib : libraries) p.parse_file(lib, true);

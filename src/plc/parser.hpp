@@ -13,8 +13,10 @@ namespace beamctl::plc::detail {
 
 // Parses the program and the libraries (files of `function` definitions) into one Unit.
 // Errors go to `diags`; after a syntax error parsing resumes at the next top-level statement.
+// `strict`: also an error for each construct beamctl accepts but ECMC's ExprTk refuses.
 Unit parse(const Source& src, const std::vector<Token>& program,
-           const std::vector<std::vector<Token>>& libraries, Host& host, Diagnostics& diags);
+           const std::vector<std::vector<Token>>& libraries, Host& host, Diagnostics& diags,
+           bool strict = false);
 
 // True when the expression's value is a vector (a vector, or element-wise arithmetic on one).
 bool is_vector_expr(const Node& n);

@@ -59,6 +59,14 @@ const char* to_string(Op op) {
         return "mod";
     case Op::pow:
         return "pow";
+    case Op::sqr:
+        return "sqr";
+    case Op::powi:
+        return "powi";
+    case Op::powi_inv:
+        return "powi_inv";
+    case Op::pow_half:
+        return "pow_half";
     case Op::lt:
         return "lt";
     case Op::le:
@@ -178,7 +186,7 @@ Program Program::compile(std::string_view text, const std::string& filename, Hos
             for (const auto& [b, e] : lib_lines)
                 libs.push_back(detail::lex(src, b, e, false, diags));
             const std::vector<detail::Token> program = detail::lex(src, first, last, true, diags);
-            const detail::Unit unit = detail::parse(src, program, libs, host, diags);
+            const detail::Unit unit = detail::parse(src, program, libs, host, diags, options.strict);
             if (diags.empty()) impl = detail::generate(unit, src, host, options, diags);
         }
     } catch (const detail::Diagnostics::Abort&) {
@@ -299,6 +307,18 @@ int Program::Impl::run() noexcept {
             break;
         case Op::pow:
             *in.d = std::pow(*in.a, *in.b);
+            break;
+        case Op::sqr:
+            *in.d = *in.a * *in.a;
+            break;
+        case Op::powi:
+            *in.d = int_pow(*in.a, in.n);
+            break;
+        case Op::powi_inv:
+            *in.d = 1.0 / int_pow(*in.a, in.n);
+            break;
+        case Op::pow_half:
+            *in.d = pow_half(*in.a);
             break;
         case Op::lt:
             *in.d = from_bool(*in.a < *in.b);

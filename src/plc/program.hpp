@@ -73,6 +73,7 @@ struct CompileOptions {
     std::uint64_t max_loop_iterations = 0; // loop iterations per scan before a fault; 0 = no limit
     int max_call_depth = 64;               // nested calls of `function`s per scan
     int max_errors = 50;                   // compile errors collected before giving up
+    bool strict = false; // also an error: each construct beamctl accepts and ECMC's ExprTk refuses
 };
 
 // Result of one scan. Anything but ok means the scan stopped at the faulting instruction: values

@@ -1175,6 +1175,7 @@ void PlcRuntime::add(const PlcSource& source) {
     co.macros.emplace("M_ID", "0");
     co.include_path = source.include_path;
     co.libraries = source.libraries;
+    co.strict = source.strict;
     co.max_loop_iterations = opt_.loop_budget;
     p->program.emplace(Program::compile(source.text, source.file, *p, co));
     p->st_enabled = source.enable;

@@ -67,6 +67,7 @@ struct PlcSource {
     MacroMap macros;       // PLC_MACROS; SELF, SELF_ID, M and M_ID are added when absent
     std::vector<std::string> include_path;
     std::vector<std::string> libraries; // files of `function` definitions
+    bool strict = false;                // compile errors for what ECMC's ExprTk refuses
 };
 
 class PlcRuntime : public rt::Stage, public motion::AxisHook {
