@@ -70,6 +70,7 @@ struct Node {
     int op = 0;
     int ref = -1;
     double num = 0;
+    bool from_var = false; // num: computed from a constant `var` (not a literal of the source)
     std::string str;
     const Builtin* builtin = nullptr;
     std::vector<std::unique_ptr<Node>> kids;

@@ -583,14 +583,17 @@ private:
         }
         const std::vector<Ref> args = gen_args(n.kids);
         const Ref d = to(dst);
-        emit_binary(op, d, args[0], args[1]);
+        emit_binary(op, d, args[0], args[1], is_literal(*n.kids[1]));
         return d;
     }
+    // A number written in the source (or computed from such numbers), not a constant `var`.
+    static bool is_literal(const Node& n) { return n.kind == NK::num && !n.from_var; }
 
     // `a op b`; a power with a literal exponent is strength-reduced: integers as ExprTk does
-    // (int_pow, bit for bit with ECMC), 0.5 to a square root (pow_half).
-    void emit_binary(BinOp op, Ref d, Ref a, Ref b) {
-        if (op == BinOp::pow && b.kind == Ref::konst) {
+    // (int_pow, bit for bit with ECMC), 0.5 to a square root (pow_half). ExprTk computes a
+    // power of a `var` exponent with pow, so one from a constant `var` stays pow here too.
+    void emit_binary(BinOp op, Ref d, Ref a, Ref b, bool literal_b) {
+        if (op == BinOp::pow && literal_b && b.kind == Ref::konst) {
             const double c = consts_[b.index];
             if (is_int_pow_exponent(c)) {
                 const auto p = static_cast<std::uint32_t>(std::fabs(c));
@@ -729,7 +732,7 @@ private:
             const Ref a = gen_elem(*n.kids[0], i, scalars);
             const Ref b = gen_elem(*n.kids[1], i, scalars);
             const Ref t = temp();
-            emit_binary(static_cast<BinOp>(n.op), t, a, b);
+            emit_binary(static_cast<BinOp>(n.op), t, a, b, is_literal(*n.kids[1]));
             return t;
         }
         case NK::builtin: {

@@ -3,6 +3,7 @@
 #include "plc/code.hpp"
 #include "plc/compiler.hpp"
 #include "plc/lexer.hpp"
+#include "plc/optimize.hpp"
 #include "plc/parser.hpp"
 #include "plc/source.hpp"
 
@@ -186,8 +187,11 @@ Program Program::compile(std::string_view text, const std::string& filename, Hos
             for (const auto& [b, e] : lib_lines)
                 libs.push_back(detail::lex(src, b, e, false, diags));
             const std::vector<detail::Token> program = detail::lex(src, first, last, true, diags);
-            const detail::Unit unit = detail::parse(src, program, libs, host, diags, options.strict);
-            if (diags.empty()) impl = detail::generate(unit, src, host, options, diags);
+            detail::Unit unit = detail::parse(src, program, libs, host, diags, options.strict);
+            if (diags.empty()) {
+                detail::propagate_constants(unit);
+                impl = detail::generate(unit, src, host, options, diags);
+            }
         }
     } catch (const detail::Diagnostics::Abort&) {
     }
