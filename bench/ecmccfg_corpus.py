@@ -205,6 +205,8 @@ def main():
     ap.add_argument("--beamctl", default=os.path.join(os.path.dirname(__file__), "..", "build", "release", "beamctl"))
     ap.add_argument("--details", action="store_true")
     ap.add_argument("--oracle", action="store_true", help="ask ecmccfg's own loader about each axis file")
+    ap.add_argument("--strict", action="store_true",
+                    help="check PLC files with `plc check --strict` (ECMC's own files should pass it)")
     a = ap.parse_args()
     root = os.path.abspath(a.root)
     plc_calls, axis_calls = collect_calls(root)
@@ -221,7 +223,7 @@ def main():
         calls = plc_calls.get(f) or [("", [os.path.dirname(f)], [])]
         errs = []
         for pm, inc, _ in calls:
-            cmd = [a.beamctl, "plc", "check"]
+            cmd = [a.beamctl, "plc", "check"] + (["--strict"] if a.strict else [])
             for d in inc + std_inc:
                 cmd += ["-I", d]
             ok, msg = run(cmd + [f], pm)

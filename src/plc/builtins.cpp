@@ -280,4 +280,11 @@ bool find_aggregate(std::string_view n, Aggregate& out) {
     return false;
 }
 
+Fn1 builtin_abs() noexcept {
+    return f_abs;
+}
+Fn1 builtin_sqrt() noexcept {
+    return f_sqrt;
+}
+
 } // namespace beamctl::plc::detail

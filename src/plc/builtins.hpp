@@ -163,6 +163,10 @@ struct Builtin {
     Fn3 f3;
 };
 
+// abs and sqrt, which the compiler inlines (Builtin::f1 identifies them).
+Fn1 builtin_abs() noexcept;
+Fn1 builtin_sqrt() noexcept;
+
 // The built-in function called `lower_name`, or nullptr.
 const Builtin* find_builtin(std::string_view lower_name);
 double call(const Builtin& b, const double* args) noexcept;

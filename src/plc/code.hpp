@@ -29,6 +29,10 @@ enum class Op : std::uint8_t {
     powi,     // *d = int_pow(*a, n)     (x ^ n, n a literal integer 3..60)
     powi_inv, // *d = 1 / int_pow(*a, n) (x ^ -n)
     pow_half, // *d = pow_half(*a)       (x ^ 0.5)
+    fabs,     // *d = |*a| as ExprTk's abs (-0 stays -0)
+    fsqrt,    // *d = sqrt(*a)
+    fmin2,    // *d = min2(*a, *b)       (min of two scalars)
+    fmax2,    // *d = max2(*a, *b)
     lt,
     le,
     gt,
@@ -47,6 +51,12 @@ enum class Op : std::uint8_t {
     jmp,      // pc = n
     jz,       // if *a == 0: pc = n
     jnz,      // if *a != 0: pc = n
+    jf_lt,    // unless *a < *b: pc = n (an `if`/loop condition that is a comparison)
+    jf_le,
+    jf_gt,
+    jf_ge,
+    jf_eq,
+    jf_ne,
     loop,     // pc = n, counted against the loop budget
     load,     // *d = a[*b]      (vector at a, size n)
     store,    // a[*b] = *c      (vector at a, size n)

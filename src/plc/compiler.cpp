@@ -273,6 +273,43 @@ private:
         emit(op).a = cond;
         return code_.size() - 1;
     }
+    // A jump taken when `cond` is false (0, or a comparison that does not hold): a scalar
+    // comparison is tested by the jump itself (one instruction instead of two).
+    std::size_t emit_jump_unless(const Node& cond) {
+        if (cond.kind == NK::binary && !is_vector_expr(cond)) {
+            Op op = Op::halt;
+            switch (static_cast<BinOp>(cond.op)) {
+            case BinOp::lt:
+                op = Op::jf_lt;
+                break;
+            case BinOp::le:
+                op = Op::jf_le;
+                break;
+            case BinOp::gt:
+                op = Op::jf_gt;
+                break;
+            case BinOp::ge:
+                op = Op::jf_ge;
+                break;
+            case BinOp::eq:
+                op = Op::jf_eq;
+                break;
+            case BinOp::ne:
+                op = Op::jf_ne;
+                break;
+            default:
+                break;
+            }
+            if (op != Op::halt) {
+                const std::vector<Ref> args = gen_args(cond.kids);
+                PInsn& j = emit(op);
+                j.a = args[0];
+                j.b = args[1];
+                return code_.size() - 1;
+            }
+        }
+        return emit_jump(Op::jz, gen(cond));
+    }
 
     std::uint32_t alloc(std::uint32_t n) {
         const std::uint32_t s = next_slot_;
@@ -422,6 +459,10 @@ private:
         case NK::builtin: {
             const std::vector<Ref> args = gen_args(n.kids);
             const Ref d = to(dst);
+            if (n.builtin->f1 == builtin_abs() || n.builtin->f1 == builtin_sqrt()) { // inline
+                emit(n.builtin->f1 == builtin_abs() ? Op::fabs : Op::fsqrt, d, args[0]);
+                return d;
+            }
             PInsn& p = emit(n.builtin->arity == 1   ? Op::fn1
                             : n.builtin->arity == 2 ? Op::fn2
                                                     : Op::fn3,
@@ -883,7 +924,7 @@ private:
         if (args.size() == 1) return args[0];
         const Ref d = to(dst);
         if (args.size() == 2 && (agg == Aggregate::min || agg == Aggregate::max)) {
-            emit(Op::fn2, d, args[0], args[1]).f2 = agg == Aggregate::min ? min2 : max2;
+            emit(agg == Aggregate::min ? Op::fmin2 : Op::fmax2, d, args[0], args[1]);
             return d;
         }
         Op op = Op::list_sum;
@@ -978,9 +1019,8 @@ private:
             if (taken) return gen(*taken, dst, need);
             return need ? konst(kNaN) : Ref{};
         }
-        const Ref c = gen(*n.kids[0]);
+        const std::size_t skip = emit_jump_unless(*n.kids[0]);
         const Ref d = need ? to(dst) : Ref{};
-        const std::size_t skip = emit_jump(Op::jz, c);
         gen(*yes, d, need);
         if (no || need) {
             const std::size_t end = emit_jump(Op::jmp);
@@ -1017,7 +1057,7 @@ private:
         loops_.push_back(Loop{d, need, {}, {}});
         const std::uint32_t top = here();
         std::size_t exit = SIZE_MAX;
-        if (cond && cond->kind != NK::num) exit = emit_jump(Op::jz, gen(*cond));
+        if (cond && cond->kind != NK::num) exit = emit_jump_unless(*cond);
         gen(*body, d, need);
         const std::uint32_t cont = here();
         if (inc) gen(*inc, {}, false);

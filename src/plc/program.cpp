@@ -68,6 +68,26 @@ const char* to_string(Op op) {
         return "powi_inv";
     case Op::pow_half:
         return "pow_half";
+    case Op::fabs:
+        return "abs";
+    case Op::fsqrt:
+        return "sqrt";
+    case Op::fmin2:
+        return "min2";
+    case Op::fmax2:
+        return "max2";
+    case Op::jf_lt:
+        return "jf_lt";
+    case Op::jf_le:
+        return "jf_le";
+    case Op::jf_gt:
+        return "jf_gt";
+    case Op::jf_ge:
+        return "jf_ge";
+    case Op::jf_eq:
+        return "jf_eq";
+    case Op::jf_ne:
+        return "jf_ne";
     case Op::lt:
         return "lt";
     case Op::le:
@@ -323,6 +343,55 @@ int Program::Impl::run() noexcept {
             break;
         case Op::pow_half:
             *in.d = pow_half(*in.a);
+            break;
+        case Op::fabs:
+            *in.d = *in.a < 0 ? -*in.a : *in.a;
+            break;
+        case Op::fsqrt:
+            *in.d = std::sqrt(*in.a);
+            break;
+        case Op::fmin2:
+            *in.d = min2(*in.a, *in.b);
+            break;
+        case Op::fmax2:
+            *in.d = max2(*in.a, *in.b);
+            break;
+        // a comparison that is false (NaN included) jumps
+        case Op::jf_lt:
+            if (!(*in.a < *in.b)) {
+                pc = in.n;
+                continue;
+            }
+            break;
+        case Op::jf_le:
+            if (!(*in.a <= *in.b)) {
+                pc = in.n;
+                continue;
+            }
+            break;
+        case Op::jf_gt:
+            if (!(*in.a > *in.b)) {
+                pc = in.n;
+                continue;
+            }
+            break;
+        case Op::jf_ge:
+            if (!(*in.a >= *in.b)) {
+                pc = in.n;
+                continue;
+            }
+            break;
+        case Op::jf_eq:
+            if (!(*in.a == *in.b)) {
+                pc = in.n;
+                continue;
+            }
+            break;
+        case Op::jf_ne:
+            if (!(*in.a != *in.b)) {
+                pc = in.n;
+                continue;
+            }
             break;
         case Op::lt:
             *in.d = from_bool(*in.a < *in.b);

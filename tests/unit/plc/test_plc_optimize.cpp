@@ -83,3 +83,51 @@ TEST(PlcOptimize, OnlyExactRewrites) {
         return b3 * b3 * b + 0;
     }()));
 }
+
+TEST(PlcOptimize, ComparisonJumpsAgreeWithComparisonValues) {
+    // `if (x op y)` and loop conditions test the comparison in the jump; every op, with NaN,
+    // signed zeros and equal values, must take the branch the comparison's value (0/1) names.
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const double values[] = {1, 2, nan, -0.0, 0.0};
+    for (const char* op : {"<", "<=", ">", ">=", "==", "!="}) {
+        test::TableHost h;
+        h.add("r");
+        h.add("v");
+        h.add("x");
+        h.add("y");
+        const std::string s = op;
+        Program branch = Program::compile("if (x " + s + " y) { r := 1; } else { r := 0; };", "t.plc", h);
+        Program loop = Program::compile("r := 0; while (x " + s + " y and r < 1) { r += 1; };", "t.plc", h);
+        Program value = Program::compile("v := x " + s + " y;", "t.plc", h);
+        EXPECT_NE(branch.disassemble().find("jf_"), std::string::npos);
+        for (double x : values)
+            for (double y : values) {
+                h["x"] = x;
+                h["y"] = y;
+                ASSERT_EQ(value.run(), 0);
+                ASSERT_EQ(branch.run(), 0);
+                EXPECT_EQ(h["r"], h["v"]) << x << " " << s << " " << y;
+            }
+        // the loop's condition is `(x op y) and r < 1`: not a plain comparison, still right
+        h["x"] = 1;
+        h["y"] = 2;
+        ASSERT_EQ(loop.run(), 0);
+        ASSERT_EQ(value.run(), 0);
+        EXPECT_EQ(h["r"], h["v"]);
+    }
+}
+
+TEST(PlcOptimize, InlineAbsSqrtMinMaxKeepExprTksResults) {
+    Eval run;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_TRUE(same_bits(run("r := abs(x);", -0.0), -0.0)); // ExprTk's abs: x < 0 ? -x : x
+    EXPECT_EQ(run("r := abs(x);", -2.5), 2.5);
+    EXPECT_TRUE(std::isnan(run("r := sqrt(x);", -1)));
+    EXPECT_TRUE(same_bits(run("r := sqrt(x);", 2), std::sqrt(2.0)));
+    // std::max/std::min order, as ExprTk: max(NaN, 1) is NaN, max(1, NaN) is 1
+    EXPECT_TRUE(std::isnan(run("r := max(x, 1);", nan)));
+    EXPECT_EQ(run("r := max(1, x);", nan), 1);
+    EXPECT_TRUE(std::isnan(run("r := min(x, 1);", nan)));
+    EXPECT_EQ(run("r := min(1, x);", nan), 1);
+    EXPECT_EQ(run("r := min(x, 3) + max(x, 3);", 5), 8);
+}
