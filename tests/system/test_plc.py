@@ -284,3 +284,43 @@ def test_axis_plc_pvs(tmp_path, prefix):
         # record's limits follow them
         assert wait_for(lambda: epics.caget(prefix + "VX.DHLM") == 12.5, timeout=5), epics.caget(prefix + "VX.DHLM")
         assert epics.caget(prefix + "VX.DLLM") == -3 and epics.caget(prefix + "VX.HLM") == 12.5
+
+
+STRICT_IOC = """
+ioc: {{name: strict, prefix: "STRICT:"}}
+engine: {{rate_hz: 1000}}
+plcs:
+  - {{id: 0, file: main.plc, strict: {strict}}}
+"""
+
+
+def test_strict_ecmc_mode(tmp_path):
+    """`plc check --strict` and `strict: true` report what ECMC's ExprTk refuses, with the place
+    and the ECMC spelling; without them the same file compiles (issue 18)."""
+    plc = tmp_path / "main.plc"
+    plc.write_text("static.x := 1;;\n{ var a := 2; static.y := a; };\nfor (; static.x < 3; static.x += 1) { static.y += 1; };\n")
+    r = run_check(str(plc))
+    assert r.returncode == 0, r.stderr
+    r = run_check("--strict", str(plc))
+    assert r.returncode == 1
+    assert f"{plc}:1:15: strict ECMC: ExprTk refuses an empty statement" in r.stderr, r.stderr
+    assert f"{plc}:2:1: strict ECMC: ExprTk refuses a bare '{{ ...; }}' block" in r.stderr, r.stderr
+    assert "ECMC spelling: '~{ ... }'" in r.stderr
+    assert f"{plc}:3:6: strict ECMC: ExprTk refuses 'for' without an initialiser" in r.stderr, r.stderr
+    # the ECMC spellings pass
+    plc.write_text("static.x := 1;\n~{ var a := 2; static.y := a; };\nwhile (static.x < 3) { static.x += 1; };\n")
+    r = run_check("--strict", str(plc))
+    assert r.returncode == 0, r.stderr
+    # in the IOC file: strict: true makes the same constructs errors when the IOC is built
+    plc.write_text("static.x := 1;;\n")
+    for strict, ok in (("false", True), ("true", False)):
+        cfg = tmp_path / "ioc.yaml"
+        cfg.write_text(STRICT_IOC.format(strict=strict))
+        r = subprocess.run([str(BEAMCTL), "check", str(cfg)], capture_output=True, text=True, timeout=60)
+        assert (r.returncode == 0) == ok, r.stdout + r.stderr
+        if not ok:
+            assert "main.plc:1:15: strict ECMC: ExprTk refuses an empty statement" in r.stdout + r.stderr
+    # the shipped kinematics pass strict mode
+    for f in ("mirror.plc", "mirror_matrix.plc", "spiral.plc", "slit.plc"):
+        r = run_check("--strict", "-I", str(REPO_ROOT / "examples" / "plc_lib"), str(REPO_ROOT / "examples" / "kinematics" / f))
+        assert r.returncode == 0, r.stderr
