@@ -669,7 +669,9 @@ private:
         // element
         const Variable& v = unit_.vars[n.ref];
         const Node& idx = *n.kids[0];
-        if (idx.kind == NK::num) {
+        // A constant index is checked by the parser when written as a number; one from a
+        // constant `var` (plc/optimize) may be out of range: checked at run time, as before.
+        if (idx.kind == NK::num && idx.num >= 0 && idx.num < v.size) {
             p.ref = var_ref(n.ref, static_cast<std::uint32_t>(idx.num));
             return p;
         }

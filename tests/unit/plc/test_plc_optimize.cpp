@@ -131,3 +131,19 @@ TEST(PlcOptimize, InlineAbsSqrtMinMaxKeepExprTksResults) {
     EXPECT_EQ(run("r := min(1, x);", nan), 1);
     EXPECT_EQ(run("r := min(x, 3) + max(x, 3);", 5), 8);
 }
+
+TEST(PlcOptimize, AnIndexFromAConstantVarIsStillChecked) {
+    test::TableHost h;
+    h.add("r");
+    // in range: a fixed element, no run-time index
+    Program in = Program::compile("var k := 1; var v[3] := {1, 2, 3}; r := v[k];", "t.plc", h);
+    ASSERT_EQ(in.run(), 0);
+    EXPECT_EQ(h["r"], 2);
+    EXPECT_EQ(in.disassemble().find("load"), std::string::npos);
+    // out of range (or NaN): the scan faults at the element, as for any computed index
+    for (const char* k : {"5", "-1", "0/0"}) {
+        Program out = Program::compile(std::string("var k := ") + k + "; var v[3] := {1, 2, 3}; r := v[k]; v[k] := 4;",
+                                       "t.plc", h);
+        EXPECT_EQ(out.run(), static_cast<int>(RunStatus::index_out_of_range)) << k;
+    }
+}
