@@ -1,6 +1,7 @@
 #include "pv/shell_server.hpp"
 
 #include "core/error.hpp"
+#include "core/log.hpp"
 
 #include <cerrno>
 #include <cstdio>
@@ -20,6 +21,8 @@ namespace beamctl::pv {
 namespace {
 
 namespace fs = std::filesystem;
+
+log::Logger lg("pv.shell");
 
 bool make_address(const std::string& path, sockaddr_un& addr) {
     std::memset(&addr, 0, sizeof addr);
@@ -121,6 +124,27 @@ void ShellServer::on_accept() {
     while (true) {
         int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
         if (fd < 0) return; // EAGAIN, or an error of that one connection
+        // The socket file is 0600, but a mode can be changed: the kernel's word on who connected
+        // decides. This IOC's own user and root may use the shell, nobody else.
+        ucred peer{};
+        socklen_t len = sizeof peer;
+        if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &peer, &len) != 0 ||
+            (peer.uid != ::geteuid() && peer.uid != 0)) {
+            ++refused_;
+            const auto now = std::chrono::steady_clock::now();
+            if (refused_ == 1 || now - last_refusal_log_ >= std::chrono::seconds(10)) {
+                last_refusal_log_ = now;
+                lg.write(log::Level::warn,
+                         SB() << "shell socket " << path_ << ": refused a connection from uid " << peer.uid
+                              << " (pid " << peer.pid << "): only uid " << ::geteuid()
+                              << " and root may use it (" << refused_ << " refused so far)");
+            }
+            const std::string msg = SB() << "error: uid " << peer.uid << " may not use this IOC's shell\n";
+            (void)!::send(fd, msg.data(), msg.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+            (void)!::send(fd, "\0" "1", 2, MSG_NOSIGNAL | MSG_DONTWAIT);
+            ::close(fd);
+            continue;
+        }
         if (conns_.size() >= kMaxClients) {
             const char msg[] = "error: too many shell clients\n\0" "1";
             (void)!::send(fd, msg, sizeof msg - 1, MSG_NOSIGNAL | MSG_DONTWAIT);

@@ -1,5 +1,6 @@
 // `beamctl shell`'s transport: a local UNIX stream socket the IOC owns (mode 0600, removed at
-// exit), served on the IOC's EventLoop without blocking, and the client that connects to it.
+// exit; a connection from any user but the IOC's own and root, by SO_PEERCRED, is refused and
+// logged), served on the IOC's EventLoop without blocking, and the client that connects to it.
 // Protocol: the client sends command lines ('\n'-terminated); for each the server sends the
 // command's output, a NUL byte and '0' (succeeded) or '1' (failed). A line longer than
 // kMaxLine bytes gets an error and the connection is closed; at most kMaxClients at once.
@@ -9,6 +10,8 @@
 #include "core/event_loop.hpp"
 #include "pv/db_shell.hpp"
 
+#include <chrono>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <unordered_map>
@@ -38,6 +41,8 @@ public:
     void start(const std::string& path);
     const std::string& path() const { return path_; }
     std::size_t client_count() const { return conns_.size(); }
+    // Connections refused because the peer (SO_PEERCRED) is neither this IOC's user nor root.
+    std::uint64_t refused() const { return refused_; }
 
 private:
     struct Conn {
@@ -55,6 +60,8 @@ private:
     std::string path_;
     int listen_fd_ = -1;
     std::unordered_map<int, std::unique_ptr<Conn>> conns_;
+    std::uint64_t refused_ = 0;
+    std::chrono::steady_clock::time_point last_refusal_log_{};
 };
 
 // Starts the shell socket of an IOC: `path` if given (the command line), else

@@ -4,9 +4,11 @@ the IOC's (0600, removed at exit); malformed input gets an error and never stops
 autosave in `beamctl run` (ioc.yaml `autosave:`)."""
 
 import os
+import shutil
 import socket
 import stat
 import subprocess
+import tempfile
 import time
 
 import pytest
@@ -248,3 +250,56 @@ def test_beamctl_run_shell_and_autosave(tmp_path, prefix):
         assert epics.caget(prefix + "gain", timeout=10) == 3.5
         assert epics.caget(prefix + "gain.DESC", timeout=5) == "saved"
         assert epics.caget(prefix + "copy", timeout=5) == 3.5  # PINI after the restore
+
+
+CONNECT_AS_OTHER = r"""
+import socket, sys
+s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+s.connect(sys.argv[1])
+s.sendall(b"dbl\n")
+data = b""
+while True:
+    chunk = s.recv(65536)
+    if not chunk:
+        break
+    data += chunk
+    if b"\0" in data and len(data) >= data.index(b"\0") + 2:
+        break
+print(data.decode(errors="replace"))
+"""
+
+
+def test_a_connection_from_another_user_is_refused(tmp_path, prefix):
+    """Issue 19: the shell socket checks who connected (SO_PEERCRED), not only its file mode: with
+    the socket opened up to everybody (mode 0666 in a world-traversable directory), another uid
+    gets an error and the IOC logs the refusal; the IOC's own user still gets answers."""
+    if os.getuid() != 0:
+        pytest.skip("needs root to run a client as another uid (nobody)")
+    (tmp_path / "x.db").write_text(DB)
+    open_dir = tempfile.mkdtemp(prefix="beamctl-shell-")  # pytest's own tree is 0700
+    os.chmod(open_dir, 0o777)
+    sock = os.path.join(open_dir, "ioc.sock")
+    port = acquire_port()
+    srv = SoftIoc(tmp_path, ["--shell-socket", sock, "-m", f"P={prefix}", "x.db"], port).start()
+    try:
+        assert socket_of(srv) == sock
+        os.chmod(sock, 0o666)  # a mode changed by mistake: the credentials check still holds
+
+        def as_nobody():
+            os.setgid(65534)
+            os.setuid(65534)
+
+        r = subprocess.run(["/usr/bin/python3", "-c", CONNECT_AS_OTHER, sock], capture_output=True, text=True,
+                           timeout=30, preexec_fn=as_nobody, cwd="/")
+        assert r.returncode == 0, r.stderr
+        assert "error: uid 65534 may not use this IOC's shell" in r.stdout, r.stdout
+        assert f"{prefix}ao" not in r.stdout
+        assert wait_for(lambda: "refused a connection from uid 65534" in srv.stderr(), timeout=5), srv.stderr()[-2000:]
+        rc, out, _ = shell(sock, "dbl")  # root (this test's user) is served
+        assert rc == 0 and f"{prefix}ao" in out
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)
+        shutil.rmtree(open_dir, ignore_errors=True)
