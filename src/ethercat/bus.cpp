@@ -44,9 +44,11 @@ struct Bus::PublishStage : rt::Stage {
         s.wkc_errors = m.wkc_errors();
         s.link_up = b.last_ != CycleStatus::FrameLost && b.last_ != CycleStatus::LinkError;
         s.wkc_ok = b.last_ == CycleStatus::Ok;
+        s.responding = m.responding();
         for (std::size_t i = 0; i < s.slave_al.size(); ++i) {
             s.slave_al[i] = m.slave_al_status(i);
             s.slave_online[i] = m.slave_online(i) && s.link_up;
+            s.slave_valid[i] = m.slave_valid(i);
         }
         const std::size_t nw = b.watch_offset_.size();
         bool changed = detect_changes(m.image(), b.watch_offset_.data(), b.watch_bits_.data(), b.watch_last_.data(),
@@ -117,9 +119,11 @@ void Bus::start_health(double period_s) {
     master_->start_cycling();
     health_stop_ = false;
     health_ = std::thread([this, period_s] {
+        // A pass every period, and at once (within 10 ms) when the cycle shows a slave lost or
+        // the number of slaves answering changed (a slave plugged in or powered up).
         while (!health_stop_.load()) {
             master_->check_and_recover();
-            for (double t = 0; t < period_s && !health_stop_.load(); t += 0.01)
+            for (double t = 0; t < period_s && !health_stop_.load() && !master_->health_due(); t += 0.01)
                 std::this_thread::sleep_for(std::chrono::milliseconds(10));
         }
     });
@@ -137,6 +141,7 @@ void Bus::bring_up() {
         s.image.assign(n, 0);
         s.slave_al.assign(k, 0);
         s.slave_online.assign(k, 0);
+        s.slave_valid.assign(k, 0);
     });
 }
 

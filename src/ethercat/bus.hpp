@@ -20,7 +20,9 @@ struct BusSnapshot {
     uint16_t wkc = 0, expected_wkc = 0;
     uint64_t frames_lost = 0, frames_late = 0, wkc_errors = 0;
     bool link_up = false;   // the last cyclic frame came back
-    bool wkc_ok = false;    // the last WKC was the expected one
+    bool wkc_ok = false;    // the last WKC was the one the slaves taking part give (Master::cycle_ok)
+    int responding = -1;    // slaves answering the cycle's broadcast read
+    std::vector<uint8_t> slave_valid;  // per configured slave: its data took part in the cycle, in OP
     std::vector<uint8_t> slave_al;     // per configured slave: AL status (state | 0x10 error)
     std::vector<uint8_t> slave_online; // per configured slave: answered its last status poll
     std::vector<uint32_t> changes;     // per watch (Bus::watch): cycles in which the entry changed

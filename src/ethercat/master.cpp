@@ -7,8 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
-#include <thread>
-#include <chrono>
+#include <functional>
 #include <cstring>
 #include <iomanip>
 #include <map>
@@ -103,6 +102,12 @@ std::string al_code_text(uint16_t c) {
     }
 }
 
+// The device at a slave's position is not the configured one (health pass: WrongId, not Error).
+class IdentityMismatch : public Error {
+public:
+    using Error::Error;
+};
+
 } // namespace
 
 Master::Master(Link& link, int bus_id, std::vector<SlaveConfig> cfg, const Catalog& catalog)
@@ -173,45 +178,64 @@ int Master::count_slaves() {
     return transact(kBrd, 0, kAlStatus, &v, 2);
 }
 
+void Master::sii_read4(const SlaveInfo& s, uint32_t addr, std::vector<uint16_t>& words) {
+    uint8_t cmd[6] = {0, 1, 0, 0, 0, 0}; // control: read; address
+    put_le32(cmd + 2, addr);
+    if (transact(kFpwr, s.station, kSiiAddress, cmd + 2, 4) != 1 ||
+        transact(kFpwr, s.station, uint16_t(kSiiControl + 1), cmd + 1, 1) != 1)
+        throw Error(SB() << slave_name(s) << ": no answer while reading the SII EEPROM");
+    uint8_t st[2] = {};
+    for (int i = 0; i < 100; ++i) { // wait while busy
+        if (transact(kFprd, s.station, kSiiControl, st, 2) != 1)
+            throw Error(SB() << slave_name(s) << ": no answer while reading the SII EEPROM");
+        if (!(st[1] & 0x80)) break;
+    }
+    if (st[1] & 0x78)
+        throw Error(SB() << slave_name(s) << ": SII read error at word " << hex(addr, 4)
+                         << " (status " << hex(le16(st), 4) << ")");
+    uint8_t d[8] = {};
+    if (transact(kFprd, s.station, kSiiData, d, 8) != 1)
+        throw Error(SB() << slave_name(s) << ": no answer while reading the SII EEPROM");
+    for (int w = 0; w < 4; ++w) {
+        if (addr + w >= words.size()) words.resize(addr + w + 1, 0xFFFF);
+        words[addr + w] = le16(d + 2 * w);
+    }
+}
+
+void Master::read_identity(SlaveInfo& s) {
+    std::vector<uint16_t> w;
+    sii_read4(s, 0x08, w);
+    sii_read4(s, 0x0C, w);
+    s.sii.vendor = uint32_t(w[0x08]) | uint32_t(w[0x09]) << 16;
+    s.sii.product = uint32_t(w[0x0A]) | uint32_t(w[0x0B]) << 16;
+    s.sii.revision = uint32_t(w[0x0C]) | uint32_t(w[0x0D]) << 16;
+}
+
 void Master::read_sii(SlaveInfo& s) {
     // Reads 4 words at a time (8-byte reads), following the category list to its end.
     std::vector<uint16_t> words;
-    auto read4 = [&](uint32_t addr) {
-        uint8_t cmd[6] = {0, 1, 0, 0, 0, 0}; // control: read; address
-        put_le32(cmd + 2, addr);
-        if (transact(kFpwr, s.station, kSiiAddress, cmd + 2, 4) != 1 ||
-            transact(kFpwr, s.station, uint16_t(kSiiControl + 1), cmd + 1, 1) != 1)
-            throw Error(SB() << slave_name(s) << ": no answer while reading the SII EEPROM");
-        uint8_t st[2] = {};
-        for (int i = 0; i < 100; ++i) { // wait while busy
-            if (transact(kFprd, s.station, kSiiControl, st, 2) != 1)
-                throw Error(SB() << slave_name(s) << ": no answer while reading the SII EEPROM");
-            if (!(st[1] & 0x80)) break;
-        }
-        if (st[1] & 0x78)
-            throw Error(SB() << slave_name(s) << ": SII read error at word " << hex(addr, 4)
-                             << " (status " << hex(le16(st), 4) << ")");
-        uint8_t d[8] = {};
-        if (transact(kFprd, s.station, kSiiData, d, 8) != 1)
-            throw Error(SB() << slave_name(s) << ": no answer while reading the SII EEPROM");
-        for (int w = 0; w < 4; ++w) {
-            if (addr + w >= words.size()) words.resize(addr + w + 1, 0xFFFF);
-            words[addr + w] = le16(d + 2 * w);
-        }
-    };
-    for (uint32_t a = 0; a < 0x40; a += 4) read4(a);
+    for (uint32_t a = 0; a < 0x40; a += 4) sii_read4(s, a, words);
     uint32_t at = 0x40;
     for (int guard = 0; guard < 256; ++guard) { // categories: {type, length in words, data}
-        if (at + 1 >= words.size()) read4(at);
+        if (at + 1 >= words.size()) sii_read4(s, at, words);
         uint16_t type = words[at];
         if (type == 0xFFFF) break;
         uint32_t len = words[at + 1];
         uint32_t end = at + 2 + len;
         if (end > 0x8000) throw Error(SB() << slave_name(s) << ": SII category at word " << hex(at, 4) << " runs past the EEPROM");
-        for (uint32_t a = uint32_t(words.size()) & ~3u; a < end + 2; a += 4) read4(a);
+        for (uint32_t a = uint32_t(words.size()) & ~3u; a < end + 2; a += 4) sii_read4(s, a, words);
         at = end;
     }
     s.sii = parse_sii(words);
+}
+
+void Master::reserve_default_layout(SlaveInfo& s) const {
+    const DeviceDesc* d = catalog_.find(s.type);
+    s.sii = parse_sii(build_sii(*d));
+    s.pdo_assign = s.sii.pdo_assign;
+    s.rx_pdos = s.sii.rx_pdos;
+    s.tx_pdos = s.sii.tx_pdos;
+    s.pdo_from_coe = false;
 }
 
 bool Master::read_al_state(std::size_t i, uint8_t& state, uint16_t& code) {
@@ -231,43 +255,59 @@ void Master::request_state(uint8_t state, const char* name) {
 }
 
 void Master::request_state(const std::vector<std::size_t>& which, uint8_t state, const char* name) {
+    auto failed = request_state_each(which, state, name);
+    if (!failed.empty()) throw Error(failed.front().second);
+}
+
+std::vector<std::pair<std::size_t, std::string>> Master::request_state_each(const std::vector<std::size_t>& which,
+                                                                            uint8_t state, const char* name) {
+    std::vector<std::pair<std::size_t, std::string>> failed;
+    std::vector<std::size_t> asked;
     for (std::size_t i : which) {
         auto& s = slaves_[i];
         uint16_t v = state;
         if (transact(kFpwr, s.station, kAlControl, &v, 2) != 1)
-            throw Error(SB() << slave_name(s) << ": no answer to the " << name << " request");
+            failed.emplace_back(i, SB() << slave_name(s) << ": no answer to the " << name << " request");
+        else
+            asked.push_back(i);
     }
-    for (std::size_t i : which) {
+    for (std::size_t i : asked) {
         uint8_t st = 0;
         uint16_t code = 0;
-        bool reached = false;
+        bool reached = false, answered = true;
         for (int poll = 0; poll < 50; ++poll) {
-            if (!read_al_state(i, st, code))
-                throw Error(SB() << slave_name(slaves_[i]) << ": no answer while waiting for " << name);
+            if (!read_al_state(i, st, code)) {
+                answered = false;
+                break;
+            }
             if (st & 0x10) break;
             if ((st & 0x0F) == state) {
                 reached = true;
                 break;
             }
         }
-        if (!reached) {
-            auto& s = slaves_[i];
-            if (st & 0x10) {
-                uint16_t ack = uint16_t((st & 0x0F) | 0x10); // acknowledge, stay where it is
-                transact(kFpwr, s.station, kAlControl, &ack, 2);
-                throw Error(SB() << slave_name(s) << ": refused " << name << ": AL status code "
-                                 << al_code_text(code) << " (state " << state_name(st) << ")");
-            }
-            throw Error(SB() << slave_name(s) << ": did not reach " << name << " (state "
-                             << state_name(st) << ")");
+        if (reached) continue;
+        auto& s = slaves_[i];
+        if (!answered) {
+            failed.emplace_back(i, SB() << slave_name(s) << ": no answer while waiting for " << name);
+        } else if (st & 0x10) {
+            uint16_t ack = uint16_t((st & 0x0F) | 0x10); // acknowledge, stay where it is
+            transact(kFpwr, s.station, kAlControl, &ack, 2);
+            failed.emplace_back(i, SB() << slave_name(s) << ": refused " << name << ": AL status code "
+                                        << al_code_text(code) << " (state " << state_name(st) << ")");
+        } else {
+            failed.emplace_back(i, SB() << slave_name(s) << ": did not reach " << name << " (state "
+                                        << state_name(st) << ")");
         }
     }
+    return failed;
 }
 
 void Master::bring_up() {
     slaves_.clear();
     signals_.clear();
     mbx_counter_.clear();
+    dc_configured_ = false;
     // 1. Everything to INIT, FMMUs and SMs cleared (broadcast).
     uint16_t init = 0x0011;
     transact(kBwr, 0, kAlControl, &init, 2);
@@ -278,7 +318,7 @@ void Master::bring_up() {
     int found = count_slaves();
     if (found < 0) throw Error(SB() << "ec" << bus_ << ": the " << link_.kind() << " link does not answer");
     int wanted = cfg_.empty() ? 0 : cfg_.back().position + 1;
-    if (found < wanted)
+    if (found < wanted && strict_)
         throw Error(SB() << "ec" << bus_ << ": " << found << " slave(s) on the bus, but the configuration has a slave at position "
                          << cfg_.back().position << " (needs at least " << wanted << ")");
     LOG_INFO(lg, "ec" << bus_ << ": " << found << " slave(s) on the " << link_.kind() << " link");
@@ -288,42 +328,120 @@ void Master::bring_up() {
         if (transact(kApwr, uint16_t(-p), 0x0010, &addr, 2) != 1)
             throw Error(SB() << "ec" << bus_ << ": slave " << p << " did not take its station address");
     }
-    // 4. SII and identity of the configured slaves.
-    for (auto& c : cfg_) {
+    // 4. Identity of the configured slaves, then their SII. A slave missing, of another identity
+    // or failing a step from here on is left out (strict: refused) with its reason.
+    health_.assign(cfg_.size(), SlaveHealth{});
+    last_error_.assign(cfg_.size(), std::string());
+    retry_at_.assign(cfg_.size(), 0);
+    backoff_.assign(cfg_.size(), 1.0);
+    std::vector<char> in(cfg_.size(), 0);
+    auto leave_out = [&](std::size_t i, SlaveState st, uint32_t id, const std::string& why) {
+        if (strict_) throw Error(why);
+        in[i] = 0;
+        set_health(i, st, id, why);
+        LOG_ERR(lg, why << "; starting without it");
+    };
+    for (std::size_t i = 0; i < cfg_.size(); ++i) {
+        const SlaveConfig& c = cfg_[i];
         SlaveInfo s;
         s.position = c.position;
         s.station = uint16_t(kStationBase + c.position);
         s.type = c.type;
-        read_sii(s);
-        check_identity(s);
         slaves_.push_back(std::move(s));
+        SlaveInfo& si = slaves_.back();
+        const DeviceDesc* want = catalog_.find(c.type);
+        if (c.position >= found) {
+            reserve_default_layout(si);
+            leave_out(i, SlaveState::Missing, slave_error::kNotOnline,
+                      SB() << "ec" << bus_ << " position " << c.position << ": missing (expected " << c.type
+                           << ", vendor " << hex(want->vendor) << ", product " << hex(want->product) << ", revision "
+                           << hex(want->revision) << "; " << found << " slave(s) answer)");
+            continue;
+        }
+        try {
+            read_sii(si);
+            std::string wrong = identity_error(si);
+            if (!wrong.empty()) {
+                uint16_t none = 0; // not ours: no station address, nothing else written
+                transact(kApwr, uint16_t(-c.position), 0x0010, &none, 2);
+                reserve_default_layout(si);
+                leave_out(i, SlaveState::WrongId, slave_error::kVerificationFail, wrong);
+                continue;
+            }
+            in[i] = 1;
+        } catch (const Error& e) {
+            reserve_default_layout(si);
+            leave_out(i, SlaveState::Error, slave_error::kNotOperational, e.what());
+        }
     }
+    auto present = [&] {
+        std::vector<std::size_t> v;
+        for (std::size_t i = 0; i < in.size(); ++i)
+            if (in[i]) v.push_back(i);
+        return v;
+    };
+    auto step_each = [&](const std::function<void(std::size_t)>& step, bool before_layout) {
+        for (std::size_t i : present()) {
+            try {
+                step(i);
+            } catch (const Error& e) {
+                // What it had read may be partial: reserve the default layout, as for a missing one.
+                if (before_layout) reserve_default_layout(slaves_[i]);
+                leave_out(i, SlaveState::Error, slave_error::kNotOperational, e.what());
+            }
+        }
+    };
+    auto transition = [&](uint8_t state, const char* name) {
+        for (auto& [i, why] : request_state_each(present(), state, name))
+            leave_out(i, SlaveState::Error, slave_error::kNotOperational, why);
+    };
     // 5. Mailbox SMs from SII, then PREOP.
-    for (auto& s : slaves_) configure_mailbox(s);
-    request_state(2, "PREOP");
+    step_each([&](std::size_t i) { configure_mailbox(slaves_[i]); }, true);
+    transition(2, "PREOP");
+    for (std::size_t i = 0; i < in.size(); ++i)
+        if (!in[i] && slaves_[i].rx_pdos.empty() && slaves_[i].tx_pdos.empty()) reserve_default_layout(slaves_[i]);
     // 6. PREOP: startup SDOs (ecmccfg order: before the PDO layout), then the PDO layout, read
     // over CoE where the slave has it.
-    for (std::size_t i = 0; i < slaves_.size(); ++i) apply_startup_sdos(i);
-    for (auto& s : slaves_) read_pdo_layout(s);
-    // 7. Process data: layout, SMs and FMMUs, SAFEOP; valid outputs, then OP.
+    step_each([&](std::size_t i) {
+        apply_startup_sdos(i);
+        read_pdo_layout(slaves_[i]);
+    }, true);
+    // 7. Process data: layout (every configured slave has its region, present or not), SMs and
+    // FMMUs, SAFEOP; valid outputs, then OP.
     layout_process_image();
-    configure_sms_and_fmmus();
-    configure_dc();
+    step_each([&](std::size_t i) { configure_process_data(i); }, false);
+    dc_pending_.clear();
+    try {
+        configure_dc(present());
+    } catch (const Error& e) {
+        if (strict_) throw;
+        LOG_ERR(lg, e.what());
+    }
+    for (auto& p : dc_pending_)
+        step_each([&](std::size_t i) {
+            if (i == p.slave) configure_dc_at(i, &p.t_ref, p.master_ns);
+        }, false);
+    dc_pending_.clear();
     build_cyclic_frames();
-    request_state(4, "SAFEOP");
-    for (int i = 0; i < 3; ++i) {
+    transition(4, "SAFEOP");
+    for (std::size_t i : present()) admit_[i].store(1, std::memory_order_relaxed);
+    for (int k = 0; k < 3; ++k) {
         send_process_data();
         receive_process_data();
     }
-    request_state(8, "OP");
+    transition(8, "OP");
     send_process_data();
     receive_process_data();
-    // The status poll saw SAFEOP during bring-up; start the cycle with the states just read.
+    int n_op = 0;
     for (std::size_t i = 0; i < slaves_.size(); ++i) {
-        slave_al_[i].store(slaves_[i].al_state, std::memory_order_relaxed);
-        slave_online_[i].store(1, std::memory_order_relaxed);
+        bool ok = in[i] != 0;
+        admit_[i].store(ok, std::memory_order_relaxed);
+        if (ok) ++n_op;
     }
-    LOG_INFO(lg, "ec" << bus_ << ": " << slaves_.size() << " slave(s) in OP, image " << bus_bytes_
+    // The cycle just run saw them in SAFEOP; start with the states just read.
+    send_process_data();
+    receive_process_data();
+    LOG_INFO(lg, "ec" << bus_ << ": " << n_op << " of " << slaves_.size() << " slave(s) in OP, image " << bus_bytes_
                       << " bytes (" << outputs_bytes_ << " out), expected WKC " << expected_wkc_);
 }
 
@@ -359,19 +477,27 @@ void Master::layout_process_image() {
         for (auto& [i, b] : v) off += b;
         s.in_bytes = off - s.in_offset;
     }
+    // The slaves' AL status bytes, one per slave, read through an FMMU of each slave in the same
+    // LRW: which slaves took part in a cycle, and in which state.
+    status_bytes_ = off;
+    off += uint32_t(slaves_.size());
     bus_bytes_ = off;
     // After the bus part, the master's own memory (not exchanged on the bus), as ECMC has it:
     // ec<m>.masterstatus and per slave the constant entries ONE (all bits set) and ZERO, which
-    // axis configurations use for unused inputs (`ec0.s3.ONE.0`).
+    // axis configurations use for unused inputs (`ec0.s3.ONE.0`), and `valid` (1 in a cycle in
+    // which the slave's data took part, in OP).
     uint32_t mem = (off + 3) / 4 * 4;
-    image_.assign(mem + 4 + 8 * slaves_.size(), 0);
+    image_.assign(mem + 4 + 12 * slaves_.size(), 0);
     masterstatus_offset_ = mem;
+    valid_offset_ = mem + 4;
     signals_.push_back(SignalInfo{SB() << "ec" << bus_ << ".masterstatus", -1, mem * 8, 32, false, "UINT32"});
     for (std::size_t i = 0; i < slaves_.size(); ++i) {
-        uint32_t at = mem + 4 + 8 * uint32_t(i);
+        uint32_t at = mem + 4 + 12 * uint32_t(i);
         std::memset(image_.data() + at, 0xFF, 4);
-        signals_.push_back(SignalInfo{SB() << "ec" << bus_ << ".s" << slaves_[i].position << ".ONE", slaves_[i].position, at * 8, 32, false, "UINT32"});
-        signals_.push_back(SignalInfo{SB() << "ec" << bus_ << ".s" << slaves_[i].position << ".ZERO", slaves_[i].position, (at + 4) * 8, 32, false, "UINT32"});
+        std::string pre = SB() << "ec" << bus_ << ".s" << slaves_[i].position << ".";
+        signals_.push_back(SignalInfo{pre + "ONE", slaves_[i].position, at * 8, 32, false, "UINT32"});
+        signals_.push_back(SignalInfo{pre + "ZERO", slaves_[i].position, (at + 4) * 8, 32, false, "UINT32"});
+        signals_.push_back(SignalInfo{pre + "valid", slaves_[i].position, (at + 8) * 8, 32, false, "UINT32"});
     }
     // Signals: every named entry of the assigned PDOs, in PDO order.
     for (auto& s : slaves_) {
@@ -399,17 +525,21 @@ void Master::layout_process_image() {
     for (auto& sig : signals_) sig.is_signed = registry::datatype_is_signed(sig.datatype);
 }
 
-void Master::check_identity(const SlaveInfo& s) const {
+std::string Master::identity_error(const SlaveInfo& s) const {
     const DeviceDesc* want = catalog_.find(s.type);
-    if (s.sii.vendor != want->vendor || s.sii.product != want->product || s.sii.revision != want->revision) {
-        const DeviceDesc* got = catalog_.find(s.sii.vendor, s.sii.product, s.sii.revision);
-        throw Error(SB() << "ec" << bus_ << " position " << s.position << ": expected " << s.type
-                         << " (vendor " << hex(want->vendor) << ", product " << hex(want->product)
-                         << ", revision " << hex(want->revision) << "), found "
-                         << (got ? got->type : (s.sii.name.empty() ? std::string("an unknown device") : s.sii.name))
-                         << " (vendor " << hex(s.sii.vendor) << ", product " << hex(s.sii.product)
-                         << ", revision " << hex(s.sii.revision) << ")");
-    }
+    if (s.sii.vendor == want->vendor && s.sii.product == want->product && s.sii.revision == want->revision) return {};
+    const DeviceDesc* got = catalog_.find(s.sii.vendor, s.sii.product, s.sii.revision);
+    return SB() << "ec" << bus_ << " position " << s.position << ": expected " << s.type << " (vendor "
+                << hex(want->vendor) << ", product " << hex(want->product) << ", revision " << hex(want->revision)
+                << "), found "
+                << (got ? got->type : (s.sii.name.empty() ? std::string("an unknown device") : s.sii.name))
+                << " (vendor " << hex(s.sii.vendor) << ", product " << hex(s.sii.product) << ", revision "
+                << hex(s.sii.revision) << ")";
+}
+
+void Master::check_identity(const SlaveInfo& s) const {
+    std::string e = identity_error(s);
+    if (!e.empty()) throw Error(e);
 }
 
 void Master::configure_mailbox(const SlaveInfo& s) {
@@ -434,49 +564,51 @@ void Master::apply_startup_sdos(std::size_t i) {
     }
 }
 
-void Master::configure_sms_and_fmmus() {
-    for (auto& s : slaves_) configure_process_data(s);
-}
-
-void Master::configure_process_data(const SlaveInfo& s) {
-    {
-        int fmmu = 0;
-        uint32_t out_off = s.out_offset, in_off = s.in_offset;
-        for (auto& sm : s.sii.sms) {
-            if (sm.type != SmType::Outputs && sm.type != SmType::Inputs) continue;
-            bool out = sm.type == SmType::Outputs;
-            uint32_t bits = 0;
-            for (auto& [smi, pdo] : s.pdo_assign)
-                if (smi == sm.index)
-                    for (auto& p : out ? s.rx_pdos : s.tx_pdos)
-                        if (p.index == pdo) bits += p.bit_size();
-            uint32_t bytes = (bits + 7) / 8;
-            if (bytes == 0) continue;
-            if (sm.enable) { // a disabled ("virtual") SM only names registers for the FMMU
-                uint8_t r[8] = {};
-                put_le16(r, sm.start);
-                put_le16(r + 2, uint16_t(bytes));
-                r[4] = sm.control;
-                r[6] = 1;
-                if (transact(kFpwr, s.station, uint16_t(kSm + 8 * sm.index), r, 8) != 1)
-                    throw Error(SB() << slave_name(s) << ": no answer while configuring SM" << int(sm.index));
-            }
-            uint8_t f[16] = {};
-            uint32_t& log = out ? out_off : in_off;
-            put_le32(f, log);
-            put_le16(f + 4, uint16_t(bytes));
-            f[6] = 0;
-            f[7] = 7;
-            put_le16(f + 8, sm.start);
-            f[10] = 0;
-            f[11] = out ? 2 : 1;
-            f[12] = 1;
-            if (transact(kFpwr, s.station, uint16_t(kFmmu + 16 * fmmu), f, 16) != 1)
-                throw Error(SB() << slave_name(s) << ": no answer while configuring FMMU" << fmmu);
-            log += bytes;
-            ++fmmu;
+void Master::configure_process_data(std::size_t i) {
+    const SlaveInfo& s = slaves_[i];
+    // SMs first, then every FMMU in one datagram: the slave starts taking part in the cycle (its
+    // data and its status byte) in one step, so no cycle sees half of it.
+    std::vector<uint8_t> fmmus;
+    uint32_t out_off = s.out_offset, in_off = s.in_offset;
+    auto add_fmmu = [&](uint32_t logical, uint16_t bytes, uint16_t phys, bool out) {
+        uint8_t f[16] = {};
+        put_le32(f, logical);
+        put_le16(f + 4, bytes);
+        f[6] = 0;
+        f[7] = 7;
+        put_le16(f + 8, phys);
+        f[10] = 0;
+        f[11] = out ? 2 : 1;
+        f[12] = 1;
+        fmmus.insert(fmmus.end(), f, f + 16);
+    };
+    for (auto& sm : s.sii.sms) {
+        if (sm.type != SmType::Outputs && sm.type != SmType::Inputs) continue;
+        bool out = sm.type == SmType::Outputs;
+        uint32_t bits = 0;
+        for (auto& [smi, pdo] : s.pdo_assign)
+            if (smi == sm.index)
+                for (auto& p : out ? s.rx_pdos : s.tx_pdos)
+                    if (p.index == pdo) bits += p.bit_size();
+        uint32_t bytes = (bits + 7) / 8;
+        if (bytes == 0) continue;
+        if (sm.enable) { // a disabled ("virtual") SM only names registers for the FMMU
+            uint8_t r[8] = {};
+            put_le16(r, sm.start);
+            put_le16(r + 2, uint16_t(bytes));
+            r[4] = sm.control;
+            r[6] = 1;
+            if (transact(kFpwr, s.station, uint16_t(kSm + 8 * sm.index), r, 8) != 1)
+                throw Error(SB() << slave_name(s) << ": no answer while configuring SM" << int(sm.index));
         }
+        uint32_t& log = out ? out_off : in_off;
+        add_fmmu(log, uint16_t(bytes), sm.start, out);
+        log += bytes;
     }
+    // The status FMMU: AL status (0x0130, low byte) read into the slave's status byte.
+    add_fmmu(status_bytes_ + uint32_t(i), 1, kAlStatus, false);
+    if (transact(kFpwr, s.station, kFmmu, fmmus.data(), uint16_t(fmmus.size())) != 1)
+        throw Error(SB() << slave_name(s) << ": no answer while configuring its FMMUs");
 }
 
 void Master::build_cyclic_frames() {
@@ -495,25 +627,32 @@ void Master::build_cyclic_frames() {
         }
         uint32_t len = uint32_t(std::min<std::size_t>(room, total - off));
         int at = cf->frame.add(kLrw, 0, off, uint16_t(len)); // index set per cycle when sent
-        // Expected WKC of this datagram: +2 per slave whose outputs overlap, +1 per inputs.
-        uint16_t exp = 0;
-        for (auto& s : slaves_) {
-            if (s.out_bytes && s.out_offset < off + len && s.out_offset + s.out_bytes > off) exp += 2;
-            if (s.in_bytes && s.in_offset < off + len && s.in_offset + s.in_bytes > off) exp += 1;
-        }
-        cf->parts.push_back({uint32_t(at), off, len, exp});
-        expected_wkc_ = uint16_t(expected_wkc_ + exp);
+        cf->parts.push_back({uint32_t(at), off, len, 0});
         off += len;
     }
     if (cyclic_.back().parts.empty()) cyclic_.pop_back();
-    // One FPRD of AL status (0x0130) per cycle, rotating over the configured slaves: every slave's
-    // state and presence is seen every N cycles without any acyclic traffic.
-    status_frame_ = -1;
-    if (!slaves_.empty()) {
-        if (cyclic_.empty() || cyclic_.back().frame.room() < 2) cyclic_.emplace_back();
-        int at = cyclic_.back().frame.add(kFprd, 0, slaves_[0].station, 0x0130, 2);
-        status_frame_ = int(cyclic_.size() - 1);
-        status_offset_ = uint32_t(at);
+    // What each slave adds to the working counter when it takes part: per LRW datagram, +2 if its
+    // outputs overlap it, +1 if its inputs or its status byte do.
+    contrib_.assign(slaves_.size(), 0);
+    for (auto& cf : cyclic_)
+        for (auto& p : cf.parts)
+            for (std::size_t i = 0; i < slaves_.size(); ++i) {
+                const SlaveInfo& s = slaves_[i];
+                auto overlaps = [&](uint32_t o, uint32_t n) { return n && o < p.image_offset + p.len && o + n > p.image_offset; };
+                uint16_t c = 0;
+                if (overlaps(s.out_offset, s.out_bytes)) c += 2;
+                if (overlaps(s.in_offset, s.in_bytes) || overlaps(status_bytes_ + uint32_t(i), 1)) c += 1;
+                contrib_[i] = uint16_t(contrib_[i] + c);
+                expected_wkc_ = uint16_t(expected_wkc_ + c);
+            }
+    // One BRD of AL status (0x0130) per cycle: its working counter is the number of slaves
+    // answering, configured or not; a change tells the health pass to look.
+    count_frame_ = -1;
+    if (cyclic_.empty() || cyclic_.back().frame.room() < 2) cyclic_.emplace_back();
+    {
+        int at = cyclic_.back().frame.add(kBrd, 0, 0, kAlStatus, 2);
+        count_frame_ = int(cyclic_.size() - 1);
+        count_offset_ = uint32_t(at);
     }
     // The reference clock's time travels with the cycle (FRMW 0x0910): read at the reference,
     // written to every later slave, which compares it with its own system time.
@@ -527,14 +666,17 @@ void Master::build_cyclic_frames() {
     if (cyclic_.size() > kMaxCyclicFrames)
         throw Error(SB() << "ec" << bus_ << ": process image of " << image_.size() << " bytes needs more than "
                          << kMaxCyclicFrames << " frames per cycle");
-    slave_al_ = std::make_unique<std::atomic<uint8_t>[]>(slaves_.size());
-    slave_online_ = std::make_unique<std::atomic<uint8_t>[]>(slaves_.size());
-    for (std::size_t i = 0; i < slaves_.size(); ++i) {
-        slave_al_[i] = slaves_[i].al_state;
-        slave_online_[i] = 1;
+    std::size_t n = slaves_.size();
+    slave_al_ = std::make_unique<std::atomic<uint8_t>[]>(n);
+    slave_online_ = std::make_unique<std::atomic<uint8_t>[]>(n);
+    valid_ = std::make_unique<std::atomic<uint8_t>[]>(n);
+    admit_ = std::make_unique<std::atomic<uint8_t>[]>(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        slave_al_[i] = 0;
+        slave_online_[i] = 0;
+        valid_[i] = 0;
+        admit_[i] = 0;
     }
-    lost_.assign(slaves_.size(), 0);
-    status_next_ = 0;
 }
 
 CycleStatus Master::send_process_data() noexcept {
@@ -546,20 +688,15 @@ CycleStatus Master::send_process_data() noexcept {
         uint8_t tag = uint8_t(seq_ << 3 | fi);
         for_each_datagram(f, cf.frame.size(), [&](Datagram& d) { d.hdr[1] = tag; });
         for (auto& p : cf.parts) {
-            // Outputs from the image; the input part of the datagram is sent as zeros.
-            uint32_t out_end = std::min(p.image_offset + p.len, outputs_bytes_);
-            uint32_t n_out = out_end > p.image_offset ? out_end - p.image_offset : 0;
-            std::memcpy(f + p.data_offset, image_.data() + p.image_offset, n_out);
-            std::memset(f + p.data_offset + n_out, 0, p.len - n_out);
+            // The image as it is: outputs, and inputs as last received (a slave absent from this
+            // cycle passes them back unchanged: its inputs keep their last values). Status bytes
+            // are sent as 0: only a slave that takes part fills its own.
+            std::memcpy(f + p.data_offset, image_.data() + p.image_offset, p.len);
+            uint32_t st_lo = std::max(p.image_offset, status_bytes_), st_hi = std::min(p.image_offset + p.len, bus_bytes_);
+            if (st_lo < st_hi) std::memset(f + p.data_offset + (st_lo - p.image_offset), 0, st_hi - st_lo);
             put_le16(f + p.data_offset + p.len, 0); // WKC
         }
-        if (&cf == &cyclic_[std::size_t(status_frame_ < 0 ? 0 : status_frame_)] && status_frame_ >= 0) {
-            uint8_t* d = f + status_offset_;
-            put_le16(d - 8, slaves_[status_next_].station); // ADP of the FPRD header
-            std::memset(d, 0, 4);                           // data and WKC
-            status_sent_ = status_next_;
-            status_next_ = status_next_ + 1 == slaves_.size() ? 0 : status_next_ + 1;
-        }
+        if (count_frame_ >= 0 && &cf == &cyclic_[std::size_t(count_frame_)]) std::memset(f + count_offset_, 0, 4);
         if (dc_frame_ >= 0 && &cf == &cyclic_[std::size_t(dc_frame_)]) std::memset(f + dc_offset_, 0, 10);
         if (!link_.send(f, cf.frame.size())) st = CycleStatus::LinkError;
     }
@@ -602,11 +739,8 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
             }
         }
         bool ok = for_each_datagram(rx_.data(), n, [&](Datagram& d) {
-            if (d.cmd() == kFprd && d.ado() == 0x0130 && d.len() == 2 && status_sent_ < slaves_.size() &&
-                d.adp() == slaves_[status_sent_].station) {
-                bool answered = d.wkc() == 1;
-                slave_online_[status_sent_].store(answered, std::memory_order_relaxed);
-                if (answered) slave_al_[status_sent_].store(d.data[0], std::memory_order_relaxed);
+            if (d.cmd() == kBrd && d.ado() == kAlStatus && d.len() == 2) {
+                responding_.store(d.wkc(), std::memory_order_relaxed);
                 return;
             }
             if (d.cmd() == kFrmw && d.ado() == 0x0910 && d.len() == 8) {
@@ -647,11 +781,35 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
     }
     wkc_.store(uint16_t(wkc), std::memory_order_relaxed);
     frames_back_.store(st == CycleStatus::Ok, std::memory_order_relaxed);
-    if (st == CycleStatus::Ok && uint16_t(wkc) != expected_wkc_) {
-        bump(wkc_errors_, 1);
-        st = CycleStatus::WkcMismatch;
+    // Which slaves took part (status byte != 0: its status FMMU answered), and the working counter
+    // they give: those admitted and in OP must all count (lo); a slave present but not (yet) trusted
+    // - joining, in SAFEOP after an error - may or may not count (hi).
+    bool consistent = false;
+    if (st == CycleStatus::Ok) {
+        uint32_t lo = 0, extra = 0;
+        const uint8_t* stat = image_.data() + status_bytes_;
+        for (std::size_t i = 0; i < slaves_.size(); ++i) {
+            uint8_t b = stat[i];
+            slave_online_[i].store(b != 0, std::memory_order_relaxed);
+            if (b == 0) continue;
+            slave_al_[i].store(b, std::memory_order_relaxed);
+            if ((b & 0x1F) == 8 && admit_[i].load(std::memory_order_relaxed)) lo += contrib_[i];
+            else extra += contrib_[i];
+        }
+        consistent = wkc >= lo && wkc <= lo + extra;
+        if (!consistent) {
+            bump(wkc_errors_, 1);
+            st = CycleStatus::WkcMismatch;
+        }
     }
-    uint32_t ok = st == CycleStatus::Ok ? 1 : 0;
+    cycle_ok_.store(consistent, std::memory_order_relaxed);
+    const uint8_t* stat = image_.data() + status_bytes_;
+    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+        uint32_t v = consistent && (stat[i] & 0x1F) == 8 && admit_[i].load(std::memory_order_relaxed) ? 1 : 0;
+        valid_[i].store(uint8_t(v), std::memory_order_relaxed);
+        std::memcpy(image_.data() + valid_offset_ + 12 * i + 8, &v, 4);
+    }
+    uint32_t ok = consistent ? 1 : 0;
     std::memcpy(image_.data() + masterstatus_offset_, &ok, 4); // little-endian host, as the bus part
     return st;
 }
@@ -943,32 +1101,101 @@ int Master::transact_via_cycle(uint8_t cmd, uint32_t addr, void* data, uint16_t 
     return -1;
 }
 
-void Master::recover_slave(std::size_t i) {
+const char* slave_state_name(SlaveState s) {
+    switch (s) {
+    case SlaveState::Op: return "OP";
+    case SlaveState::Missing: return "MISSING";
+    case SlaveState::WrongId: return "WRONG_ID";
+    case SlaveState::Error: return "ERROR";
+    case SlaveState::Lost: return "LOST";
+    case SlaveState::Configuring: return "CONFIGURING";
+    }
+    return "?";
+}
+
+void Master::set_health(std::size_t i, SlaveState st, uint32_t error_id, const std::string& error) {
+    std::lock_guard<std::mutex> l(health_mu_);
+    SlaveHealth& h = health_[i];
+    h.state = st;
+    h.error_id = error_id;
+    if (!error.empty()) last_error_[i] = error;
+}
+
+std::string Master::slave_last_error(std::size_t i) const {
+    std::lock_guard<std::mutex> l(health_mu_);
+    return i < last_error_.size() ? last_error_[i] : std::string();
+}
+
+SlaveHealth Master::slave_health(std::size_t i) const {
+    std::lock_guard<std::mutex> l(health_mu_);
+    return i < health_.size() ? health_[i] : SlaveHealth{};
+}
+
+int Master::slaves_op() const {
+    int n = 0;
+    for (std::size_t i = 0; i < slaves_.size(); ++i) n += slave_valid(i);
+    return n;
+}
+
+bool Master::health_due() const {
+    if (responding() != last_responding_) return true;
+    for (std::size_t i = 0; i < slaves_.size(); ++i)
+        if (admit_[i].load(std::memory_order_relaxed) && !(slave_online(i) && (slave_al_status(i) & 0x1F) == 8)) return true;
+    return false;
+}
+
+bool Master::claim_position(std::size_t i) {
     SlaveInfo& s = slaves_[i];
+    uint16_t addr = 0xFFFF;
+    if (transact(kAprd, uint16_t(-s.position), 0x0010, &addr, 2, 0) != 1) return false;
+    if (addr == s.station) return true;
+    // Only a slave without an address is ours to take: with a slave missing, positions shift and
+    // the one answering may be a neighbour that still has its own address.
+    if (addr != 0) return false;
+    uint16_t st = s.station;
+    return transact(kApwr, uint16_t(-s.position), 0x0010, &st, 2) == 1;
+}
+
+void Master::configure_slave(std::size_t i, bool full_sii) {
+    SlaveInfo& s = slaves_[i];
+    // Identity first, before anything is written to it.
+    SlaveInfo fresh = s;
+    if (full_sii) read_sii(fresh);
+    else read_identity(fresh);
+    std::string wrong = identity_error(fresh);
+    if (!wrong.empty()) {
+        uint16_t none = 0; // not ours: take the station address back, leave it alone
+        transact(kFpwr, s.station, 0x0010, &none, 2);
+        throw IdentityMismatch(wrong);
+    }
+    if (full_sii) s.sii = fresh.sii;
     uint16_t ack = 0x0011; // INIT, acknowledge any error
     transact(kFpwr, s.station, kAlControl, &ack, 2);
     uint8_t zeros[256] = {};
     transact(kFpwr, s.station, kFmmu, zeros, 256);
     transact(kFpwr, s.station, kSm, zeros, 128);
-    SlaveInfo fresh = s;
-    read_sii(fresh);
-    check_identity(fresh);
-    configure_mailbox(fresh);
+    request_state({i}, 1, "INIT");
+    configure_mailbox(s);
     request_state({i}, 2, "PREOP");
     mbx_counter_.erase(s.position);
     apply_startup_sdos(i);
-    SlaveInfo layout = fresh;
+    // The PDO layout must be the one its image region was laid out for, entry by entry.
+    SlaveInfo layout = s;
     read_pdo_layout(layout);
-    auto bits = [](const SlaveInfo& x, bool out) {
-        uint32_t n = 0;
+    auto entries = [](const SlaveInfo& x, bool out) {
+        std::vector<std::tuple<uint16_t, uint8_t, uint8_t>> v;
         for (auto& [smi, pdo] : x.pdo_assign)
             for (auto& p : out ? x.rx_pdos : x.tx_pdos)
-                if (p.index == pdo) n += p.bit_size();
-        return n;
+                if (p.index == pdo)
+                    for (auto& e : p.entries) v.emplace_back(e.index, e.sub, e.bits);
+        return v;
     };
-    if (bits(layout, true) != bits(s, true) || bits(layout, false) != bits(s, false))
-        throw Error(SB() << slave_name(s) << ": came back with a different PDO layout; restart the IOC");
-    configure_process_data(s);
+    for (bool out : {true, false})
+        if (entries(layout, out) != entries(s, out))
+            throw Error(SB() << slave_name(s) << ": its PDO " << (out ? "outputs" : "inputs")
+                             << " differ from the layout reserved at start (restart the IOC to use them)");
+    configure_process_data(i);
+    if (s.sii.dc_assign_activate) configure_dc_slave(i);
     request_state({i}, 4, "SAFEOP");
     request_state({i}, 8, "OP");
 }
@@ -1002,103 +1229,162 @@ std::string Master::check_outage(double now_s) {
 }
 
 int Master::check_and_recover() {
-    check_outage(std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count());
-    int recovered = 0;
+    double now = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+    check_outage(now);
+    int responding_now = responding();
+    bool topology_changed = responding_now != last_responding_;
+    last_responding_ = responding_now;
+    int brought = 0;
     for (std::size_t i = 0; i < slaves_.size(); ++i) {
         SlaveInfo& s = slaves_[i];
         bool online = slave_online(i);
         uint8_t al = slave_al_status(i);
-        if (online && al == 8) {
-            if (lost_[i]) {
-                lost_[i] = 0;
-                LOG_INFO(lg, slave_name(s) << ": back in OP");
+        SlaveHealth h = slave_health(i);
+        bool admitted = admit_[i].load(std::memory_order_relaxed);
+        if (admitted) {
+            if (online && (al & 0x1F) == 8) continue;
+            // It was in the cycle and is no longer there, or left OP: out of the cycle's trust
+            // until configured again.
+            admit_[i].store(0, std::memory_order_relaxed);
+            {
+                std::lock_guard<std::mutex> l(health_mu_);
+                health_[i].lost++;
             }
-            continue;
+            std::string why = online ? std::string(SB() << slave_name(s) << ": left OP (AL status " << hex(al, 2) << ")")
+                                     : std::string(SB() << slave_name(s) << ": lost (no answer at station " << hex(s.station, 4) << ")");
+            set_health(i, SlaveState::Lost, online ? slave_error::kNotOperational : slave_error::kNotOnline, why);
+            LOG_WARN(lg, why);
+            retry_at_[i] = 0;
+            backoff_[i] = 1.0;
         }
-        if (!lost_[i]) {
-            lost_[i] = 1;
-            if (!online) LOG_WARN(lg, slave_name(s) << ": lost (no answer at station " << hex(s.station, 4) << ")");
-            else LOG_WARN(lg, slave_name(s) << ": left OP (AL status " << hex(al, 2) << ")");
-        }
-        if (!online) {
-            // Is something at its position again, without its station address (power cycle)?
-            uint16_t addr = 0xFFFF;
-            if (transact(kAprd, uint16_t(-s.position), 0x0010, &addr, 2, 0) != 1) continue;
-            // Only a slave without an address is ours to take: with a slave missing, positions
-            // shift and the one answering may be a neighbour that still has its own address.
-            if (addr == 0) {
-                uint16_t st = s.station;
-                if (transact(kApwr, uint16_t(-s.position), 0x0010, &st, 2) != 1) continue;
-            } else if (addr != s.station) {
-                continue;
-            }
-        }
+        // Not in the cycle: Missing, WrongId, Error, Lost. A slave that failed or was of another
+        // identity is tried again with a back-off (1 s doubling to 30 s) unless the bus changed.
+        if (!topology_changed && now < retry_at_[i]) continue;
+        if (!online && !claim_position(i)) continue; // nothing (ours) at its position yet
+        // A slave that was in OP before has its SII cached: its identity is enough.
+        bool full_sii = h.state != SlaveState::Lost;
+        set_health(i, SlaveState::Configuring, h.error_id, "");
         try {
-            recover_slave(i);
-            ++recovered;
+            configure_slave(i, full_sii);
+            admit_[i].store(1, std::memory_order_relaxed);
+            {
+                std::lock_guard<std::mutex> l(health_mu_);
+                health_[i].reconfigured++;
+            }
+            set_health(i, SlaveState::Op, 0, "");
+            ++brought;
             recoveries_++;
-            LOG_INFO(lg, slave_name(s) << ": configured again and back in OP");
+            backoff_[i] = 1.0;
+            LOG_INFO(lg, slave_name(s) << (h.state == SlaveState::Missing ? ": appeared, configured and in OP"
+                                                                          : ": configured again and back in OP")
+                                       << (cfg_[i].sdos.empty() ? "" : std::string(SB() << " (" << cfg_[i].sdos.size() << " start-up SDO(s) written)")));
         } catch (const Error& e) {
-            LOG_WARN(lg, slave_name(s) << ": recovery failed: " << e.what());
+            bool wrong = dynamic_cast<const IdentityMismatch*>(&e) != nullptr;
+            SlaveState st = wrong ? SlaveState::WrongId : SlaveState::Error;
+            {
+                std::lock_guard<std::mutex> l(health_mu_);
+                health_[i].refused++;
+            }
+            bool same = slave_last_error(i) == e.what();
+            set_health(i, st, wrong ? slave_error::kVerificationFail : slave_error::kNotOperational, e.what());
+            if (!same) LOG_ERR(lg, e.what() << (wrong ? "; left out" : "; will try again"));
+            retry_at_[i] = now + backoff_[i];
+            backoff_[i] = std::min(backoff_[i] * 2, 30.0);
         }
     }
-    return recovered;
+    return brought;
 }
 
 } // namespace beamctl::ethercat
 
 namespace beamctl::ethercat {
 
-void Master::configure_dc() {
-    // Minimal distributed clocks (ethercat.md §4): latch receive times, delays from the reference
-    // (line topology), offsets so every slave's system time is the master's time, SYNC0 at the
-    // cycle time for slaves whose ESI asks for it (AssignActivate).
+namespace {
+uint64_t master_time_ns() { // [ns] since the EtherCAT epoch 2000-01-01, from the system clock
+    auto t = std::chrono::system_clock::now().time_since_epoch();
+    return uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(t).count()) - 946684800ull * 1000000000ull;
+}
+} // namespace
+
+void Master::configure_dc(const std::vector<std::size_t>& which) {
+    // Minimal distributed clocks (ethercat.md §4): the reference is the first configured slave with
+    // DC (its cyclic FRMW 0x0910 is in the frame even while it is absent); each DC slave present
+    // gets its delay, offset and SYNC0 in configure_dc_slave().
     dc_ref_ = -1;
-    std::vector<std::size_t> dc;
+    int n = 0;
     for (std::size_t i = 0; i < slaves_.size(); ++i)
+        if (slaves_[i].sii.dc_assign_activate) {
+            if (dc_ref_ < 0) dc_ref_ = int(i);
+            n += std::count(which.begin(), which.end(), i) ? 1 : 0;
+        }
+    // One latch and one master timestamp for all of them, delays from the first present.
+    std::vector<std::size_t> dc;
+    for (std::size_t i : which)
         if (slaves_[i].sii.dc_assign_activate) dc.push_back(i);
-    if (dc.empty()) return;
-    dc_ref_ = int(dc.front());
+    if (!dc.empty()) {
+        uint32_t latch = 0;
+        if (transact(kBwr, 0, 0x0900, &latch, 4) < 1) throw Error(SB() << "ec" << bus_ << ": DC receive-time latch got no answer");
+        uint64_t master_ns = master_time_ns();
+        uint8_t rr[4] = {};
+        if (transact(kFprd, slaves_[dc.front()].station, 0x0900, rr, 4) != 1)
+            throw Error(SB() << slave_name(slaves_[dc.front()]) << ": no answer reading DC receive times");
+        uint32_t t_ref = le32(rr);
+        for (std::size_t i : dc) dc_pending_.push_back({i, t_ref, master_ns});
+    }
+    if (dc_ref_ >= 0)
+        LOG_INFO(lg, "ec" << bus_ << ": distributed clocks on " << n << " slave(s), reference "
+                          << slave_name(slaves_[std::size_t(dc_ref_)]) << ", SYNC0 every " << cycle_ns_ << " ns");
+}
+
+void Master::configure_dc_slave(std::size_t i) {
+    // Receive times latched on every slave (harmless to those running); the delay from the
+    // reference (from the slave itself if the reference does not answer).
     uint32_t latch = 0;
     if (transact(kBwr, 0, 0x0900, &latch, 4) < 1) throw Error(SB() << "ec" << bus_ << ": DC receive-time latch got no answer");
+    uint64_t master_ns = master_time_ns();
     uint32_t t_ref = 0;
-    // One master timestamp for the latch: every slave's offset is computed against it.
-    auto t = std::chrono::system_clock::now().time_since_epoch();
-    uint64_t master_ns = uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(t).count()) -
-                         946684800ull * 1000000000ull; // EtherCAT epoch 2000-01-01
-    for (std::size_t k = 0; k < dc.size(); ++k) {
-        SlaveInfo& s = slaves_[dc[k]];
-        uint8_t rt[4] = {};
-        if (transact(kFprd, s.station, 0x0900, rt, 4) != 1)
-            throw Error(SB() << slave_name(s) << ": no answer reading DC receive times");
-        uint32_t t0 = le32(rt);
-        if (k == 0) t_ref = t0;
-        uint8_t delay[4];
-        put_le32(delay, t0 - t_ref);
-        uint8_t local[8] = {};
-        if (transact(kFprd, s.station, 0x0918, local, 8) != 1 || transact(kFpwr, s.station, 0x0928, delay, 4) != 1)
-            throw Error(SB() << slave_name(s) << ": no answer configuring DC delay");
-        uint8_t offset[8]; // system time = master time, seen through this slave's delay
-        put_le64(offset, master_ns + (t0 - t_ref) - le64(local));
-        if (transact(kFpwr, s.station, 0x0920, offset, 8) != 1)
-            throw Error(SB() << slave_name(s) << ": no answer configuring DC offset");
-        // SYNC0: deactivate, cycle time, start 100 ms ahead on a cycle boundary, activate.
-        uint16_t aa = s.sii.dc_assign_activate;
-        uint16_t off = 0;
-        uint8_t cyc[4];
-        put_le32(cyc, uint32_t(cycle_ns_));
-        uint8_t st[8] = {};
-        transact(kFprd, s.station, 0x0910, st, 8);
-        uint64_t start = (le64(st) + 100'000'000ull) / cycle_ns_ * cycle_ns_;
-        uint8_t start_b[8];
-        put_le64(start_b, start);
-        uint8_t act[2] = {uint8_t(aa), uint8_t(aa >> 8)};
-        if (transact(kFpwr, s.station, 0x0980, &off, 2) != 1 || transact(kFpwr, s.station, 0x09A0, cyc, 4) != 1 ||
-            transact(kFpwr, s.station, 0x0990, start_b, 8) != 1 || transact(kFpwr, s.station, 0x0980, act, 2) != 1)
-            throw Error(SB() << slave_name(s) << ": no answer configuring SYNC0");
+    bool have_ref = false;
+    if (dc_ref_ >= 0 && std::size_t(dc_ref_) != i) {
+        uint8_t rr[4] = {};
+        if (transact(kFprd, slaves_[std::size_t(dc_ref_)].station, 0x0900, rr, 4) == 1) {
+            t_ref = le32(rr);
+            have_ref = true;
+        }
     }
-    LOG_INFO(lg, "ec" << bus_ << ": distributed clocks on " << dc.size() << " slave(s), reference "
-                      << slave_name(slaves_[std::size_t(dc_ref_)]) << ", SYNC0 every " << cycle_ns_ << " ns");
+    configure_dc_at(i, have_ref ? &t_ref : nullptr, master_ns);
+}
+
+void Master::configure_dc_at(std::size_t i, const uint32_t* t_ref, uint64_t master_ns) {
+    // Delay (line topology), offset so its system time is the master's time at the latch, SYNC0 at
+    // the cycle time starting 100 ms ahead on a cycle boundary.
+    SlaveInfo& s = slaves_[i];
+    uint8_t rt[4] = {};
+    if (transact(kFprd, s.station, 0x0900, rt, 4) != 1)
+        throw Error(SB() << slave_name(s) << ": no answer reading DC receive times");
+    uint32_t t0 = le32(rt);
+    uint32_t d = t_ref ? t0 - *t_ref : 0;
+    uint8_t delay[4];
+    put_le32(delay, d);
+    uint8_t local[8] = {};
+    if (transact(kFprd, s.station, 0x0918, local, 8) != 1 || transact(kFpwr, s.station, 0x0928, delay, 4) != 1)
+        throw Error(SB() << slave_name(s) << ": no answer configuring DC delay");
+    uint8_t offset[8]; // system time = master time, seen through this slave's delay
+    put_le64(offset, master_ns + d - le64(local));
+    if (transact(kFpwr, s.station, 0x0920, offset, 8) != 1)
+        throw Error(SB() << slave_name(s) << ": no answer configuring DC offset");
+    uint16_t aa = s.sii.dc_assign_activate;
+    uint16_t off = 0;
+    uint8_t cyc[4];
+    put_le32(cyc, uint32_t(cycle_ns_));
+    uint8_t st[8] = {};
+    transact(kFprd, s.station, 0x0910, st, 8);
+    uint64_t start = (le64(st) + 100'000'000ull) / cycle_ns_ * cycle_ns_;
+    uint8_t start_b[8];
+    put_le64(start_b, start);
+    uint8_t act[2] = {uint8_t(aa), uint8_t(aa >> 8)};
+    if (transact(kFpwr, s.station, 0x0980, &off, 2) != 1 || transact(kFpwr, s.station, 0x09A0, cyc, 4) != 1 ||
+        transact(kFpwr, s.station, 0x0990, start_b, 8) != 1 || transact(kFpwr, s.station, 0x0980, act, 2) != 1)
+        throw Error(SB() << slave_name(s) << ": no answer configuring SYNC0");
 }
 
 } // namespace beamctl::ethercat

@@ -2,6 +2,12 @@
 // addresses, SII, identity check, mailbox SMs, PREOP, startup SDOs, PDO layout from CoE or SII,
 // process-data SMs and FMMUs, SAFEOP, OP) and exchanges process data cyclically with the
 // working-counter check; CoE SDO upload/download over the mailbox.
+// Self-healing (docs/ethercat.md "Missing slaves, hot connect"): by default a configured slave that
+// is absent, answers with another identity or fails its configuration does not stop the bus: it is
+// left out (its image region reserved from the catalog's default layout) and joins when it
+// appears; a slave that is lost and returns is configured again. Every slave maps its AL status
+// register into the cyclic LRW (one byte each), so each cycle tells which slaves took part and in
+// which state, and a slave's data is valid (`ec<m>.s<k>.valid`) only in a cycle in which it did.
 // Threading: bring_up(), the SDO calls and the diagnostics run on a non-RT thread, never while
 // another thread runs the cycle; send_process_data()/receive_process_data() are the RT path:
 // noexcept, no allocation.
@@ -18,6 +24,7 @@
 
 #include <atomic>
 #include <memory>
+#include <mutex>
 
 #include <cstdint>
 #include <map>
@@ -90,12 +97,45 @@ struct SlaveInfo {
 
 enum class CycleStatus : uint8_t { Ok, WkcMismatch, FrameLost, LinkError };
 
+// Where a configured slave stands, as the master's health pass sees it.
+enum class SlaveState : uint8_t {
+    Op,          // configured by the master and in OP
+    Missing,     // nothing answers at its position (absent at start)
+    WrongId,     // something answers at its position with another identity: left alone
+    Error,       // present but its configuration or a state change failed (last_error says why)
+    Lost,        // was in OP, stopped answering
+    Configuring, // being configured (again) by the health pass
+};
+const char* slave_state_name(SlaveState s);
+
+// ECMC's error ids for a slave (ecmcEcSlave.h, ecmcEc.h).
+namespace slave_error {
+constexpr uint32_t kNotOnline = 0x24012;        // ERROR_EC_SLAVE_NOT_ONLINE
+constexpr uint32_t kNotOperational = 0x24011;   // ERROR_EC_SLAVE_NOT_OPERATIONAL
+constexpr uint32_t kVerificationFail = 0x26026; // ERROR_EC_SLAVE_VERIFICATION_FAIL (identity)
+} // namespace slave_error
+
+// Per-slave history and state for diagnostics and PVs; written by the health pass, read as a copy.
+struct SlaveHealth {
+    SlaveState state = SlaveState::Op;
+    uint32_t lost = 0;         // times it stopped answering (or left OP) while in the cycle
+    uint32_t reconfigured = 0; // times it was configured and brought to OP after the start
+    uint32_t refused = 0;      // configuration attempts that failed, or identity mismatches seen
+    uint32_t error_id = 0;     // slave_error::*, 0 while in OP
+};
+
 class Master {
 public:
     Master(Link& link, int bus_id, std::vector<SlaveConfig> cfg, const Catalog& catalog);
 
-    // Brings every configured slave to OP. Throws Error naming the bus, position and cause.
+    // Brings every configured slave to OP. A slave that is absent, of another identity or fails its
+    // configuration is left out with a log line naming position, expected and found (Missing,
+    // WrongId, Error), unless strict: then that throws Error naming the bus, position and cause.
+    // Throws if the link does not answer at all.
     void bring_up();
+    // Refuse to start with a slave missing, wrong or failing (the behaviour before self-healing).
+    void set_strict(bool strict) { strict_ = strict; }
+    bool strict() const { return strict_; }
     // Takes every slave back to SAFEOP (outputs safe, inputs still read), after the cycle has
     // stopped (a clean shutdown). Non-RT. Throws Error naming the slave that did not get there.
     void to_safe_op() { request_state(4, "SAFEOP"); }
@@ -115,13 +155,22 @@ public:
     uint32_t outputs_size() const { return outputs_bytes_; }
     // The last cycle's working counter and the error counters; any thread (relaxed atomics).
     uint16_t wkc() const { return wkc_.load(std::memory_order_relaxed); }
+    // The working counter with every configured slave in OP.
     uint16_t expected_wkc() const { return expected_wkc_; }
+    // The last cycle's frames came back with the working counter the slaves that took part in it
+    // give (a slave absent or joining is accounted for by its status byte); ec<m>.masterstatus.
+    bool cycle_ok() const { return cycle_ok_.load(std::memory_order_relaxed); }
+    // Slaves answering the last cycle's broadcast read (BRD 0x0130), configured or not; -1 none.
+    int responding() const { return responding_.load(std::memory_order_relaxed); }
+    // Slave i's inputs and outputs took part in the last cycle, in OP, with a consistent working
+    // counter (ec<m>.s<k>.valid). Any thread.
+    bool slave_valid(std::size_t i) const noexcept { return valid_[i].load(std::memory_order_relaxed); }
     uint64_t frames_lost() const { return frames_lost_.load(std::memory_order_relaxed); }
     uint64_t wkc_errors() const { return wkc_errors_.load(std::memory_order_relaxed); }
     // Cyclic frames that came back after their cycle's receive time-out (dropped as too old).
     uint64_t frames_late() const { return frames_late_; }
-    // AL status byte (state | 0x10 error) and presence of slave i, from the rotating poll: each
-    // slave is read once every slaves().size() cycles.
+    // AL status byte (state | 0x10 error) and presence of slave i in the last cycle whose frames
+    // came back, from its status byte in the LRW (0: it did not answer).
     uint8_t slave_al_status(std::size_t i) const noexcept { return slave_al_[i].load(std::memory_order_relaxed); }
     bool slave_online(std::size_t i) const noexcept { return slave_online_[i].load(std::memory_order_relaxed); }
 
@@ -132,11 +181,21 @@ public:
     void start_cycling() { cycling_.store(true, std::memory_order_release); }
     // One health pass (non-RT thread, while cycling): a slave that stopped answering is reported
     // once; a slave that answers again at its position (power-cycled: INIT, no station address)
-    // or left OP is configured again and brought back to OP while the others keep cycling.
-    // Returns the number of slaves brought back.
+    // or left OP is configured again, start-up SDOs and DC included, and brought back to OP while
+    // the others keep cycling; a slave missing since the start joins the same way when it appears,
+    // once its identity checks. Returns the number of slaves brought (back) to OP.
     // Each pass also watches for bus outages (check_outage()).
     int check_and_recover();
     uint64_t recoveries() const { return recoveries_.load(); }
+    // Whether a health pass has work (a slave not in OP, the responding count changed): the
+    // health thread runs a pass at once instead of waiting for its period.
+    bool health_due() const;
+    SlaveHealth slave_health(std::size_t i) const;
+    // The slave's last problem in words ("" if none yet).
+    std::string slave_last_error(std::size_t i) const;
+    SlaveState slave_state(std::size_t i) const { return slave_health(i).state; }
+    // Configured slaves in OP with valid data (last cycle).
+    int slaves_op() const;
     // Logs a bus outage (no frames back, a wrong working counter) when it begins, at most every
     // 5 s while it lasts with what is wrong, and when it ends with its duration (OutageMonitor).
     // `now_s`: monotonic time [s]. Returns the line logged, or "". Health thread, while cycling.
@@ -207,15 +266,41 @@ private:
     bool read_mailbox(const SlaveInfo& s, std::vector<uint8_t>& buf, const std::string& ctx);
     void request_state(uint8_t state, const char* name);
     void request_state(const std::vector<std::size_t>& which, uint8_t state, const char* name);
+    // As request_state, but a slave that does not get there is returned with the error (in the
+    // order of `which`) instead of throwing; the others carry on.
+    std::vector<std::pair<std::size_t, std::string>> request_state_each(const std::vector<std::size_t>& which,
+                                                                        uint8_t state, const char* name);
     void check_identity(const SlaveInfo& s) const;
+    std::string identity_error(const SlaveInfo& s) const; // "" if it is the configured device
+    void sii_read4(const SlaveInfo& s, uint32_t addr, std::vector<uint16_t>& words);
+    // Vendor, product, revision from SII words 0x08-0x0D into s.sii (nothing written to the slave).
+    void read_identity(SlaveInfo& s);
+    // The layout a slave absent at start gets reserved: the catalog device's SII defaults.
+    void reserve_default_layout(SlaveInfo& s) const;
+    // Brings slave i (present at its station address) from whatever state to OP: INIT, identity,
+    // SMs, PREOP, start-up SDOs, PDO layout (must match the reserved one), FMMUs, DC, SAFEOP, OP.
+    // `full_sii`: read the whole SII (a slave never configured); else only its identity.
+    void configure_slave(std::size_t i, bool full_sii);
+    // Finds slave i at its position: true if something answers there and now has its station
+    // address (a fresh slave without one gets it).
+    bool claim_position(std::size_t i);
+    void set_health(std::size_t i, SlaveState st, uint32_t error_id, const std::string& error);
+    void configure_dc_slave(std::size_t i);
+    // DC registers of slave i given the reference's latched receive time (nullptr: it is its own
+    // reference) and the master's time at the latch [ns since 2000].
+    void configure_dc_at(std::size_t i, const uint32_t* t_ref, uint64_t master_ns);
+    struct DcPending {
+        std::size_t slave;
+        uint32_t t_ref;
+        uint64_t master_ns;
+    };
+    std::vector<DcPending> dc_pending_; // bring-up: one latch for all DC slaves
     void configure_mailbox(const SlaveInfo& s);
     void apply_startup_sdos(std::size_t i);
-    void configure_process_data(const SlaveInfo& s);
-    void recover_slave(std::size_t i);
-    void configure_dc();
+    void configure_process_data(std::size_t i);
+    void configure_dc(const std::vector<std::size_t>& which);
     int transact_via_cycle(uint8_t cmd, uint32_t addr, void* data, uint16_t len, int retries);
     void layout_process_image();
-    void configure_sms_and_fmmus();
     void build_cyclic_frames();
     std::string slave_name(const SlaveInfo& s) const;
 
@@ -230,10 +315,23 @@ private:
     uint32_t bus_bytes_ = 0;            // image bytes exchanged on the bus (LRW)
     uint32_t masterstatus_offset_ = 0;  // byte offset of ec<m>.masterstatus in the image
     std::vector<CyclicFrame> cyclic_;
-    int status_frame_ = -1;      // frame holding the rotating AL-status FPRD
-    uint32_t status_offset_ = 0; // its data offset in that frame
-    std::size_t status_next_ = 0, status_sent_ = ~std::size_t(0);
-    std::unique_ptr<std::atomic<uint8_t>[]> slave_al_, slave_online_; // written by the RT thread
+    int count_frame_ = -1;       // frame holding the BRD 0x0130 (responding slaves)
+    uint32_t count_offset_ = 0;  // its data offset in that frame
+    uint32_t status_bytes_ = 0;  // image offset of the slaves' AL status bytes (one per slave)
+    uint32_t valid_offset_ = 0;  // image offset of the per-slave words ONE, ZERO, valid (12 bytes each)
+    std::unique_ptr<std::atomic<uint8_t>[]> slave_al_, slave_online_, valid_; // written by the RT thread
+    std::unique_ptr<std::atomic<uint8_t>[]> admit_; // health thread: the master configured it (trust its data in OP)
+    std::vector<uint16_t> contrib_; // working counter slave i adds to the cycle when it takes part
+    std::atomic<int> responding_{-1};
+    std::atomic<bool> cycle_ok_{false};
+    bool strict_ = false;
+    mutable std::mutex health_mu_;   // guards health_
+    std::vector<SlaveHealth> health_;
+    std::vector<std::string> last_error_;
+    std::vector<double> retry_at_;   // health thread: next try for a slave in Error/WrongId [s, steady]
+    std::vector<double> backoff_;    // its current back-off [s]
+    int last_responding_ = -1;       // health thread: responding() at the last pass
+    bool dc_configured_ = false;
 
     // Acyclic datagrams while cycling: one in flight, in its own frame after the cyclic ones.
     static constexpr std::size_t kMaxAcyclic = 512;
@@ -253,7 +351,6 @@ private:
     FrameBuilder acyc_frame_;
     AcyclicRequest acyc_cur_;
     bool acyc_in_flight_ = false;
-    std::vector<uint8_t> lost_; // health thread: slaves reported lost
     OutageMonitor outage_;      // health thread
     std::atomic<uint64_t> recoveries_{0};
     uint64_t cycle_ns_ = 1'000'000;

@@ -10,9 +10,11 @@ namespace beamctl::ioc {
 // $(P) = "<prefix>m<m>", $(BUS) = "ec<m>.", $(NB) = the histogram's buckets
 const PvTable& bus_table() {
     static const PvTable t{"bus", {
-        {"-Stat-OK", "bi", "$(BUS)ok", {{"DESC", "Bus OK: all slaves OP, WKC complete"}, {"ZNAM", "NOT_OK"}, {"ONAM", "OK"}, {"ZSV", "MAJOR"}}},
+        {"-Stat-OK", "bi", "$(BUS)ok", {{"DESC", "Bus OK: all slaves OP, data valid"}, {"ZNAM", "NOT_OK"}, {"ONAM", "OK"}, {"ZSV", "MAJOR"}}},
         {"-LinkUp", "bi", "$(BUS)linkup", {{"DESC", "Cyclic frames come back"}, {"ZNAM", "DOWN"}, {"ONAM", "UP"}, {"ZSV", "MAJOR"}}},
         {"-SlvCntr", "longin", "$(BUS)slavecounter", {{"DESC", "Slaves configured on the bus"}}},
+        {"-SlvRsp", "longin", "$(BUS)slavesresponding", {{"DESC", "Slaves answering on the bus"}}},
+        {"-SlvOP", "longin", "$(BUS)slavesop", {{"DESC", "Configured slaves in OP, data valid"}}},
         {"-Dom-WC", "longin", "$(BUS)dom0.wc", {{"DESC", "Working counter of the last cycle"}}},
         {"-Dom-WC-Exp", "longin", "$(BUS)dom0.wcexpected", {{"DESC", "Expected working counter"}}},
         {"-Dom-WC-Complete", "bi", "$(BUS)dom0.wccomplete", {{"DESC", "Working counter complete"}, {"ZNAM", "INCOMPLETE"}, {"ONAM", "COMPLETE"}, {"ZSV", "MAJOR"}}},
@@ -37,22 +39,34 @@ const PvTable& slave_table() {
         {"-Online", "bi", "slavestatus.0", {{"DESC", "Slave answers"}, {"ZNAM", "OFFLINE"}, {"ONAM", "ONLINE"}, {"ZSV", "MAJOR"}}},
         {"-Operational", "bi", "slavestatus.1", {{"DESC", "Slave in OP"}, {"ZNAM", "NOT_OP"}, {"ONAM", "OP"}, {"ZSV", "MAJOR"}}},
         {"-HWType", "stringin", "", {{"VAL", "$(TYPE)"}, {"DESC", "$(NAME)"}}},
+        {"-Valid", "bi", "slavestatus.6", {{"DESC", "Data valid: in the cycle, in OP"}, {"ZNAM", "INVALID"}, {"ONAM", "VALID"}, {"ZSV", "MAJOR"}}},
+        {"-State", "mbbi", "state", {{"DESC", "Slave state (master's view)"}, {"ZRST", "OP"}, {"ONST", "MISSING"}, {"TWST", "WRONG_ID"},
+                                   {"THST", "ERROR"}, {"FRST", "LOST"}, {"FVST", "CONFIGURING"},
+                                   {"ONSV", "MAJOR"}, {"TWSV", "MAJOR"}, {"THSV", "MAJOR"}, {"FRSV", "MAJOR"}, {"FVSV", "MINOR"}}},
+        {"-LostCntr", "longin", "lostcounter", {{"DESC", "Times lost or out of OP"}}},
+        {"-ReconfCntr", "longin", "reconfigcounter", {{"DESC", "Times configured after the start"}}},
+        {"-ErrId", "longin", "errorid", {{"DESC", "ECMC error id (0: none)"}}},
     }};
     return t;
 }
 
 namespace {
 
-enum class Item { Ok, LinkUp, SlaveCounter, Wc, WcExpected, WcComplete, FramesMissed, FramesLate, WkcErrors,
-                  SlaveStatus, LatMax, ExeMax, LatMean, Cycles, Missed, Reset };
+enum class Item { Ok, LinkUp, SlaveCounter, SlavesResponding, SlavesOp, Wc, WcExpected, WcComplete, FramesMissed,
+                  FramesLate, WkcErrors, SlaveStatus, SlaveState, SlaveLost, SlaveReconf, SlaveErrorId, LatMax, ExeMax,
+                  LatMean, Cycles, Missed, Reset };
 struct ItemName {
     const char* name; // after "ec<m>." (bus), "ec<m>.s<k>." (slave) or "ecmc.thread." (engine)
     Item item;
 };
 constexpr ItemName kBus[] = {{"ok", Item::Ok}, {"linkup", Item::LinkUp}, {"slavecounter", Item::SlaveCounter},
+                             {"slavesresponding", Item::SlavesResponding}, {"slavesop", Item::SlavesOp},
                              {"dom0.wc", Item::Wc}, {"dom0.wcexpected", Item::WcExpected},
                              {"dom0.wccomplete", Item::WcComplete}, {"framesmissed", Item::FramesMissed},
                              {"frameslate", Item::FramesLate}, {"wkcerrors", Item::WkcErrors}};
+constexpr ItemName kSlave[] = {{"slavestatus", Item::SlaveStatus}, {"state", Item::SlaveState},
+                               {"lostcounter", Item::SlaveLost}, {"reconfigcounter", Item::SlaveReconf},
+                               {"errorid", Item::SlaveErrorId}};
 constexpr ItemName kEngine[] = {{"latency.max", Item::LatMax}, {"execute.max", Item::ExeMax},
                                 {"latency.mean", Item::LatMean}, {"cycles", Item::Cycles},
                                 {"missed", Item::Missed}, {"reset", Item::Reset}};
@@ -110,9 +124,23 @@ private:
         }
         const ethercat::BusSnapshot& s = bus_->looked();
         switch (item_) {
-        case Item::Ok: return s.link_up && s.wkc_ok;
+        case Item::Ok: {
+            bool ok = s.link_up && s.wkc_ok;
+            for (uint8_t v : s.slave_valid) ok = ok && v;
+            return ok;
+        }
         case Item::LinkUp: return s.link_up;
         case Item::SlaveCounter: return double(bus_->master().slaves().size());
+        case Item::SlavesResponding: return s.link_up ? std::max(s.responding, 0) : 0;
+        case Item::SlavesOp: {
+            int n = 0;
+            for (uint8_t v : s.slave_valid) n += v;
+            return n;
+        }
+        case Item::SlaveState: return double(int(bus_->master().slave_health(std::size_t(slave_)).state));
+        case Item::SlaveLost: return bus_->master().slave_health(std::size_t(slave_)).lost;
+        case Item::SlaveReconf: return bus_->master().slave_health(std::size_t(slave_)).reconfigured;
+        case Item::SlaveErrorId: return bus_->master().slave_health(std::size_t(slave_)).error_id;
         case Item::Wc: return s.wkc;
         case Item::WcExpected: return s.expected_wkc;
         case Item::WcComplete: return s.wkc_ok;
@@ -127,6 +155,7 @@ private:
             uint8_t al = s.slave_al[i] & 0x0F;
             if (online && al == 8) w |= 2u;
             if (online) w |= (al == 1 ? 1u << 2 : al == 2 ? 1u << 3 : al == 4 ? 1u << 4 : al == 8 ? 1u << 5 : 0u);
+            if (i < s.slave_valid.size() && s.slave_valid[i]) w |= 1u << 6;
             return bit_ >= 0 ? double(w >> bit_ & 1u) : double(w);
         }
         default: return 0;
@@ -147,7 +176,8 @@ private:
 void declare_bus_items(registry::Registry& r, int id, const std::vector<int>& slave_positions) {
     std::string bus = SB() << "ec" << id;
     for (const ItemName& n : kBus) declare(r, bus + "." + n.name, registry::OwnerKind::Bus, bus, false);
-    for (int p : slave_positions) declare(r, SB() << bus << ".s" << p << ".slavestatus", registry::OwnerKind::Bus, bus, false);
+    for (int p : slave_positions)
+        for (const ItemName& n : kSlave) declare(r, SB() << bus << ".s" << p << "." << n.name, registry::OwnerKind::Bus, bus, false);
 }
 
 void declare_engine_items(registry::Registry& r) {
@@ -180,7 +210,8 @@ std::unique_ptr<pv::LinkDevice> make_bus_item_device(const std::string& name, in
         for (const ItemName& n : kBus)
             if (rest == n.name) return make(n.item, -1);
         for (std::size_t i = 0; i < slave_positions.size(); ++i)
-            if (rest == std::string(SB() << "s" << slave_positions[i] << ".slavestatus")) return make(Item::SlaveStatus, int(i));
+            for (const ItemName& n : kSlave)
+                if (rest == std::string(SB() << "s" << slave_positions[i] << "." << n.name)) return make(n.item, int(i));
     }
     why = SB() << "no IOC-loop item '" << name << "'";
     return nullptr;

@@ -2,13 +2,16 @@
 // tables (pv_table.hpp) on IOC-loop items of the registry:
 //   per bus, ECMC's names where ECMC has them: ec<m>.ok, ec<m>.linkup, ec<m>.slavecounter,
 //     ec<m>.dom0.wc, .dom0.wcexpected, .dom0.wccomplete, ec<m>.framesmissed, .frameslate,
-//     .wkcerrors; per slave ec<m>.s<k>.slavestatus (bit 0 online, 1 operational, 2-5 AL state
-//     INIT/PREOP/SAFEOP/OP)
+//     .wkcerrors; beamctl's ec<m>.slavesresponding, ec<m>.slavesop; per slave ec<m>.s<k>.slavestatus
+//     (bit 0 online, 1 operational, 2-5 AL state INIT/PREOP/SAFEOP/OP; beamctl's bit 6 data valid)
+//     and beamctl's ec<m>.s<k>.state (Master SlaveState: 0 OP, 1 MISSING, 2 WRONG_ID, 3 ERROR,
+//     4 LOST, 5 CONFIGURING), .lostcounter, .reconfigcounter, .errorid (ECMC's slave error ids)
 //   the engine's: ecmc.thread.latency.max, .latency.mean, .execute.max, .cycles, .missed (µs,
 //     counts) and ecmc.thread.reset (a write of 1 clears them; reads 1 until the cycle did)
 // $(P)m<m>-Stat-OK -LinkUp -SlvCntr -Dom-WC -Dom-WC-Exp -Dom-WC-Complete -MissedFrames
 // -LateFrames -WkcErrors -ThdLatMax -ThdExeMax -ThdLatMean -ThdCycles -ThdMissedCycles
-// -ThdStat-Reset; $(P)m<m>s<kkk>-Online -Operational -HWType. The latency histogram
+// -ThdStat-Reset -SlvRsp -SlvOP; $(P)m<m>s<kkk>-Online -Operational -HWType -Valid -State -LostCntr
+// -ReconfCntr -ErrId. The latency histogram
 // (-ThdLatHist, -ThdLatHistEdges: arrays) is published by the IOC. These items live in the IOC
 // loop: records read them, PLC code and axes (the cycle) cannot.
 // Threading: IOC loop thread.

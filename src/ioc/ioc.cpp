@@ -47,14 +47,24 @@ struct SimTimeStage : rt::Stage {
 class EcLinkDevice : public pv::LinkDevice {
 public:
     EcLinkDevice(ethercat::Bus& bus, const ethercat::SignalInfo& sig, int bit, int watch)
-        : bus_(bus), sig_(sig), bit_(bit), watch_(watch) {}
+        : bus_(bus), sig_(sig), bit_(bit), watch_(watch) {
+        const auto& sl = bus.master().slaves();
+        for (std::size_t i = 0; i < sl.size() && sig.bit_offset / 8 < bus.master().bus_bytes(); ++i)
+            if (sl[i].position == sig.slave) slave_ = int(i); // an entry exchanged on the bus
+    }
     bool read(double& v) override {
         const ethercat::BusSnapshot& s = bus_.looked();
+        alarm_ = pv::kStatLink;
         if (!s.link_up || !s.wkc_ok) return false; // no fresh data: LINK/INVALID
+        if (!slave_ok(s)) { // its slave is missing, lost or not in OP: COMM/INVALID (as ECMC)
+            alarm_ = pv::kStatComm;
+            return false;
+        }
         v = value(s);
         last_ = v;
         return true;
     }
+    uint16_t read_alarm() const override { return alarm_; }
     bool write(double v) override {
         if (!sig_.output || !std::isfinite(v)) return false;
         if (bit_ >= 0) { // one bit of a wider output: the others as last sent
@@ -77,7 +87,7 @@ public:
     }
     bool changed() override {
         const ethercat::BusSnapshot& s = bus_.looked();
-        bool ok = s.link_up && s.wkc_ok;
+        bool ok = s.link_up && s.wkc_ok && slave_ok(s);
         if (ok != last_ok_) { // the bus went down (the record shows LINK/INVALID) or came back
             last_ok_ = ok;
             if (watch_ >= 0 && std::size_t(watch_) < s.changes.size()) seen_ = s.changes[std::size_t(watch_)];
@@ -100,6 +110,9 @@ public:
     }
 
 private:
+    bool slave_ok(const ethercat::BusSnapshot& s) const {
+        return slave_ < 0 || (std::size_t(slave_) < s.slave_valid.size() && s.slave_valid[std::size_t(slave_)]);
+    }
     bool in_image(const ethercat::BusSnapshot& s) const { // false before the first cycle published
         return (std::size_t(sig_.bit_offset) + sig_.bits + 7) / 8 <= s.image.size();
     }
@@ -116,6 +129,8 @@ private:
     uint32_t seen_ = 0; // the watch's change count at the last look
     double last_ = NAN;
     bool last_ok_ = false; // the bus's data was valid at the last look
+    int slave_ = -1;       // index of the entry's slave (-1: the master's own memory)
+    uint16_t alarm_ = pv::kStatLink;
 };
 
 // An entry PV whose entry the slave's PDO assignment does not have: reads and writes fail
@@ -325,6 +340,7 @@ void Ioc::declare_bus_signals() {
             std::string pre = SB() << bus << ".s" << sc.position << ".";
             declare(pre + "ONE", "UDINT", false);
             declare(pre + "ZERO", "UDINT", false);
+            declare(pre + "valid", "UDINT", false);
             const ethercat::DeviceDesc* d = catalog_.find(sc.type);
             if (!d) continue;
             std::set<std::string> seen; // an entry in two alternative PDOs is one signal

@@ -680,6 +680,7 @@ void Axis::run(double dt) noexcept {
     ++st_.cycle;
     take_variables();
     bool bus_ok = !io_.bus_status.bound() || io_.bus_status.get() != 0;
+    for (const registry::BoundSignal& v : io_.slave_valid) bus_ok = bus_ok && v.get() != 0;
     read_inputs();
     if (!p_.virtual_axis) {
         enc_.update(dt);
@@ -719,6 +720,8 @@ void Axis::run(double dt) noexcept {
             st_.last_interlock = Interlock::BusNotOk;
             fault(error_id::kBusNotOk, true); // every cycle while not OK
         } else if (!bus_was_ok_ && p_.enable_at_startup) {
+            // axis.autoEnable.atStartup: enabled again when its slaves are back (ECMC goes through
+            // its start-up state after every loss); it holds its position, it never moves by itself.
             AxisCommand on{CommandType::Power};
             on.on = true;
             (void)command(on);

@@ -154,7 +154,9 @@ struct AxisIo {
     registry::BoundSignal encoder;                            // raw position
     registry::BoundSignal drive_control, drive_status, drive_setpoint;
     registry::BoundSignal limit_fwd, limit_bwd, home, interlock;
-    registry::BoundSignal bus_status; // ec<m>.masterstatus: 1 while the bus is OK
+    registry::BoundSignal bus_status; // ec<m>.masterstatus: 1 while the bus's cycle is consistent
+    // ec<m>.s<k>.valid of every slave the axis reads or writes: 1 while its data takes part, in OP
+    std::vector<registry::BoundSignal> slave_valid;
     registry::BoundSignal brake;      // output: 1 = brake open (released); unbound: no brake
     // encoder latch (index homing 11/12): latched counter, arm bit (encoder control), valid bit
     registry::BoundSignal latch_position, latch_arm, latch_valid;

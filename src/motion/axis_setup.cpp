@@ -1,3 +1,4 @@
+#include <algorithm>
 #include "motion/axis_setup.hpp"
 
 #include "core/error.hpp"
@@ -237,6 +238,20 @@ AxisIo bind_axis_io(const AxisConfig& c, const SignalResolver& resolve) {
     status.text = SB() << "ec" << status.bus << ".masterstatus";
     status.slave = -2; // the master itself
     io.bus_status = resolve(status);
+    // The slaves it uses: the axis runs only while every one of them is in the cycle, in OP.
+    std::vector<std::pair<int, int>> slaves;
+    for (const SignalRef& r : axis_signal_refs(c))
+        if (r.slave >= 0 && !r.is_constant() && std::find(slaves.begin(), slaves.end(), std::pair{r.bus, r.slave}) == slaves.end())
+            slaves.emplace_back(r.bus, r.slave);
+    for (auto [b, k] : slaves) {
+        SignalRef v;
+        v.bus = b;
+        v.slave = k;
+        v.entry = "valid";
+        v.text = SB() << "ec" << b << ".s" << k << ".valid";
+        registry::BoundSignal bs = resolve(v);
+        if (bs.bound()) io.slave_valid.push_back(bs);
+    }
     return io;
 }
 

@@ -967,7 +967,12 @@ bool Database::link_get(Record& r, Link& l, Prim t, void* dest, uint32_t n, uint
     case Link::Kind::Constant: return true;
     case Link::Kind::Hw: {
         double v = 0;
-        if (!l.device() || !l.device()->read(v)) break;
+        if (!l.device()) break;
+        if (!l.device()->read(v)) {
+            stats_.link_errors++;
+            r.set_sevr(l.device()->read_alarm(), kInvalid);
+            return false;
+        }
         Elements e{Dbf::Double, &v, 1, 1, 8};
         get_element(r, kScratchDouble, e, 0, t, dest);
         *got = 1;

@@ -34,7 +34,10 @@ struct FieldDesc;
 class LinkDevice {
 public:
     virtual ~LinkDevice() = default;
-    virtual bool read(double& v) = 0;        // false: no value (the record raises LINK/INVALID)
+    virtual bool read(double& v) = 0;        // false: no value (the record raises read_alarm()/INVALID)
+    // The alarm status a failed read raises: LINK (default), or COMM for a device whose hardware
+    // does not answer (an EtherCAT slave missing or lost).
+    virtual uint16_t read_alarm() const { return kStatLink; }
     virtual bool write(double v) = 0;        // false: refused (the record raises LINK/INVALID)
     virtual std::string describe() const = 0; // for dbpr/introspection
     // SCAN "I/O Intr": true when the value differs from the one the record last read.

@@ -220,10 +220,30 @@ TEST(Coe, StartupSdosAreCheckedAtConfigurationAndTheirAbortsStopBringUp) {
     EXPECT_EQ(ctor_error(with(2, {0x8010, 1, uint64_t(-40000), 2})),
               "ec0 position 2: startup SDO 0x8010:01: value -40000 does not fit in 2 byte(s)");
     Master m(b.link, 0, with(2, {0x1018, 1, 5, 4}), Catalog::builtin());
+    m.set_strict(true);
     EXPECT_EQ(message_of([&] { m.bring_up(); }),
               "ec0 position 2: SDO download 0x1018:01 aborted: 0x06010002 attempt to write a "
               "read-only object");
     EXPECT_EQ(b.seg.slave(2).al_state(), 2); // stopped in PREOP
+}
+
+TEST(Coe, AnAbortedStartupSdoLeavesThatSlaveOutAndTheOthersRun) {
+    Bus b({"EK1100", "EL1008", "EL7211"});
+    auto cfg = b.cfg;
+    cfg[2].sdos = {{0x1018, 1, 5, 4}};
+    Master m(b.link, 0, cfg, Catalog::builtin());
+    m.bring_up(); // not strict: starts without it
+    EXPECT_EQ(m.slave_state(2), SlaveState::Error);
+    EXPECT_EQ(m.slave_health(2).error_id, slave_error::kNotOperational);
+    EXPECT_EQ(m.slave_last_error(2),
+              "ec0 position 2: SDO download 0x1018:01 aborted: 0x06010002 attempt to write a read-only object");
+    EXPECT_EQ(b.seg.slave(2).al_state(), 2);
+    EXPECT_EQ(b.seg.slave(1).al_state(), 8);
+    m.send_process_data();
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::Ok);
+    EXPECT_TRUE(m.slave_valid(1));
+    EXPECT_FALSE(m.slave_valid(2));
+    EXPECT_NE(m.find_signal("ec0.s2.positionActual01"), nullptr); // its region is reserved
 }
 
 TEST(Coe, MailboxWrittenTwiceWithoutReadingIsRefusedAndTheMasterRecovers) {
@@ -400,6 +420,7 @@ TEST(Coe, AssignmentInconsistentWithTheSmSizeRefusesSafeopNamingTheSlave) {
             done = true;
         };
         Master m(b.link, 0, b.cfg, Catalog::builtin());
+        m.set_strict(true);
         std::string w = message_of([&] { m.bring_up(); });
         EXPECT_TRUE(done);
         EXPECT_NE(w.find("ec0 slave 2 (EL7211): refused SAFEOP"), std::string::npos) << w;

@@ -60,10 +60,11 @@ TEST(Master, DigitalOutputWiredToInputIsSeenNextCycle) {
     EXPECT_EQ(m.get(*i3), 0u);
 }
 
-TEST(Master, IdentityMismatchNamesPositionExpectedAndFound) {
+TEST(Master, StrictIdentityMismatchNamesPositionExpectedAndFound) {
     Bus b({"EK1100", "EL1008", "EL2008"});
     b.cfg[2].type = "EL2808";
     Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.set_strict(true);
     try {
         m.bring_up();
         FAIL() << "bring-up should fail";
@@ -75,10 +76,11 @@ TEST(Master, IdentityMismatchNamesPositionExpectedAndFound) {
     }
 }
 
-TEST(Master, MissingSlavesAreAClearError) {
+TEST(Master, StrictMissingSlavesAreAClearError) {
     Bus b({"EK1100", "EL1008"});
     b.cfg.push_back({5, "EL2008"});
     Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.set_strict(true);
     try {
         m.bring_up();
         FAIL();
@@ -125,10 +127,18 @@ TEST(Master, UnpluggedSlaveDropsTheWorkingCounterOthersKeepCycling) {
     b.seg.unplug(2);
     *b.seg.slave(3).sm_buffer(0) = 0x02;
     m.send_process_data();
-    EXPECT_EQ(m.receive_process_data(), CycleStatus::WkcMismatch);
+    // Its status byte did not come back: the cycle is consistent without it, its data invalid in
+    // this very cycle, the others' valid.
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::Ok);
     EXPECT_EQ(m.wkc(), m.expected_wkc() - 1);
     EXPECT_EQ(m.get(*m.find_signal("ec0.s3.binaryInput02")), 1u); // the others still exchange data
-    EXPECT_EQ(m.wkc_errors(), 1u);
+    EXPECT_FALSE(m.slave_valid(2));
+    EXPECT_FALSE(m.slave_online(2));
+    EXPECT_TRUE(m.slave_valid(1));
+    EXPECT_TRUE(m.slave_valid(3));
+    EXPECT_EQ(m.get(*m.find_signal("ec0.s2.valid")), 0u);
+    EXPECT_EQ(m.get(*m.find_signal("ec0.s3.valid")), 1u);
+    EXPECT_EQ(m.wkc_errors(), 0u);
 }
 
 TEST(Master, CyclicExchangeAllocatesNothing) {
@@ -340,9 +350,17 @@ TEST(Master, MasterStatusAndConstantEntriesAreSignals) {
     m.send_process_data();
     ASSERT_EQ(m.receive_process_data(), CycleStatus::Ok);
     EXPECT_EQ(m.get(*ms), 1u);
-    b.seg.unplug(2); // WKC drops: not OK
+    b.seg.unplug(2); // WKC drops with its status byte: consistent, that slave's data invalid
+    m.send_process_data();
+    EXPECT_EQ(m.receive_process_data(), CycleStatus::Ok);
+    EXPECT_EQ(m.get(*ms), 1u);
+    EXPECT_EQ(m.get(*m.find_signal("ec0.s2.valid")), 0u);
+    // A working counter the slaves taking part do not explain (an FMMU lost): not OK.
+    b.seg.slave(1).memory()[0x0600 + 12] = 0; // EL2008's output FMMU off
     m.send_process_data();
     EXPECT_EQ(m.receive_process_data(), CycleStatus::WkcMismatch);
     EXPECT_EQ(m.get(*ms), 0u);
+    EXPECT_EQ(m.get(*m.find_signal("ec0.s1.valid")), 0u);
+    EXPECT_EQ(m.wkc_errors(), 1u);
     EXPECT_EQ(m.get(*one), 0xFFFFFFFFu); // never touched by the bus
 }

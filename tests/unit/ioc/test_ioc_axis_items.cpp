@@ -368,12 +368,17 @@ TEST(BusItems, EntryPvsReadWriteAndShowTheBusState) {
     pv::Record* enc = db.find("T:m0s002-encoderControl01");
     ASSERT_NE(enc, nullptr);
     EXPECT_FALSE(enc->val_read_only);
-    // unplugging the input terminal: WKC incomplete, the inputs' PVs go INVALID
+    // unplugging the input terminal: its PVs go COMM/INVALID (as ECMC), the bus is not OK, the
+    // drive's entries stay valid
     r.ioc->segment(0)->unplug(1);
     r.step(20);
     EXPECT_EQ(r.get("T:m0-Stat-OK"), 0);
     EXPECT_EQ(in->sevr, pv::kInvalid);
-    EXPECT_EQ(in->stat, pv::kStatLink);
+    EXPECT_EQ(in->stat, pv::kStatComm);
+    EXPECT_EQ(r.get("T:m0s001-Valid"), 0);
+    EXPECT_EQ(r.get("T:m0s002-Valid"), 1);
+    EXPECT_EQ(r.get("T:m0-SlvOP"), 2);
+    EXPECT_EQ(ctrl->sevr, pv::kNoAlarm);
 }
 
 // One writer per output at run time: a record relinked to another output (a put to OUT, as dbpf

@@ -77,6 +77,7 @@ AxisIo drive_io(SimBus& b, int drv) {
     io.drive_status = b.m->bind(s + "driveStatus01");
     io.drive_setpoint = b.m->bind(s + "velocitySetpoint01");
     io.bus_status = b.m->bind("ec0.masterstatus");
+    io.slave_valid.push_back(b.m->bind(s + "valid"));
     return io;
 }
 
@@ -85,6 +86,7 @@ AxisIo switch_io(SimBus& b) {
     io.limit_fwd = b.m->bind("ec0.s1.binaryInput01");
     io.limit_bwd = b.m->bind("ec0.s1.binaryInput02");
     io.home = b.m->bind("ec0.s1.binaryInput03");
+    io.slave_valid.push_back(b.m->bind("ec0.s1.valid"));
     return io;
 }
 
