@@ -31,6 +31,7 @@
 #include "ioc/ioc.hpp"
 #include "plc/runtime.hpp"
 #include "rt/engine.hpp"
+#include "ethercat/sim/fault_server.hpp"
 #include "ethercat/sim/raw_server.hpp"
 #include "ethercat/sim/sim_config.hpp"
 
@@ -304,12 +305,18 @@ int run_softioc(const SoftIocOptions& o) {
 
 volatile bool g_sim_stop = false;
 
-int run_sim(const std::string& file, const std::string& bind, int port, const std::string& iface, bool busy_poll) {
+int run_sim(const std::string& file, const std::string& bind, int port, const std::string& iface, bool busy_poll,
+            const std::string& control) {
     const ethercat::Catalog& cat = ethercat::Catalog::builtin();
     ethercat::sim::SimConfig cfg = ethercat::sim::SimConfig::load(file, cat);
     if (cfg.slaves.empty()) throw Error(SB() << file << ": slaves: is required for beamctl sim");
     ethercat::sim::Segment seg;
     cfg.build(seg, cat);
+    std::unique_ptr<ethercat::sim::FaultServer> faults;
+    if (!control.empty()) {
+        faults = std::make_unique<ethercat::sim::FaultServer>(seg, cat, control);
+        std::printf("control: %s (beamctl sim fault %s FAULT...)\n", control.c_str(), control.c_str());
+    }
     struct sigaction sa {};
     sa.sa_handler = [](int) { g_sim_stop = true; };
     sigaction(SIGINT, &sa, nullptr);
@@ -573,11 +580,21 @@ int main(int argc, char** argv) {
     rcpcmd->add_option("--rate", rcpo.rate_hz, "Model rate [Hz] (overrides rate_hz)")->check(CLI::Range(1.0, 100000.0));
     rcpcmd->add_option("--duration", rcpo.duration_s, "Stop after this many seconds (default: until SIGINT/SIGTERM)");
 
-    std::string sim_file, sim_bind = "127.0.0.1", sim_iface;
+    std::string sim_file, sim_bind = "127.0.0.1", sim_iface, sim_control;
     int sim_port = 0x88A4;
     bool sim_busy_poll = false;
     auto* simcmd = app.add_subcommand("sim", "Run a simulated EtherCAT segment (SIM.yaml) behind UDP or on an interface");
-    simcmd->add_option("file", sim_file, "Simulator configuration (slaves:, wiring:)")->required();
+    simcmd->add_option("file", sim_file, "Simulator configuration (slaves:, wiring:)");
+    simcmd->add_option("--control", sim_control,
+                       "Local socket taking fault commands at run time (beamctl sim fault SOCKET FAULT...)");
+    std::string fault_socket;
+    std::vector<std::string> fault_words;
+    auto* faultcmd = simcmd->add_subcommand(
+        "fault", "Inject a fault into a running `beamctl sim --control SOCKET`: power K off|on, break K, repair, loss F, "
+                 "corrupt F, refuse-state K STATE CODE, refuse-sdo K INDEX:SUB ABORT, replace K TYPE, glitch K COUNTS, "
+                 "drive-fault K, clear");
+    faultcmd->add_option("socket", fault_socket, "The simulator's control socket")->required();
+    faultcmd->add_option("fault", fault_words, "The fault, e.g. power 3 off")->required();
     auto* sim_udp = simcmd->add_option("--udp", sim_port, "UDP port for EtherCAT frames (0: any free port)")
                         ->check(CLI::Range(0, 65535));
     auto* sim_bind_opt = simcmd->add_option("--bind", sim_bind, "Address to bind (default 127.0.0.1)");
@@ -641,7 +658,17 @@ int main(int argc, char** argv) {
         if (*rcpcmd) return bridge::rcp::run_rcp_sim(rcp_model, rcpo);
         if (*repcmd)
             return ca::run_ca_repeater(repeater_port ? uint16_t(repeater_port) : ca::repeater_port_from_env());
-        if (*simcmd) return run_sim(sim_file, sim_bind, sim_port, sim_iface, sim_busy_poll);
+        if (*faultcmd) {
+            std::string text;
+            for (const auto& w : fault_words) text += (text.empty() ? "" : " ") + w;
+            std::string reply = ethercat::sim::send_fault(fault_socket, text);
+            std::printf("%s\n", reply.c_str());
+            return reply.rfind("ok:", 0) == 0 ? 0 : 1;
+        }
+        if (*simcmd) {
+            if (sim_file.empty()) throw Error("beamctl sim: the simulator configuration file is required (beamctl sim SIM.yaml)");
+            return run_sim(sim_file, sim_bind, sim_port, sim_iface, sim_busy_poll, sim_control);
+        }
         if (*runcmd) {
             rt::MonotonicClock clock;
             ioc::Ioc ioc(runo.load(), clock);

@@ -35,11 +35,12 @@ void read_buses(const YamlNode& buses, const std::string& dir, IocConfig& cfg) {
     const auto items = buses.list();
     for (std::size_t i = 0; i < items.size(); ++i) {
         const YamlNode& b = items[i];
-        if (!b.keys({"id", "link", "slaves"})) continue;
+        if (!b.keys({"id", "link", "slaves", "strict"})) continue;
         BusConfig bc;
         bc.id = int_of(b["id"], int(i), 0, 15);
+        bc.strict = b["strict"].boolean().value_or(false);
         if (!ids.insert(bc.id).second) b.error(SB() << "bus id " << bc.id << " used twice");
-        if (YamlNode l = b["link"]; l.keys({"type", "plant", "host", "port", "iface", "busy_poll"}) && l) {
+        if (YamlNode l = b["link"]; l.keys({"type", "plant", "host", "port", "iface", "busy_poll", "faults"}) && l) {
             bc.link.type = l.required("type", " (sim, udp or raw)").one_of({"sim", "udp", "raw"}).value_or("sim");
             if (auto p = l["plant"].string()) {
                 bc.link.plant = resolve(dir, *p);
@@ -49,6 +50,13 @@ void read_buses(const YamlNode& buses, const std::string& dir, IocConfig& cfg) {
             bc.link.port = uint16_t(l["port"].unsigned_integer(65535).value_or(bc.link.port));
             bc.link.iface = l["iface"].string().value_or("");
             bc.link.busy_poll = l["busy_poll"].boolean().value_or(false);
+            for (const YamlNode& f : l["faults"].list())
+                if (auto t = f.string()) {
+                    bc.link.faults.push_back(*t);
+                    bc.link.faults_where.push_back(f.where());
+                }
+            if (l.has("faults") && bc.link.type != "sim")
+                l["faults"].error("faults are injected into a simulated segment: only with type: sim");
             if (bc.link.type == "raw" && bc.link.iface.empty() && (!l.has("iface") || l["iface"].is_scalar()))
                 l.error("a raw link needs 'iface' (the network interface of the segment)");
         }

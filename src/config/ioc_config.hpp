@@ -35,11 +35,14 @@ struct LinkConfig {
     uint16_t port = 0x88A4;   // udp
     std::string iface;        // raw: network interface of the segment
     bool busy_poll = false;   // raw: spin in receive instead of sleeping (no wake-up latency)
+    std::vector<std::string> faults; // sim: fault commands applied before bring-up ("power 3 off")
+    std::vector<std::string> faults_where;
     std::string plant_where;  // file:line:col of `plant` in the IOC file
 };
 
 struct BusConfig {
     int id = 0;
+    bool strict = false; // refuse to start with a slave missing, wrong or failing
     LinkConfig link;
     std::vector<SlaveEntry> slaves;
 };

@@ -1205,7 +1205,9 @@ std::string Master::check_outage(double now_s) {
     smp.send_ok = send_ok_.load(std::memory_order_relaxed);
     smp.frames_back = frames_back_.load(std::memory_order_relaxed);
     smp.wkc = wkc();
-    smp.expected_wkc = expected_wkc_;
+    // A slave left out (missing, lost) is the health pass's to report, not an outage: the cycle
+    // counts as good while the working counter is the one the slaves taking part give.
+    smp.expected_wkc = cycle_ok() ? smp.wkc : expected_wkc_;
     smp.frames_lost = frames_lost();
     smp.wkc_errors = wkc_errors();
     if (smp.frames_back) {

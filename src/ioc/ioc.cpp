@@ -14,6 +14,7 @@
 #include "ioc/rcp_signals.hpp"
 #include "core/signals.hpp"
 #include "ethercat/raw_link.hpp"
+#include "ethercat/sim/faults.hpp"
 #include "ethercat/sim/sim_config.hpp"
 #include "pv/convert.hpp"
 #include "pv/db_file.hpp"
@@ -285,6 +286,14 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
                     throw Error(SB() << bc.link.plant << ": a plant file used by an IOC takes its slaves from the IOC file; remove 'slaves:'");
             }
             b.plant = sim.build(*b.segment, catalog_);
+            // link.faults: the segment starts with them (a slave without power, a refusal, ...).
+            for (std::size_t k = 0; k < bc.link.faults.size(); ++k) {
+                try {
+                    b.segment->apply(ethercat::sim::parse_fault(bc.link.faults[k], catalog_, b.segment->size()));
+                } catch (const Error& e) {
+                    throw Error(SB() << bc.link.faults_where[k] << ": " << e.what());
+                }
+            }
             link = std::make_unique<ethercat::InProcessLink>(*b.segment);
             b.sim_stage = std::make_unique<SimTimeStage>(*b.segment);
             engine_->add_stage(rt::StageOrder::BusSend, *b.sim_stage);
@@ -294,6 +303,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
             link = std::make_unique<ethercat::UdpLink>(bc.link.host, bc.link.port);
         }
         b.bus = std::make_unique<ethercat::Bus>(bc.id, std::move(link), std::move(slaves), catalog_);
+        b.bus->master().set_strict(bc.strict);
         b.bus->add_stages(*engine_);
         buses_.push_back(std::move(b));
     }
@@ -315,6 +325,50 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
             throw Error(SB() << d.file_where << ": " << d.file << ": " << e.what());
         }
     }
+}
+
+bool Ioc::ethercat_report(const std::vector<std::string>& argv, std::ostream& os) {
+    bool any = false;
+    for (std::size_t bi = 0; bi < buses_.size(); ++bi) {
+        ethercat::Bus& bus = *buses_[bi].bus;
+        if (argv.size() > 1 && argv[1] != std::to_string(bus.id())) continue;
+        any = true;
+        ethercat::Master& m = bus.master();
+        const ethercat::BusSnapshot& s = bus.looked();
+        int valid = 0;
+        for (uint8_t v : s.slave_valid) valid += v;
+        os << "ec" << bus.id() << ": " << m.slaves().size() << " slave(s) configured, " << std::max(s.responding, 0)
+           << " answering, " << valid << " in OP with valid data; cycle " << (s.wkc_ok ? "consistent" : "NOT consistent")
+           << ", WKC " << s.wkc << " (all slaves: " << s.expected_wkc << ")\n";
+        for (std::size_t i = 0; i < m.slaves().size(); ++i) {
+            ethercat::SlaveHealth h = m.slave_health(i);
+            std::string err = m.slave_last_error(i);
+            os << "  s" << m.slaves()[i].position << " " << m.slaves()[i].type << ": " << ethercat::slave_state_name(h.state)
+               << (i < s.slave_valid.size() && s.slave_valid[i] ? ", valid" : ", not valid") << ", lost " << h.lost
+               << ", configured again " << h.reconfigured << ", refused " << h.refused;
+            if (h.error_id) os << ", error 0x" << std::hex << h.error_id << std::dec;
+            if (!err.empty()) os << "; last: " << err;
+            os << "\n";
+        }
+    }
+    if (!any) os << (argv.size() > 1 ? "no bus " + argv[1] : std::string("no EtherCAT bus")) << "\n";
+    return any;
+}
+
+bool Ioc::sim_fault(const std::vector<std::string>& argv, std::ostream& os) {
+    if (argv.size() < 3) throw Error(SB() << "usage: sim BUS FAULT ... (faults: " << ethercat::sim::fault_usage() << ")");
+    for (auto& b : buses_) {
+        if (argv[1] != std::to_string(b.bus->id())) continue;
+        if (!b.segment) throw Error(SB() << "bus " << argv[1] << " is not simulated in this IOC (link type " << b.bus->link_kind() << "); use beamctl sim fault");
+        std::string text;
+        for (std::size_t k = 2; k < argv.size(); ++k) text += (k > 2 ? " " : "") + argv[k];
+        ethercat::sim::Fault f = ethercat::sim::parse_fault(text, catalog_, b.segment->size());
+        if (!b.segment->post(f)) throw Error("sim: too many faults queued; try again");
+        LOG_WARN(lg, "ec" << argv[1] << ": simulated fault injected: " << ethercat::sim::describe(f));
+        os << "ec" << argv[1] << ": " << ethercat::sim::describe(f) << " (applied at the next frame)\n";
+        return true;
+    }
+    throw Error(SB() << "no bus " << argv[1]);
 }
 
 void Ioc::declare_bus_signals() {
@@ -694,6 +748,12 @@ int Ioc::run() {
         registry_.print(os, pattern);
         return !registry_.match(pattern).empty();
     };
+    shell_hooks.commands["ethercat"] = {
+        "ethercat [BUS]                         slaves: state, data valid, times lost and configured, last error",
+        [this](const std::vector<std::string>& argv, std::ostream& os) { return ethercat_report(argv, os); }};
+    shell_hooks.commands["sim"] = {
+        "sim BUS FAULT ...                      inject a fault into a simulated segment (docs/ethercat.md)",
+        [this](const std::vector<std::string>& argv, std::ostream& os) { return sim_fault(argv, os); }};
     pv::DbShell db_shell(db_, shell_hooks);
     auto shell_server = pv::start_shell_server(loop, db_shell, cfg_.name, shell_socket_);
     if (plc::PlcRuntime* rt = plcs_->runtime()) rt->set_epics_state(16); // initHookAfterIocRunning: epics_get_started()

@@ -88,6 +88,9 @@ private:
         pv::Record *lat_hist = nullptr, *lat_edges = nullptr; // arrays the IOC publishes
     };
     void declare_bus_signals();
+    // Shell commands (IOC loop): `ethercat [BUS]`, `sim BUS FAULT ...`.
+    bool ethercat_report(const std::vector<std::string>& argv, std::ostream& os);
+    bool sim_fault(const std::vector<std::string>& argv, std::ostream& os);
     void make_bus_pvs(BusRt& b, const config::BusConfig& bc);
     std::map<std::string, std::string, std::less<>> entry_pvs_; // entry PV name -> its signal
 

@@ -91,6 +91,7 @@ bool DbShell::execute(std::string_view line, std::ostream& os) {
     try {
         if (cmd == "help" || cmd == "?") {
             os << kHelp;
+            for (const auto& [name, c] : hooks_.commands) os << "  " << c.usage << "\n";
         } else if (cmd == "dbl") {
             std::string first = arg(1) == "*" ? "" : arg(1);
             if (!first.empty() && RecordTypes::global().find(first))
@@ -129,6 +130,8 @@ bool DbShell::execute(std::string_view line, std::ostream& os) {
                 os << "no signal matches '" << arg(1) << "'\n";
                 return false;
             }
+        } else if (auto c = hooks_.commands.find(cmd); c != hooks_.commands.end()) {
+            return c->second.run(argv, os);
         } else {
             throw Error(SB() << "unknown command '" << cmd << "' (help lists the commands)");
         }

@@ -6,6 +6,8 @@
 #pragma once
 
 #include <functional>
+#include <map>
+#include <vector>
 #include <iosfwd>
 #include <string>
 #include <string_view>
@@ -20,6 +22,13 @@ struct DbShellHooks {
     // signals [PATTERN]: the IOC's signal registry now, with what the RCP bridge has declared since
     // start (empty: "signals: this IOC has no signal registry" — a soft IOC). False: none matched.
     std::function<bool(const std::string& pattern, std::ostream& os)> signals;
+    // Commands of the application (the IOC's `ethercat`, `sim`): argv[0] is the name; false: it
+    // failed (an Error thrown is printed as "error: ..."). `usage` goes into help.
+    struct Command {
+        std::string usage; // "sim BUS FAULT ...  inject a fault into a simulated segment"
+        std::function<bool(const std::vector<std::string>& argv, std::ostream& os)> run;
+    };
+    std::map<std::string, Command> commands;
 };
 
 class DbShell {

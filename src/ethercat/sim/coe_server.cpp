@@ -77,8 +77,15 @@ uint32_t CoeServer::upload(uint16_t index, uint8_t sub, std::vector<uint8_t>& ou
     return 0;
 }
 
+void CoeServer::refuse_download(uint16_t index, uint8_t sub, uint32_t code) {
+    if (index == 0 && code == 0) refused_.clear();
+    else if (code == 0) refused_.erase(uint32_t(index) << 8 | sub);
+    else refused_[uint32_t(index) << 8 | sub] = code;
+}
+
 uint32_t CoeServer::download(uint16_t index, uint8_t sub, const uint8_t* data, std::size_t len,
                              uint8_t al_state) {
+    if (auto r = refused_.find(uint32_t(index) << 8 | sub); r != refused_.end()) return r->second;
     auto it = objects_.find(index);
     if (it == objects_.end()) {
         if (index < 0x8000 || index > 0x8FFF) return coe::kAbortNoObject;

@@ -32,6 +32,9 @@ public:
     uint32_t download(uint16_t index, uint8_t sub, const uint8_t* data, std::size_t len,
                       uint8_t al_state);
 
+    // Fault injection: downloads of index:sub abort with `code` (0: lift it; index 0: every one).
+    void refuse_download(uint16_t index, uint8_t sub, uint32_t code);
+
     // Bytes of process data of SM `sm` under its current PDO assignment (the DeviceDesc default
     // if the SM has no assignment object).
     uint32_t sm_bytes(uint8_t sm) const;
@@ -48,6 +51,7 @@ private:
 
     DeviceDesc desc_;
     std::map<uint16_t, Object> objects_;
+    std::map<uint32_t, uint32_t> refused_; // index << 8 | sub -> abort code
 };
 
 } // namespace beamctl::ethercat::sim

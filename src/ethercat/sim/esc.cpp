@@ -424,6 +424,7 @@ void Esc::al_control_written() noexcept {
         return;
     }
     if (req == cur) return;
+    if (refuse_code_ && req == refuse_state_) return set_al(cur, refuse_code_); // injected fault
     if (req < cur || req == kInit) { // going down is always allowed
         if (req == kBoot && cur != kInit) {
             set_al(cur, kAlInvalidTransition);

@@ -73,6 +73,8 @@ public:
     uint8_t* memory() { return mem_.data(); }
     // The CoE object dictionary (nullptr if the device has no CoE).
     CoeServer* coe() { return coe_.get(); }
+    // Fault injection: refuse every change to `state` with AL status code `code` (0: lift it).
+    void refuse_state(uint8_t state, uint16_t code) noexcept { refuse_state_ = state, refuse_code_ = code; }
     // Bytes of process data SM `sm` must have for SAFEOP: from the current CoE PDO assignment,
     // or the device's default assignment without CoE.
     uint32_t expected_sm_bytes(uint8_t sm) const;
@@ -84,6 +86,8 @@ public:
     uint64_t mailbox_requests = 0, mailbox_rejected_writes = 0;
 
 private:
+    uint8_t refuse_state_ = 0;
+    uint16_t refuse_code_ = 0;
     // False (no access, no working counter) if the range touches a mailbox buffer that the
     // master may not access now (writing a full or reading an empty mailbox).
     bool read_phys(uint16_t ado, uint8_t* data, uint16_t len) noexcept;

@@ -1,5 +1,7 @@
 #include "ethercat/sim/plant.hpp"
 
+#include "ethercat/sim/faults.hpp"
+
 #include "ethercat/sim/segment.hpp"
 
 #include <algorithm>
@@ -154,6 +156,22 @@ void Plant::step(Segment& seg) noexcept {
     if (dt > 0)
         for (auto& c : cycle_counters) c.update(seg);
     for (auto& l : latches) l.update(seg);
+}
+
+bool Plant::apply_fault(const Fault& f) noexcept {
+    for (auto& st : stages_) {
+        if (f.kind == Fault::Kind::DriveFault && st->drive() && st->drive()->slave() == f.position) {
+            st->drive()->inject_fault();
+            return true;
+        }
+        if (f.kind == Fault::Kind::Glitch)
+            for (auto& e : st->encoders)
+                if (e.slave() == f.position) {
+                    e.glitch(f.counts);
+                    return true;
+                }
+    }
+    return false;
 }
 
 } // namespace beamctl::ethercat::sim

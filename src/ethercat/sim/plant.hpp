@@ -23,6 +23,7 @@
 namespace beamctl::ethercat::sim {
 
 class Segment;
+struct Fault;
 
 struct StageParams {
     std::string name;
@@ -95,6 +96,9 @@ public:
     void step(Segment& seg) noexcept;
 
     Stage* find_stage(const std::string& name);
+    // Plant faults (faults.hpp): an encoder glitch, a drive fault at a slave. False if the plant
+    // has no encoder / drive there.
+    bool apply_fault(const Fault& f) noexcept;
     std::vector<std::unique_ptr<Stage>>& stages() { return stages_; }
 
     std::vector<std::unique_ptr<Stage>> stages_;

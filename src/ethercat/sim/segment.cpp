@@ -28,6 +28,46 @@ void Segment::replug(std::size_t position) {
     s.plugged = true;
 }
 
+void Segment::replace(std::size_t position, const DeviceDesc& desc) {
+    Slot& s = slaves_.at(position);
+    replaced_.push_back(std::make_unique<DeviceDesc>(desc));
+    s.desc = replaced_.back().get();
+    replug(position);
+}
+
+bool Segment::apply(const Fault& f) {
+    ++faults_applied;
+    std::size_t k = std::size_t(f.position);
+    switch (f.kind) {
+    case Fault::Kind::PowerOff: unplug(k); return true;
+    case Fault::Kind::PowerOn:
+        if (!plugged(k)) replug(k);
+        return true;
+    case Fault::Kind::BreakAfter: break_after_ = f.position; return true;
+    case Fault::Kind::Repair: break_after_ = -1; return true;
+    case Fault::Kind::Loss: set_frame_loss(f.fraction); return true;
+    case Fault::Kind::Corrupt: set_frame_corruption(f.fraction); return true;
+    case Fault::Kind::RefuseState: slave(k).refuse_state(f.state, f.al_code); return true;
+    case Fault::Kind::RefuseSdo:
+        if (slave(k).coe()) slave(k).coe()->refuse_download(f.index, f.sub, f.abort);
+        return true;
+    case Fault::Kind::Replace: replace(k, *f.desc); return true;
+    case Fault::Kind::Clear:
+        for (std::size_t i = 0; i < slaves_.size(); ++i) {
+            if (!plugged(i)) replug(i);
+            slave(i).refuse_state(0, 0);
+            if (slave(i).coe()) slave(i).coe()->refuse_download(0, 0, 0);
+        }
+        break_after_ = -1;
+        set_frame_loss(0);
+        set_frame_corruption(0);
+        return true;
+    case Fault::Kind::Glitch:
+    case Fault::Kind::DriveFault: return on_plant_fault && on_plant_fault(f);
+    }
+    return false;
+}
+
 void Segment::set_frame_loss(double fraction, uint64_t seed) {
     loss_ = fraction;
     loss_rng_.seed(seed);
@@ -40,16 +80,24 @@ void Segment::set_frame_corruption(double fraction, uint64_t seed) {
 
 bool Segment::process(uint8_t* frame, std::size_t len) noexcept {
     ++frames;
+    for (Fault f; faults_.pop(f);) {
+        try {
+            apply(f);
+        } catch (...) { // a fault that cannot be applied changes nothing
+        }
+    }
     if (loss_ > 0 && std::uniform_real_distribution<double>(0, 1)(loss_rng_) < loss_) {
         ++frames_lost;
         return false;
     }
+    // Slaves up to a break (the frame turns back there), each one powered in the line.
+    std::size_t reach = break_after_ < 0 ? slaves_.size() : std::min(slaves_.size(), std::size_t(break_after_) + 1);
     for_each_datagram(frame, len, [&](Datagram& d) {
-        for (auto& s : slaves_)
-            if (s.plugged) s.esc->process(d);
+        for (std::size_t i = 0; i < reach; ++i)
+            if (slaves_[i].plugged) slaves_[i].esc->process(d);
     });
-    for (auto& s : slaves_)
-        if (s.plugged) s.esc->run_firmware();
+    for (std::size_t i = 0; i < reach; ++i)
+        if (slaves_[i].plugged) slaves_[i].esc->run_firmware();
     if (corrupt_ > 0 && len >= 2 &&
         std::uniform_real_distribution<double>(0, 1)(corrupt_rng_) < corrupt_) {
         ++frames_corrupted;

@@ -3,8 +3,10 @@
 // Terminal behaviour and plant models hook in through on_frame (called after each frame).
 #pragma once
 
+#include "core/spsc_queue.hpp"
 #include "ethercat/device.hpp"
 #include "ethercat/sim/esc.hpp"
+#include "ethercat/sim/faults.hpp"
 
 #include <cstdint>
 #include <functional>
@@ -39,7 +41,22 @@ public:
     // Drops (or corrupts: wrong header) that fraction of frames, reproducibly from `seed`.
     void set_frame_loss(double fraction, uint64_t seed = 1);
     void set_frame_corruption(double fraction, uint64_t seed = 2);
+    // The line is cut after `position`: frames turn back there, later slaves see nothing
+    // (-1: no break).
+    void break_after(int position) { break_after_ = position; }
+    int broken_after() const { return break_after_; }
+    // A power cycle with another device at `position` (a replaced terminal).
+    void replace(std::size_t position, const DeviceDesc& desc);
 
+    // Faults from another thread (faults.hpp): post() queues one (one producer thread; false if
+    // the queue is full); the segment applies it before the next frame on its own thread. Faults
+    // on the plant (glitch, drive-fault) go to on_plant_fault.
+    bool post(const Fault& f) { return faults_.push(f); }
+    // Applies a fault now (the segment's thread, or before it runs). False if it is a plant fault
+    // and nobody takes it.
+    bool apply(const Fault& f);
+    std::function<bool(const Fault&)> on_plant_fault;
+    uint64_t faults_applied = 0;
     // Called after every frame that passed the segment (terminal models, plants).
     std::function<void(Segment&)> on_frame;
 
@@ -55,6 +72,9 @@ private:
     std::vector<std::unique_ptr<DeviceDesc>> descs_;
     uint64_t time_ns_ = 0;
     double loss_ = 0, corrupt_ = 0;
+    int break_after_ = -1;
+    SpscQueue<Fault> faults_{64};
+    std::vector<std::unique_ptr<DeviceDesc>> replaced_;
     std::mt19937_64 loss_rng_{1}, corrupt_rng_{2};
 };
 

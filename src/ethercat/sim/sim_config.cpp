@@ -425,6 +425,7 @@ std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog, Er
     }
     plant->steps = 0;
     seg.on_frame = [plant](Segment& s) { plant->step(s); };
+    seg.on_plant_fault = [plant](const Fault& f) { return plant->apply_fault(f); };
     return plant;
 }
 

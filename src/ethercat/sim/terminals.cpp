@@ -208,7 +208,7 @@ void Cia402Terminal::report(Segment& seg, const DriveFeedback& fb) noexcept {
 EncoderChannel::EncoderChannel(Segment& seg, int slave, const std::string& entry, double counts_per_unit,
                                bool absolute, double zero, double start_position, double index_every,
                                double index_offset)
-    : value_(bind_io(seg, slave, entry)), counts_per_unit_(counts_per_unit), zero_(absolute ? zero : start_position),
+    : slave_(slave), value_(bind_io(seg, slave, entry)), counts_per_unit_(counts_per_unit), zero_(absolute ? zero : start_position),
       index_every_(index_every), index_offset_(index_offset), last_position_(start_position) {
     std::string ch = channel_of(entry);
     control_ = bind_optional(seg, slave, "encoderControl" + ch);

@@ -137,8 +137,12 @@ public:
                    double index_offset = 0);
     void update(Segment& seg, double position) noexcept;
     int64_t counts() const { return counts_; }
+    int slave() const { return slave_; }
+    // Fault injection: the counter jumps by `counts` (lost or extra pulses) and keeps counting.
+    void glitch(int64_t counts) noexcept { offset_ += counts; }
 
 private:
+    int slave_;
     IoPoint value_, control_, setval_, status_, latch_;
     double counts_per_unit_, zero_;
     double index_every_, index_offset_;
