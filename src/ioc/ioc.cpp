@@ -88,9 +88,9 @@ public:
     }
     bool changed() override {
         const ethercat::BusSnapshot& s = bus_.looked();
-        bool ok = s.link_up && s.wkc_ok && slave_ok(s);
-        if (ok != last_ok_) { // the bus went down (the record shows LINK/INVALID) or came back
-            last_ok_ = ok;
+        int ok = s.link_up && s.wkc_ok && slave_ok(s) ? 1 : 0;
+        if (ok != last_ok_) { // the bus or the slave went down (LINK or COMM/INVALID) or came back;
+            last_ok_ = ok;    // also at the first look, so a slave missing from the start shows it
             if (watch_ >= 0 && std::size_t(watch_) < s.changes.size()) seen_ = s.changes[std::size_t(watch_)];
             last_ = value(s);
             return true;
@@ -129,7 +129,7 @@ private:
     int watch_;         // index of the bus's change watch, -1: compare values at each look
     uint32_t seen_ = 0; // the watch's change count at the last look
     double last_ = NAN;
-    bool last_ok_ = false; // the bus's data was valid at the last look
+    int last_ok_ = -1;     // the bus's data was valid at the last look (-1: no look yet)
     int slave_ = -1;       // index of the entry's slave (-1: the master's own memory)
     uint16_t alarm_ = pv::kStatLink;
 };
