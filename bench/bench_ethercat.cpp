@@ -4,12 +4,19 @@
 //   BM_SimulatedCycle40: master + in-process simulator (every ESC processing the frame);
 //   BM_SimulatedCycle40WithPlant: the same with the terminal and plant models running after each
 //     frame (6 drives moving stages, 12 analog signals, a wire), 1 ms of simulated time per cycle;
+//   BM_ReturnToOp/<device>: the self-healing bus (issue 20): cycles from a slave's return (power
+//     on) to OP, counted as the acyclic datagrams the health pass needs (one per cycle while the
+//     bus runs), for a slave in OP before (identity only) and for one missing since the start
+//     (whole SII read);
+//   BM_SimulatedCycle40Reconfiguring: BM_SimulatedCycle40 while a health thread power-cycles and
+//     re-configures the last slave over and over (one acyclic datagram in every cycle);
 //   BM_UdpRoundTrip40, BM_VethRoundTrip40: master and simulator on two CPUs, over UDP loopback
 //     and over a veth pair with raw sockets (the latter needs root; bench/veth_rate.sh measures
 //     the cycle rate with `beamctl run` and `beamctl sim --iface` as separate processes).
 #include "ethercat/catalog.hpp"
 #include "ethercat/master.hpp"
 #include "ethercat/raw_link.hpp"
+#include "ethercat/sim/faults.hpp"
 #include "ethercat/sim/raw_server.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "ethercat/sim/sim_config.hpp"
@@ -20,6 +27,7 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -131,6 +139,96 @@ void BM_SimulatedCycle40WithPlant(benchmark::State& st) {
     st.counters["wkc_ok"] = f.m->wkc() == f.m->expected_wkc();
 }
 BENCHMARK(BM_SimulatedCycle40WithPlant);
+
+// Counts the frames sent through it (acyclic transactions outside the cycle: one frame each).
+struct CountingLink : Link {
+    explicit CountingLink(Link& l) : to(l) {}
+    Link& to;
+    uint64_t sent = 0;
+    bool send(const uint8_t* p, std::size_t n) noexcept override {
+        ++sent;
+        return to.send(p, n);
+    }
+    std::size_t receive(uint8_t* b, std::size_t c, int t) noexcept override { return to.receive(b, c, t); }
+    const char* kind() const noexcept override { return "counting"; }
+};
+
+sim::Fault fault(sim::Segment& seg, const char* text) {
+    return sim::parse_fault(text, Catalog::builtin(), seg.size());
+}
+
+// Arg: 0 EL1008, 1 EL7041 with a start-up SDO, 2 EL7211 (DC); the slave at position 2.
+void BM_ReturnToOp(benchmark::State& st) {
+    const char* types[] = {"EL1008", "EL7041", "EL7211"};
+    const char* type = types[st.range(0)];
+    sim::Segment seg;
+    for (const char* t : {"EK1100", "EL1008", type}) seg.add(*Catalog::builtin().find(t));
+    InProcessLink link(seg);
+    CountingLink counting(link);
+    std::vector<SlaveConfig> cfg{{0, "EK1100"}, {1, "EL1008"}, {2, type}};
+    if (st.range(0) == 1) cfg[2].sdos = {{0x8010, 1, 1000, 2}};
+    seg.apply(fault(seg, "power 2 off"));
+    Master m(counting, 0, cfg, Catalog::builtin());
+    m.bring_up(); // slave 2 missing
+    auto cycle = [&] {
+        m.send_process_data();
+        m.receive_process_data(0);
+    };
+    cycle();
+    seg.apply(fault(seg, "power 2 on"));
+    cycle();
+    uint64_t before = counting.sent;
+    m.check_and_recover();
+    double first_join = double(counting.sent - before);
+    if (m.slave_state(2) != SlaveState::Op) st.SkipWithError("the slave did not join");
+    double back = 0;
+    int n = 0;
+    for (auto _ : st) {
+        seg.apply(fault(seg, "power 2 off"));
+        cycle();
+        m.check_and_recover(); // lost
+        seg.apply(fault(seg, "power 2 on"));
+        cycle();
+        before = counting.sent;
+        m.check_and_recover(); // configured again
+        back += double(counting.sent - before);
+        ++n;
+        if (m.slave_state(2) != SlaveState::Op) st.SkipWithError("the slave did not come back");
+    }
+    st.counters["cycles_first_join"] = first_join;
+    st.counters["cycles_back_to_op"] = n ? back / n : 0;
+    st.SetLabel(type);
+}
+BENCHMARK(BM_ReturnToOp)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
+
+void BM_SimulatedCycle40Reconfiguring(benchmark::State& st) {
+    Fixture f;
+    std::size_t last = f.seg.size() - 1;
+    f.m->start_cycling();
+    std::atomic<bool> stop{false};
+    std::atomic<uint64_t> rejoined{0};
+    std::string off = "power " + std::to_string(last) + " off", on = "power " + std::to_string(last) + " on";
+    std::thread health([&] {
+        while (!stop.load()) {
+            f.seg.post(fault(f.seg, off.c_str()));
+            while (!stop.load() && f.m->slave_state(last) != SlaveState::Lost) f.m->check_and_recover();
+            f.seg.post(fault(f.seg, on.c_str()));
+            while (!stop.load() && f.m->slave_state(last) != SlaveState::Op) f.m->check_and_recover();
+            if (!stop.load()) rejoined++;
+        }
+    });
+    uint64_t others_invalid = 0;
+    for (auto _ : st) {
+        f.m->send_process_data();
+        benchmark::DoNotOptimize(f.m->receive_process_data(0));
+        others_invalid += !f.m->slave_valid(1) || !f.m->slave_valid(last - 1);
+    }
+    stop = true;
+    health.join();
+    st.counters["rejoins"] = double(rejoined.load());
+    st.counters["others_invalid_cycles"] = double(others_invalid);
+}
+BENCHMARK(BM_SimulatedCycle40Reconfiguring)->MinTime(2.0);
 
 // Forwards to another link; retargeted after bring-up.
 struct ForwardLink : Link {

@@ -424,7 +424,7 @@ void Master::bring_up() {
     dc_pending_.clear();
     build_cyclic_frames();
     transition(4, "SAFEOP");
-    for (std::size_t i : present()) admit_[i].store(1, std::memory_order_relaxed);
+    for (std::size_t i : present()) set_admitted(i, true);
     for (int k = 0; k < 3; ++k) {
         send_process_data();
         receive_process_data();
@@ -435,7 +435,7 @@ void Master::bring_up() {
     int n_op = 0;
     for (std::size_t i = 0; i < slaves_.size(); ++i) {
         bool ok = in[i] != 0;
-        admit_[i].store(ok, std::memory_order_relaxed);
+        set_admitted(i, ok);
         if (ok) ++n_op;
     }
     // The cycle just run saw them in SAFEOP; start with the states just read.
@@ -677,6 +677,13 @@ void Master::build_cyclic_frames() {
         valid_[i] = 0;
         admit_[i] = 0;
     }
+    last_stat_.assign(n, 0xFF); // never a status byte: the first cycle walks
+    last_consistent_ = -1;
+}
+
+void Master::set_admitted(std::size_t i, bool yes) {
+    admit_[i].store(yes, std::memory_order_relaxed);
+    admit_gen_.fetch_add(1, std::memory_order_release);
 }
 
 CycleStatus Master::send_process_data() noexcept {
@@ -785,26 +792,41 @@ CycleStatus Master::receive_process_data(int timeout_us) noexcept {
     // they give: those admitted and in OP must all count (lo); a slave present but not (yet) trusted
     // - joining, in SAFEOP after an error - may or may not count (hi).
     bool consistent = false;
+    const uint8_t* stat = image_.data() + status_bytes_;
+    const std::size_t n = slaves_.size();
     if (st == CycleStatus::Ok) {
-        uint32_t lo = 0, extra = 0;
-        const uint8_t* stat = image_.data() + status_bytes_;
-        for (std::size_t i = 0; i < slaves_.size(); ++i) {
-            uint8_t b = stat[i];
-            slave_online_[i].store(b != 0, std::memory_order_relaxed);
-            if (b == 0) continue;
-            slave_al_[i].store(b, std::memory_order_relaxed);
-            if ((b & 0x1F) == 8 && admit_[i].load(std::memory_order_relaxed)) lo += contrib_[i];
-            else extra += contrib_[i];
+        // The per-slave walk only when a status byte or an admission changed (rare): otherwise
+        // the sums of the last walk hold.
+        uint32_t gen = admit_gen_.load(std::memory_order_acquire);
+        bool changed = gen != admit_seen_ || std::memcmp(stat, last_stat_.data(), n) != 0;
+        if (changed) {
+            admit_seen_ = gen;
+            std::memcpy(last_stat_.data(), stat, n);
+            uint32_t lo = 0, extra = 0;
+            for (std::size_t i = 0; i < n; ++i) {
+                uint8_t b = stat[i];
+                slave_online_[i].store(b != 0, std::memory_order_relaxed);
+                if (b == 0) continue;
+                slave_al_[i].store(b, std::memory_order_relaxed);
+                if ((b & 0x1F) == 8 && admit_[i].load(std::memory_order_relaxed)) lo += contrib_[i];
+                else extra += contrib_[i];
+            }
+            wkc_lo_ = lo;
+            wkc_hi_ = lo + extra;
         }
-        consistent = wkc >= lo && wkc <= lo + extra;
+        consistent = wkc >= wkc_lo_ && wkc <= wkc_hi_;
         if (!consistent) {
             bump(wkc_errors_, 1);
             st = CycleStatus::WkcMismatch;
         }
+        if (!changed && consistent == (last_consistent_ == 1)) {
+            cycle_ok_.store(consistent, std::memory_order_relaxed);
+            return st; // valid flags, masterstatus as they are
+        }
     }
+    last_consistent_ = consistent ? 1 : 0;
     cycle_ok_.store(consistent, std::memory_order_relaxed);
-    const uint8_t* stat = image_.data() + status_bytes_;
-    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+    for (std::size_t i = 0; i < n; ++i) {
         uint32_t v = consistent && (stat[i] & 0x1F) == 8 && admit_[i].load(std::memory_order_relaxed) ? 1 : 0;
         valid_[i].store(uint8_t(v), std::memory_order_relaxed);
         std::memcpy(image_.data() + valid_offset_ + 12 * i + 8, &v, 4);
@@ -1247,7 +1269,7 @@ int Master::check_and_recover() {
             if (online && (al & 0x1F) == 8) continue;
             // It was in the cycle and is no longer there, or left OP: out of the cycle's trust
             // until configured again.
-            admit_[i].store(0, std::memory_order_relaxed);
+            set_admitted(i, false);
             {
                 std::lock_guard<std::mutex> l(health_mu_);
                 health_[i].lost++;
@@ -1268,7 +1290,7 @@ int Master::check_and_recover() {
         set_health(i, SlaveState::Configuring, h.error_id, "");
         try {
             configure_slave(i, full_sii);
-            admit_[i].store(1, std::memory_order_relaxed);
+            set_admitted(i, true);
             {
                 std::lock_guard<std::mutex> l(health_mu_);
                 health_[i].reconfigured++;

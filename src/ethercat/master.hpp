@@ -322,6 +322,13 @@ private:
     std::unique_ptr<std::atomic<uint8_t>[]> slave_al_, slave_online_, valid_; // written by the RT thread
     std::unique_ptr<std::atomic<uint8_t>[]> admit_; // health thread: the master configured it (trust its data in OP)
     std::vector<uint16_t> contrib_; // working counter slave i adds to the cycle when it takes part
+    // RT: the status bytes and admissions of the last walk over the slaves, and the working
+    // counter range they give (most cycles change nothing: no walk).
+    std::vector<uint8_t> last_stat_;
+    uint32_t wkc_lo_ = 0, wkc_hi_ = 0, admit_seen_ = ~0u;
+    int last_consistent_ = -1;
+    std::atomic<uint32_t> admit_gen_{0}; // health thread: bumped on every admission change
+    void set_admitted(std::size_t i, bool yes);
     std::atomic<int> responding_{-1};
     std::atomic<bool> cycle_ok_{false};
     bool strict_ = false;

@@ -58,8 +58,9 @@ def test_bus_status_pvs(bus_ioc):
     assert get(p + "m0-LinkUp") == 1
     assert get(p + "m0-SlvCntr") == 5
     wc, exp = get(p + "m0-Dom-WC"), get(p + "m0-Dom-WC-Exp")
-    # EL2008 and EL4134 write (2 each), EL1008 and EL3104 read (1 each)
-    assert (wc, exp) == (6, 6)
+    # EL2008 and EL4134 write (2 each) and read their status byte (1 each), EL1008 and EL3104 read
+    # inputs and status (1 each), the EK1100 its status byte (1)
+    assert (wc, exp) == (9, 9)
     assert get(p + "m0-Dom-WC-Complete") == 1
     assert get(p + "m0-MissedFrames") == 0
     assert get(p + "m0-ThdExeMax") > 0

@@ -121,7 +121,7 @@ def test_bus_over_veth_reaches_op_and_wires_do_to_di(veth_bus):
     assert "1 bus(es)" in run.ready_line
     assert wait_for(lambda: get(p + "m0-Stat-OK") == 1, timeout=5)
     assert get(p + "m0-LinkUp") == 1
-    assert (get(p + "m0-Dom-WC"), get(p + "m0-Dom-WC-Exp")) == (3, 3)
+    assert (get(p + "m0-Dom-WC"), get(p + "m0-Dom-WC-Exp")) == (5, 5)  # + a status byte per slave
     for pos in range(3):
         assert wait_for(lambda: get(p + f"m0s{pos:03d}-Operational") == 1, timeout=5)
     # dio.yaml wires EL2008 outputs 1..4 to EL1008 inputs 1..4; 5..8 are not wired.
@@ -164,15 +164,16 @@ def test_master_frames_decode_in_tshark(veth_bus, tmp_path):
     summary = subprocess.run([tshark, "-r", str(pcap), "-Y", "ecat"], capture_output=True, text=True,
                              timeout=60)
     assert summary.returncode == 0, summary.stderr[-2000:]
-    # e.g. "2 Cmds, 'LRW': len 2, 'FPRD': len 2"
-    assert "'LRW': len 2" in summary.stdout and "'FPRD': len 2" in summary.stdout, summary.stdout[:2000]
+    # e.g. "2 Cmds, 'LRW': len 5, 'BRD': len 2": process data and one status byte per slave, and
+    # the broadcast read that counts the slaves answering
+    assert "'LRW': len 5" in summary.stdout and "'BRD': len 2" in summary.stdout, summary.stdout[:2000]
     out = subprocess.run([tshark, "-r", str(pcap), "-Y", "ecat", "-T", "fields", "-e", "eth.src",
                           "-e", "ecat.cmd"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr[-2000:]
     rows = [line.split("\t") for line in out.stdout.splitlines() if line.strip()]
     assert len(rows) > 500, f"expected ~2000 EtherCAT frames in 1 s at 1 kHz, got {len(rows)}"
     cmds = {c for _src, cs in rows for c in cs.split(",")}
-    assert {0x0C, 0x04} <= {int(c, 0) for c in cmds}, f"LRW (12) and FPRD (4) not decoded: {sorted(cmds)}"
+    assert {0x0C, 0x07} <= {int(c, 0) for c in cmds}, f"LRW (12) and BRD (7) not decoded: {sorted(cmds)}"
     srcs = {src for src, _ in rows}
     # Sent by the master as SOEM does, returned with the ESC's locally-administered bit.
     assert srcs == {"01:01:01:01:01:01", "03:01:01:01:01:01"}, srcs
