@@ -591,7 +591,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> fault_words;
     auto* faultcmd = simcmd->add_subcommand(
         "fault", "Inject a fault into a running `beamctl sim --control SOCKET`: power K off|on, break K, repair, loss F, "
-                 "corrupt F, refuse-state K STATE CODE, refuse-sdo K INDEX:SUB ABORT, replace K TYPE, glitch K COUNTS, "
+                 "corrupt F, delay MS, refuse-state K STATE CODE, refuse-sdo K INDEX:SUB ABORT, replace K TYPE, glitch K COUNTS, "
                  "drive-fault K, clear");
     faultcmd->add_option("socket", fault_socket, "The simulator's control socket")->required();
     faultcmd->add_option("fault", fault_words, "The fault, e.g. power 3 off")->required();

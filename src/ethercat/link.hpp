@@ -41,6 +41,7 @@ private:
     static constexpr int kSlots = 8;
     std::array<std::array<uint8_t, kMaxFrame>, kSlots> ring_{};
     std::array<std::size_t, kSlots> len_{};
+    std::array<int64_t, kSlots> hold_{}; // [us] a frame is still on its way (Segment::answer_delay_us)
     int head_ = 0, tail_ = 0; // frames in flight: [tail, head)
 };
 

@@ -1141,6 +1141,7 @@ void Master::set_health(std::size_t i, SlaveState st, uint32_t error_id, const s
     h.state = st;
     h.error_id = error_id;
     if (!error.empty()) last_error_[i] = error;
+    health_version_.fetch_add(1, std::memory_order_release);
 }
 
 std::string Master::slave_last_error(std::size_t i) const {
@@ -1274,6 +1275,7 @@ int Master::check_and_recover() {
                 std::lock_guard<std::mutex> l(health_mu_);
                 health_[i].lost++;
             }
+            health_version_.fetch_add(1, std::memory_order_release);
             std::string why = online ? std::string(SB() << slave_name(s) << ": left OP (AL status " << hex(al, 2) << ")")
                                      : std::string(SB() << slave_name(s) << ": lost (no answer at station " << hex(s.station, 4) << ")");
             set_health(i, SlaveState::Lost, online ? slave_error::kNotOperational : slave_error::kNotOnline, why);

@@ -193,6 +193,8 @@ public:
     SlaveHealth slave_health(std::size_t i) const;
     // The slave's last problem in words ("" if none yet).
     std::string slave_last_error(std::size_t i) const;
+    // Changes whenever any slave's health changes (a cheap "look again" for the IOC loop).
+    uint64_t health_version() const { return health_version_.load(std::memory_order_acquire); }
     SlaveState slave_state(std::size_t i) const { return slave_health(i).state; }
     // Configured slaves in OP with valid data (last cycle).
     int slaves_op() const;
@@ -335,6 +337,7 @@ private:
     mutable std::mutex health_mu_;   // guards health_
     std::vector<SlaveHealth> health_;
     std::vector<std::string> last_error_;
+    std::atomic<uint64_t> health_version_{0};
     std::vector<double> retry_at_;   // health thread: next try for a slave in Error/WrongId [s, steady]
     std::vector<double> backoff_;    // its current back-off [s]
     int last_responding_ = -1;       // health thread: responding() at the last pass

@@ -46,6 +46,7 @@ const PvTable& slave_table() {
         {"-LostCntr", "longin", "lostcounter", {{"DESC", "Times lost or out of OP"}}},
         {"-ReconfCntr", "longin", "reconfigcounter", {{"DESC", "Times configured after the start"}}},
         {"-ErrId", "longin", "errorid", {{"DESC", "ECMC error id (0: none)"}}},
+        {"-ErrMsg", "stringin", "", {{"DESC", "Last error (full text: ethercat command)"}}}, // text: set by the IOC
     }};
     return t;
 }

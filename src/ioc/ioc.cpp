@@ -470,6 +470,13 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
     db_.load(f);
     b.lat_hist = db_.find(m + "-ThdLatHist");
     b.lat_edges = db_.find(m + "-ThdLatHistEdges");
+    for (const auto& s : bc.slaves) {
+        char sp[32];
+        std::snprintf(sp, sizeof sp, "s%03d-ErrMsg", s.position);
+        pv::Record* r = db_.find(m + sp);
+        if (r) r->val_read_only = true;
+        b.err_msg.push_back(r);
+    }
 }
 
 // One writer per output: CA may only read it, the PV shows what is sent on the bus, and DESC
@@ -675,6 +682,25 @@ void Ioc::publish() {
         }
         set_array_if_changed(db_, *b.lat_hist, hist, rt::kLatencyBuckets);
         set_array_if_changed(db_, *b.lat_edges, edges, rt::kLatencyBuckets);
+        // the slaves' last errors in words (-ErrMsg), when the health pass changed any
+        ethercat::Master& m = b.bus->master();
+        if (uint64_t v = m.health_version(); v != b.health_seen) {
+            b.health_seen = v;
+            for (std::size_t i = 0; i < b.err_msg.size() && i < m.slaves().size(); ++i) {
+                pv::Record* r = b.err_msg[i];
+                if (!r) continue;
+                char t[pv::kStringSize] = "";
+                std::snprintf(t, sizeof t, "%s", m.slave_last_error(i).c_str()); // 39 characters of it
+                const pv::FieldDesc* f = r->type().find("VAL");
+                pv::Elements e = r->elements(*f);
+                char cur[pv::kStringSize] = "";
+                pv::get_element(*r, *f, e, 0, pv::Prim::String, cur);
+                if (std::strncmp(cur, t, sizeof t) == 0 && r->udf == 0) continue;
+                pv::put_element(*r, *f, e, 0, pv::Prim::String, t);
+                r->udf = 0;
+                db_.process(*r);
+            }
+        }
     }
     db_.scan_io_intr(); // records on engine signals (axis items, bus entries) that changed since the last look
 }

@@ -86,6 +86,8 @@ private:
         std::unique_ptr<rt::Stage> sim_stage;
         std::vector<EntryPv> entries;
         pv::Record *lat_hist = nullptr, *lat_edges = nullptr; // arrays the IOC publishes
+        std::vector<pv::Record*> err_msg; // per slave $(P)m0s003-ErrMsg: its last error in words
+        uint64_t health_seen = ~uint64_t(0); // Master::health_version() at the last publish
     };
     void declare_bus_signals();
     // Shell commands (IOC loop): `ethercat [BUS]`, `sim BUS FAULT ...`.

@@ -17,6 +17,7 @@ namespace {
 constexpr double kAxisIdOutOfRange = 0x20502;   // ERROR_PLC_AXIS_ID_OUT_OF_RANGE
 constexpr double kAxisObjectNull = 0x20508;     // ERROR_PLC_AXIS_OBJECT_NULL (also: no such group)
 constexpr double kEcBitsOutOfRange = 0x20800;   // ERROR_PLC_EC_LIB_BITS_OUT_OF_RANGE
+constexpr double kEcEntryNotValid = 0x2100E;    // ERROR_EC_ENTRY_EC_DOMAIN_ERROR: a slave it uses is out
 constexpr uint32_t kEncIndexOutOfRange = 0x14326; // ECMC: encoder index out of range (mc_*_act_pos)
 
 std::string lower(std::string_view s) {
@@ -66,6 +67,11 @@ struct PlcRuntime::Plc : Host {
     };
     std::deque<EcCell> ec;
     std::map<std::string, EcCell*> ec_names;
+    // ec<m>.s<k>.valid of every slave whose entries the code uses: the PLC is scanned only while
+    // all are 1 (a slave missing, lost or out of OP holds it, with error kEcEntryNotValid).
+    std::vector<registry::BoundSignal> slave_valid;
+    std::set<std::pair<int, int>> slaves_used;
+    bool held = false; // RT: not scanned in the last cycle for that reason
     // ds<n>.<item>: read from the storage before each scan, applied after it when changed
     enum class DsItem : uint8_t { Append, Data, Index, Size, Full, Clear, Error };
     struct DsCell {
@@ -227,6 +233,13 @@ struct PlcRuntime::Plc : Host {
                                                            std::count(n.begin(), n.end(), '.') == (bit >= 0 ? 3 : 2));
             if (!rt.opt_.check_only || !well_formed || rt.opt_.ec) return std::nullopt;
             e = EcEntry{{}, EcEntry::Kind::Integer, after != "masterstatus"};
+        }
+        std::string_view entry_name = slave_rest.substr(0, slave_rest.find('.'));
+        if (is_slave && entry_name != "ONE" && entry_name != "ZERO" && entry_name != "valid" && rt.opt_.ec &&
+            slaves_used.insert({m, slave}).second) {
+            std::string why;
+            if (auto v = rt.opt_.ec(SB() << "ec" << m << ".s" << slave << ".valid", why); v && v->signal.bound())
+                slave_valid.push_back(v->signal);
         }
         ec.push_back(EcCell{e->signal, e->kind, e->writable});
         ec.back().signal.bit = bit;
@@ -1211,6 +1224,18 @@ void PlcRuntime::scan(Plc& p, const rt::CycleInfo& c) noexcept {
     }
     p.counter = 0;
     if (!buses_ok()) return; // PLCs wait for the first cycle with every bus OK
+    bool data_ok = true;
+    for (const registry::BoundSignal& v : p.slave_valid) data_ok = data_ok && v.get() != 0;
+    if (!data_ok) { // a slave it reads or writes is missing, lost or not in OP: hold the PLC
+        p.held = true;
+        p.vars.error = kEcEntryNotValid;
+        p.st_error.store(int(p.vars.error), std::memory_order_relaxed);
+        return;
+    }
+    if (p.held) { // its slaves are back: it runs again, the error it was held with cleared
+        p.held = false;
+        if (p.vars.error == kEcEntryNotValid) p.vars.error = 0;
+    }
     p.vars.firstscan = p.first_done ? 0 : 1;
     p.copy_in();
     p.ds_in();

@@ -32,6 +32,9 @@ buses:
 axes:
   - {{file: stepper.yaml, macros: {{AX_NAME: X, DRV_SLAVE: 2}}}}
   - {{file: stepper_y.yaml, macros: {{AX_NAME: Y, DRV_SLAVE: 4}}}}
+plcs:
+  - {{id: 0, file: on_s4.plc, rate_ms: 10}}
+  - {{id: 1, file: on_s2.plc, rate_ms: 10}}
 """
 
 PLANT = """
@@ -55,6 +58,8 @@ class Ioc:
     def __init__(self, tmp_path, prefix, faults="", strict=False):
         shutil.copy(DATA / "stepper.yaml", tmp_path / "stepper.yaml")
         (tmp_path / "plant.yaml").write_text(PLANT)
+        (tmp_path / "on_s4.plc").write_text("static.p := ec0.s4.positionActual01;\n")  # the drive that may be out
+        (tmp_path / "on_s2.plc").write_text("static.p := ec0.s2.positionActual01;\n")
         text = IOC.format(name=prefix.rstrip(":"), prefix=prefix, faults=faults,
                           strict="    strict: true\n" if strict else "")
         # the second axis: same file, id 2, its switches on the second EL1008
@@ -119,6 +124,12 @@ def test_start_with_a_drive_unpowered_then_power_it(tmp_path, prefix):
         assert wait_for(lambda: get(p + "X-EnaAct") == 1)
         rc, out = ioc.shell("ethercat 0")
         assert rc == 0 and "s4 EL7041: MISSING, not valid" in out, out
+        assert get(p + "m0s004-ErrMsg").startswith("ec0 position 4: missing (expected EL70")
+        # the PLC reading the missing drive is held with ECMC's entry error; the other one runs
+        assert wait_for(lambda: get(p + "PLC01-Scans") > 10)
+        assert get(p + "PLC01-Err") == 0
+        assert get(p + "PLC00-Err") == 0x2100E
+        assert get(p + "PLC00-Scans") == 0
         # powered: it joins, its start-up SDO written, without a restart
         rc, out = ioc.shell("sim 0 power 4 on")
         assert rc == 0 and "ec0: power 4 on (applied at the next frame)" in out, out
@@ -126,6 +137,8 @@ def test_start_with_a_drive_unpowered_then_power_it(tmp_path, prefix):
         assert wait_for(lambda: get(p + "m0-Stat-OK") == 1, timeout=5)
         assert get(p + "m0s004-ReconfCntr") == 1
         assert get(p + "m0s004-ErrId") == 0
+        assert wait_for(lambda: get(p + "PLC00-Scans") > 0)  # its slave is back: it runs, error cleared
+        assert get(p + "PLC00-Err") == 0
         assert wait_for(lambda: get(pos + ".SEVR", as_string=True) == "NO_ALARM")
         assert "ec0 slave 4 (EL7041): appeared, configured and in OP (1 start-up SDO(s) written)" in ioc.srv.stderr()
         # the axis needs the operator: reset, then enable
@@ -239,6 +252,17 @@ buses:
             assert ok.returncode == 0, ok
             assert wait_for(lambda: get(prefix + "m0s002-State", as_string=True) == "OP", timeout=20)
             assert wait_for(lambda: get(prefix + "m0-Stat-OK") == 1)
+            # answers 5 ms late (beyond the 1 ms receive time-out at 500 Hz): frames late, counted,
+            # no slave reported lost; on time again: the bus is OK without a restart
+            late0 = get(prefix + "m0-LateFrames")
+            ok = subprocess.run([str(BEAMCTL), "sim", "fault", sock, "delay", "5"], capture_output=True, text=True, timeout=30)
+            assert ok.returncode == 0 and ok.stdout == "ok: delay 5\n", ok
+            assert wait_for(lambda: get(prefix + "m0-LateFrames") > late0 + 50, timeout=20)
+            assert get(prefix + "m0-Stat-OK") == 0
+            subprocess.run([str(BEAMCTL), "sim", "fault", sock, "delay", "0"], capture_output=True, text=True, timeout=30)
+            assert wait_for(lambda: get(prefix + "m0-Stat-OK") == 1, timeout=20)
+            for k in range(3):
+                assert get(prefix + f"m0s{k:03d}-LostCntr") == 0
         finally:
             srv.stop()
             srv.kill()

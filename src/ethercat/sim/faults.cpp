@@ -35,7 +35,7 @@ bool number(const std::string& s, int64_t& v) {
 } // namespace
 
 std::string fault_usage() {
-    return "power K off|on, break K, repair, loss F, corrupt F, refuse-state K SAFEOP|OP|PREOP CODE, "
+    return "power K off|on, break K, repair, loss F, corrupt F, delay MS, refuse-state K SAFEOP|OP|PREOP CODE, "
            "refuse-sdo K INDEX:SUB ABORT, replace K TYPE, glitch K COUNTS, drive-fault K, clear";
 }
 
@@ -79,6 +79,13 @@ Fault parse_fault(std::string_view text, const Catalog& catalog, std::size_t sla
         want(2);
         f.kind = verb == "loss" ? Fault::Kind::Loss : Fault::Kind::Corrupt;
         f.fraction = fraction(1);
+    } else if (verb == "delay") {
+        want(2);
+        f.kind = Fault::Kind::Delay;
+        char* end = nullptr;
+        f.fraction = std::strtod(w[1].c_str(), &end);
+        if (end == w[1].c_str() || *end || !(f.fraction >= 0 && f.fraction <= 1000))
+            throw fail(SB() << "'" << w[1] << "' is not a delay of 0..1000 ms");
     } else if (verb == "refuse-state") {
         want(4);
         f.kind = Fault::Kind::RefuseState;
@@ -144,6 +151,7 @@ std::string describe(const Fault& f) {
     case Fault::Kind::Repair: return "repair";
     case Fault::Kind::Loss: return SB() << "loss " << f.fraction;
     case Fault::Kind::Corrupt: return SB() << "corrupt " << f.fraction;
+    case Fault::Kind::Delay: return SB() << "delay " << f.fraction;
     case Fault::Kind::RefuseState: return SB() << "refuse-state " << f.position << " " << st << " " << hex(f.al_code, 4);
     case Fault::Kind::RefuseSdo:
         return SB() << "refuse-sdo " << f.position << " " << hex(f.index, 4) << ":" << hex(f.sub, 2).substr(2) << " " << hex(f.abort, 8);

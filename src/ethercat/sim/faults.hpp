@@ -6,6 +6,7 @@
 //                         is powered again (INIT, no station address, SDOs and SMs lost)
 //   break K | repair      the line is cut after slave K (frames come back from K; K+1.. are gone)
 //   loss F | corrupt F    drop / corrupt that fraction of frames (0..1)
+//   delay MS              answers come back MS milliseconds later (0..1000; 0 ends it)
 //   refuse-state K STATE CODE   slave K refuses the next change to STATE (SAFEOP, OP, PREOP) with
 //                         AL status code CODE (e.g. 0x001D), until cleared
 //   refuse-sdo K INDEX:SUB ABORT  slave K aborts downloads of that object with ABORT, until cleared
@@ -30,11 +31,11 @@ class Catalog;
 namespace beamctl::ethercat::sim {
 
 struct Fault {
-    enum class Kind : uint8_t { PowerOff, PowerOn, BreakAfter, Repair, Loss, Corrupt, RefuseState, RefuseSdo,
+    enum class Kind : uint8_t { PowerOff, PowerOn, BreakAfter, Repair, Loss, Corrupt, Delay, RefuseState, RefuseSdo,
                                 Replace, Glitch, DriveFault, Clear };
     Kind kind = Kind::Clear;
     int position = -1;
-    double fraction = 0;          // loss, corrupt
+    double fraction = 0;          // loss, corrupt: 0..1; delay: [ms]
     uint8_t state = 0;            // refuse-state: AL state refused
     uint16_t al_code = 0;         // refuse-state: AL status code given
     uint16_t index = 0;           // refuse-sdo

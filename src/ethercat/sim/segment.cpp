@@ -47,6 +47,7 @@ bool Segment::apply(const Fault& f) {
     case Fault::Kind::Repair: break_after_ = -1; return true;
     case Fault::Kind::Loss: set_frame_loss(f.fraction); return true;
     case Fault::Kind::Corrupt: set_frame_corruption(f.fraction); return true;
+    case Fault::Kind::Delay: set_answer_delay_us(uint32_t(f.fraction * 1000.0 + 0.5)); return true;
     case Fault::Kind::RefuseState: slave(k).refuse_state(f.state, f.al_code); return true;
     case Fault::Kind::RefuseSdo:
         if (slave(k).coe()) slave(k).coe()->refuse_download(f.index, f.sub, f.abort);
@@ -59,6 +60,7 @@ bool Segment::apply(const Fault& f) {
             if (slave(i).coe()) slave(i).coe()->refuse_download(0, 0, 0);
         }
         break_after_ = -1;
+        answer_delay_us_ = 0;
         set_frame_loss(0);
         set_frame_corruption(0);
         return true;

@@ -45,6 +45,11 @@ public:
     // (-1: no break).
     void break_after(int position) { break_after_ = position; }
     int broken_after() const { return break_after_; }
+    // Answers come back `us` later than they would (a slow or congested link): the in-process
+    // link and the UDP server hold each frame that long. The master sees them late when that
+    // is beyond its receive time-out (dropped, counted).
+    void set_answer_delay_us(uint32_t us) { answer_delay_us_ = us; }
+    uint32_t answer_delay_us() const noexcept { return answer_delay_us_; }
     // A power cycle with another device at `position` (a replaced terminal).
     void replace(std::size_t position, const DeviceDesc& desc);
 
@@ -73,6 +78,7 @@ private:
     uint64_t time_ns_ = 0;
     double loss_ = 0, corrupt_ = 0;
     int break_after_ = -1;
+    uint32_t answer_delay_us_ = 0;
     SpscQueue<Fault> faults_{64};
     std::vector<std::unique_ptr<DeviceDesc>> replaced_;
     std::mt19937_64 loss_rng_{1}, corrupt_rng_{2};

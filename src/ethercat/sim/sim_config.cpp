@@ -447,9 +447,28 @@ UdpServer::~UdpServer() {
     if (fd_ >= 0) ::close(fd_);
 }
 
+namespace {
+int64_t steady_ns() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+} // namespace
+
+void UdpServer::send_due(int64_t now_ns) {
+    while (!held_.empty() && held_.front().due_ns <= now_ns) {
+        Held& h = held_.front();
+        sendto(fd_, h.frame.data(), h.frame.size(), 0, reinterpret_cast<sockaddr*>(&h.to), h.to_len);
+        held_.pop_front();
+    }
+}
+
 bool UdpServer::serve_one(int timeout_ms) {
+    send_due(steady_ns());
+    if (!held_.empty()) // wake for the next held answer
+        timeout_ms = std::min<int64_t>(timeout_ms, std::max<int64_t>(0, (held_.front().due_ns - steady_ns()) / 1'000'000));
     pollfd p{fd_, POLLIN, 0};
-    if (poll(&p, 1, timeout_ms) <= 0) return false;
+    int ready = poll(&p, 1, timeout_ms);
+    send_due(steady_ns());
+    if (ready <= 0) return false;
     uint8_t buf[kMaxFrame + 64];
     sockaddr_in from{};
     socklen_t flen = sizeof from;
@@ -464,6 +483,12 @@ bool UdpServer::serve_one(int timeout_ms) {
     seg_.set_time(uint64_t(ns));
     ++frames;
     if (!seg_.process(buf, std::size_t(n))) return true; // lost on purpose
+    if (uint32_t d = seg_.answer_delay_us()) {
+        Held h{steady_ns() + int64_t(d) * 1000, std::vector<uint8_t>(buf, buf + n), {}, flen};
+        std::memcpy(&h.to, &from, flen);
+        held_.push_back(std::move(h));
+        return true;
+    }
     sendto(fd_, buf, std::size_t(n), 0, reinterpret_cast<sockaddr*>(&from), flen);
     return true;
 }

@@ -14,8 +14,10 @@
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
 
+#include <deque>
 #include <memory>
 #include <string>
+#include <sys/socket.h>
 #include <vector>
 
 namespace beamctl::ethercat::sim {
@@ -104,9 +106,17 @@ public:
     uint64_t frames = 0, malformed = 0;
 
 private:
+    void send_due(int64_t now_ns);
     Segment& seg_;
     int fd_ = -1;
     uint16_t port_ = 0;
+    struct Held { // an answer held back (Segment::answer_delay_us)
+        int64_t due_ns;
+        std::vector<uint8_t> frame;
+        sockaddr_storage to;
+        socklen_t to_len;
+    };
+    std::deque<Held> held_;
 };
 
 } // namespace beamctl::ethercat::sim

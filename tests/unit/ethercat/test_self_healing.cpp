@@ -279,6 +279,31 @@ TEST(SelfHealing, OnePercentFrameLossInvalidatesOnlyTheLostCycles) {
     }
 }
 
+TEST(SelfHealing, LateAnswersAreCountedAndLoseNoSlave) {
+    Bus b({"EK1100", "EL1008", "EL2008"});
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    cycle(m, 2);
+    fault(b, "delay 1.5"); // [ms]: beyond the 1 ms receive time-out of each cycle
+    int lost = 0;
+    for (int c = 0; c < 100; ++c) {
+        m.send_process_data();
+        if (m.receive_process_data(1000) == CycleStatus::FrameLost) ++lost;
+        EXPECT_FALSE(m.slave_valid(1));
+    }
+    EXPECT_EQ(lost, 100);
+    EXPECT_GE(m.frames_late(), 99u); // each came back one wait late: dropped as too old
+    m.check_and_recover();
+    for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(m.slave_state(i), SlaveState::Op) << i;
+    fault(b, "delay 0.5"); // within the time-out: on time again
+    for (int c = 0; c < 3; ++c) {
+        m.send_process_data();
+        m.receive_process_data(1000);
+    }
+    EXPECT_TRUE(m.slave_valid(1) && m.slave_valid(2));
+    EXPECT_EQ(m.slave_health(1).lost, 0u);
+}
+
 TEST(SelfHealing, StrictKeepsTheRefusalOfAMissingSlave) {
     Bus b({"EK1100", "EL1008"});
     b.cfg.push_back({2, "EL2008"});
@@ -339,6 +364,7 @@ TEST(SelfHealing, FaultCommandsParseAndRefuseBadInput) {
     EXPECT_EQ(sim::describe(sim::parse_fault("refuse-state 1 OP 0x1D", cat, 5)), "refuse-state 1 OP 0x001D");
     EXPECT_EQ(sim::describe(sim::parse_fault("glitch 4 -500", cat, 5)), "glitch 4 -500");
     EXPECT_EQ(sim::describe(sim::parse_fault("replace 1 EL2008", cat, 5)), "replace 1 EL2008");
+    EXPECT_EQ(sim::describe(sim::parse_fault("delay 2.5", cat, 5)), "delay 2.5");
     auto error = [&](const std::string& t) {
         try {
             sim::parse_fault(t, cat, 5);
@@ -354,6 +380,7 @@ TEST(SelfHealing, FaultCommandsParseAndRefuseBadInput) {
     EXPECT_NE(error("refuse-sdo 1 0x8010 5").find("is not an object INDEX:SUB"), std::string::npos);
     EXPECT_NE(error("explode 1").find("unknown fault 'explode'"), std::string::npos);
     EXPECT_NE(error("").find("empty"), std::string::npos);
+    EXPECT_NE(error("delay -1").find("is not a delay of 0..1000 ms"), std::string::npos);
     // random words and bytes: an error or a fault, never a crash
     std::mt19937 rng(3);
     const char* vocab[] = {"power", "break", "loss", "refuse-sdo", "refuse-state", "glitch", "0x", "-1", "1e9", "OP",
