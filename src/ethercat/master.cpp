@@ -627,7 +627,7 @@ void Master::build_cyclic_frames() {
         }
         uint32_t len = uint32_t(std::min<std::size_t>(room, total - off));
         int at = cf->frame.add(kLrw, 0, off, uint16_t(len)); // index set per cycle when sent
-        cf->parts.push_back({uint32_t(at), off, len, 0});
+        cf->parts.push_back({uint32_t(at), off, len});
         off += len;
     }
     if (cyclic_.back().parts.empty()) cyclic_.pop_back();

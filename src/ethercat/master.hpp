@@ -251,7 +251,6 @@ private:
             uint32_t data_offset; // in the frame
             uint32_t image_offset;
             uint32_t len;
-            uint16_t expected_wkc;
         };
         std::vector<Part> parts;
     };
