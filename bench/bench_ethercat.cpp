@@ -18,6 +18,7 @@
 #include "ethercat/raw_link.hpp"
 #include "ethercat/sim/faults.hpp"
 #include "ethercat/sim/raw_server.hpp"
+#include "ethercat/sim/inprocess_link.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "ethercat/sim/sim_config.hpp"
 
@@ -72,7 +73,7 @@ private:
 
 struct Fixture {
     sim::Segment seg;
-    InProcessLink link{seg};
+    sim::InProcessLink link{seg};
     std::unique_ptr<Master> m;
     std::shared_ptr<sim::Plant> plant;
     explicit Fixture(bool with_plant = false) {
@@ -163,7 +164,7 @@ void BM_ReturnToOp(benchmark::State& st) {
     const char* type = types[st.range(0)];
     sim::Segment seg;
     for (const char* t : {"EK1100", "EL1008", type}) seg.add(*Catalog::builtin().find(t));
-    InProcessLink link(seg);
+    sim::InProcessLink link(seg);
     CountingLink counting(link);
     std::vector<SlaveConfig> cfg{{0, "EK1100"}, {1, "EL1008"}, {2, type}};
     if (st.range(0) == 1) cfg[2].sdos = {{0x8010, 1, 1000, 2}};
@@ -248,7 +249,7 @@ void BM_MasterCycle40(benchmark::State& st) {
         seg.add(*Catalog::builtin().find(types[i]));
         cfg.push_back({int(i), types[i]});
     }
-    InProcessLink sim_link(seg);
+    sim::InProcessLink sim_link(seg);
     EchoLink echo;
     ForwardLink fwd;
     fwd.to = &sim_link;

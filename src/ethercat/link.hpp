@@ -1,21 +1,16 @@
 // How the master reaches a segment: one interface, several transports (ethercat.md §5).
-//   InProcessLink: straight into a simulated segment in this process (the default, and tests).
+//   sim::InProcessLink (sim/inprocess_link.hpp): straight into a simulated segment in this process.
 //   UdpLink: UDP to a `beamctl sim --udp` process; RawLink (raw_link.hpp): AF_PACKET on a NIC/veth.
 // send/receive are called from the master's thread only; they never allocate.
 #pragma once
 
 #include "ethercat/frame.hpp"
 
-#include <array>
 #include <string>
 #include <cstddef>
 #include <cstdint>
 
 namespace beamctl::ethercat {
-
-namespace sim {
-class Segment;
-}
 
 class Link {
 public:
@@ -26,23 +21,6 @@ public:
     // 0 when nothing arrived within timeout_us.
     virtual std::size_t receive(uint8_t* buf, std::size_t cap, int timeout_us) noexcept = 0;
     virtual const char* kind() const noexcept = 0;
-};
-
-// Frames go through a simulated segment synchronously; a lost frame never comes back.
-class InProcessLink : public Link {
-public:
-    explicit InProcessLink(sim::Segment& seg) : seg_(seg) {}
-    bool send(const uint8_t* frame, std::size_t len) noexcept override;
-    std::size_t receive(uint8_t* buf, std::size_t cap, int timeout_us) noexcept override;
-    const char* kind() const noexcept override { return "inproc"; }
-
-private:
-    sim::Segment& seg_;
-    static constexpr int kSlots = 8;
-    std::array<std::array<uint8_t, kMaxFrame>, kSlots> ring_{};
-    std::array<std::size_t, kSlots> len_{};
-    std::array<int64_t, kSlots> hold_{}; // [us] a frame is still on its way (Segment::answer_delay_us)
-    int head_ = 0, tail_ = 0; // frames in flight: [tail, head)
 };
 
 } // namespace beamctl::ethercat

@@ -15,6 +15,7 @@
 #include "core/signals.hpp"
 #include "ethercat/raw_link.hpp"
 #include "ethercat/sim/faults.hpp"
+#include "ethercat/sim/inprocess_link.hpp"
 #include "ethercat/sim/sim_config.hpp"
 #include "pv/convert.hpp"
 #include "pv/db_file.hpp"
@@ -294,7 +295,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
                     throw Error(SB() << bc.link.faults_where[k] << ": " << e.what());
                 }
             }
-            link = std::make_unique<ethercat::InProcessLink>(*b.segment);
+            link = std::make_unique<ethercat::sim::InProcessLink>(*b.segment);
             b.sim_stage = std::make_unique<SimTimeStage>(*b.segment);
             engine_->add_stage(rt::StageOrder::BusSend, *b.sim_stage);
         } else if (bc.link.type == "raw") {

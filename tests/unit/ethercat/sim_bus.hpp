@@ -4,6 +4,7 @@
 
 #include "ethercat/catalog.hpp"
 #include "ethercat/link.hpp"
+#include "ethercat/sim/inprocess_link.hpp"
 #include "ethercat/master.hpp"
 #include "core/error.hpp"
 #include "ethercat/sim/segment.hpp"
@@ -24,7 +25,7 @@ inline std::vector<std::string> demo() { return std::vector<std::string>(std::be
 
 struct Bus {
     sim::Segment seg;
-    InProcessLink link{seg};
+    sim::InProcessLink link{seg};
     std::vector<SlaveConfig> cfg;
     explicit Bus(std::vector<std::string> types) {
         for (std::size_t i = 0; i < types.size(); ++i) {
@@ -39,7 +40,7 @@ struct Bus {
 // advanced in 1 ms cycles of virtual time; `sdos_for_last` are startup SDOs of the last slave.
 struct PlantBus {
     sim::Segment seg;
-    InProcessLink link{seg};
+    sim::InProcessLink link{seg};
     std::shared_ptr<sim::Plant> plant;
     std::unique_ptr<Master> m;
     uint64_t t = 1'000'000'000;

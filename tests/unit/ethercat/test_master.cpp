@@ -5,6 +5,7 @@
 #include "core/error.hpp"
 #include "ethercat/catalog.hpp"
 #include "ethercat/master.hpp"
+#include "ethercat/sim/inprocess_link.hpp"
 #include "ethercat/sim/segment.hpp"
 
 #include "sim_bus.hpp"
@@ -91,7 +92,7 @@ TEST(Master, StrictMissingSlavesAreAClearError) {
 
 TEST(Master, UnknownTypeIsRejectedAtConfiguration) {
     sim::Segment seg;
-    InProcessLink link(seg);
+    sim::InProcessLink link(seg);
     EXPECT_THROW(Master(link, 0, {{0, "EL9999"}}, Catalog::builtin()), Error);
 }
 

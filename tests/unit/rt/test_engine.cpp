@@ -3,6 +3,7 @@
 #include "../alloc_counter.hpp"
 #include "ethercat/bus.hpp"
 #include "ethercat/catalog.hpp"
+#include "ethercat/sim/inprocess_link.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "rt/engine.hpp"
 
@@ -98,7 +99,7 @@ TEST(Engine, FullBusCycleAllocatesNothing) {
         seg.add(*cat.find(types[i]));
         cfg.push_back({i, types[i]});
     }
-    ethercat::Bus bus(0, std::make_unique<ethercat::InProcessLink>(seg), cfg, cat);
+    ethercat::Bus bus(0, std::make_unique<ethercat::sim::InProcessLink>(seg), cfg, cat);
     bus.bring_up();
     rt::VirtualClock clock;
     rt::Engine e({1000}, clock);
@@ -125,7 +126,7 @@ TEST(Engine, QueuedOutputWriteReachesTheSlaveInTheNextCycle) {
     ethercat::sim::Segment seg;
     seg.add(*cat.find("EK1100"));
     seg.add(*cat.find("EL2008"));
-    ethercat::Bus bus(0, std::make_unique<ethercat::InProcessLink>(seg), {{0, "EK1100"}, {1, "EL2008"}}, cat);
+    ethercat::Bus bus(0, std::make_unique<ethercat::sim::InProcessLink>(seg), {{0, "EK1100"}, {1, "EL2008"}}, cat);
     bus.bring_up();
     rt::VirtualClock clock;
     rt::Engine e({1000}, clock);
@@ -150,7 +151,7 @@ TEST(Engine, LostSlaveIsRecoveredWhileTheOthersKeepCycling) {
         cfg.push_back({i, types[i]});
     }
     cfg[2].sdos.push_back({0x8010, 1, 900, 2}); // startup SDO, applied again on recovery
-    ethercat::Bus bus(0, std::make_unique<ethercat::InProcessLink>(seg), cfg, cat);
+    ethercat::Bus bus(0, std::make_unique<ethercat::sim::InProcessLink>(seg), cfg, cat);
     bus.bring_up();
     rt::MonotonicClock clock;
     rt::Engine e({1000}, clock);
