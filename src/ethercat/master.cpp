@@ -254,6 +254,13 @@ void Master::request_state(uint8_t state, const char* name) {
     request_state(all, state, name);
 }
 
+void Master::to_safe_op() {
+    std::vector<std::size_t> which;
+    for (std::size_t i = 0; i < slaves_.size(); ++i)
+        if (slave_online(i)) which.push_back(i);
+    request_state(which, 4, "SAFEOP");
+}
+
 void Master::request_state(const std::vector<std::size_t>& which, uint8_t state, const char* name) {
     auto failed = request_state_each(which, state, name);
     if (!failed.empty()) throw Error(failed.front().second);

@@ -138,7 +138,8 @@ public:
     bool strict() const { return strict_; }
     // Takes every slave back to SAFEOP (outputs safe, inputs still read), after the cycle has
     // stopped (a clean shutdown). Non-RT. Throws Error naming the slave that did not get there.
-    void to_safe_op() { request_state(4, "SAFEOP"); }
+    // Slaves not taking part (missing, lost) are not asked.
+    void to_safe_op();
     // Counts the slaves on the segment (BRD); -1 if the link did not answer.
     int count_slaves();
 

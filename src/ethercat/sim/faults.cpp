@@ -56,10 +56,10 @@ Fault parse_fault(std::string_view text, const Catalog& catalog, std::size_t sla
             throw fail(SB() << "'" << w[at] << "' is not a slave position (0.." << int64_t(slaves) - 1 << ")");
         return int(k);
     };
-    auto fraction = [&](std::size_t at) {
+    auto real = [&](std::size_t at, double hi, const char* what) { // a number 0..hi
         char* end = nullptr;
         double v = std::strtod(w[at].c_str(), &end);
-        if (end == w[at].c_str() || *end || !(v >= 0 && v <= 1)) throw fail(SB() << "'" << w[at] << "' is not a fraction 0..1");
+        if (end == w[at].c_str() || *end || !(v >= 0 && v <= hi)) throw fail(SB() << "'" << w[at] << "' is not " << what);
         return v;
     };
     if (verb == "power") {
@@ -78,14 +78,11 @@ Fault parse_fault(std::string_view text, const Catalog& catalog, std::size_t sla
     } else if (verb == "loss" || verb == "corrupt") {
         want(2);
         f.kind = verb == "loss" ? Fault::Kind::Loss : Fault::Kind::Corrupt;
-        f.fraction = fraction(1);
+        f.fraction = real(1, 1, "a fraction 0..1");
     } else if (verb == "delay") {
         want(2);
         f.kind = Fault::Kind::Delay;
-        char* end = nullptr;
-        f.fraction = std::strtod(w[1].c_str(), &end);
-        if (end == w[1].c_str() || *end || !(f.fraction >= 0 && f.fraction <= 1000))
-            throw fail(SB() << "'" << w[1] << "' is not a delay of 0..1000 ms");
+        f.fraction = real(1, 1000, "a delay of 0..1000 ms");
     } else if (verb == "refuse-state") {
         want(4);
         f.kind = Fault::Kind::RefuseState;

@@ -304,6 +304,17 @@ TEST(SelfHealing, LateAnswersAreCountedAndLoseNoSlave) {
     EXPECT_EQ(m.slave_health(1).lost, 0u);
 }
 
+TEST(SelfHealing, ACleanStopLeavesTheMissingSlaveAlone) {
+    Bus b({"EK1100", "EL2008", "EL1008"});
+    b.cfg.push_back({3, "EL1008"});
+    Master m(b.link, 0, b.cfg, Catalog::builtin());
+    m.bring_up();
+    cycle(m);
+    EXPECT_NO_THROW(m.to_safe_op()); // not "no answer to the SAFEOP request" for the missing one
+    EXPECT_EQ(b.seg.slave(1).al_state(), 4);
+    EXPECT_EQ(b.seg.slave(2).al_state(), 4);
+}
+
 TEST(SelfHealing, StrictKeepsTheRefusalOfAMissingSlave) {
     Bus b({"EK1100", "EL1008"});
     b.cfg.push_back({2, "EL2008"});
