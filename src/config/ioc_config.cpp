@@ -63,11 +63,16 @@ void read_buses(const YamlNode& buses, const std::string& dir, IocConfig& cfg) {
         YamlNode slaves = b.required("slaves", " (a list of {position, type})");
         std::set<int> positions;
         for (const YamlNode& s : slaves.list()) {
-            if (!s.keys({"position", "type", "sdo"})) continue;
+            if (!s.keys({"position", "type", "sdo", "oversampling"})) continue;
             SlaveEntry se;
             se.position = int_of(s.required("position"), -1, 0, 65534);
             se.type = s.required("type", " (a device of the catalog, e.g. EL1008)").string().value_or("");
             se.type_where = s["type"].where();
+            if (s.has("oversampling")) { // checked against the device's range once its type is known
+                se.oversampling = unsigned(s["oversampling"].unsigned_integer(1000).value_or(1));
+                se.oversampling_where = s["oversampling"].where();
+                if (se.oversampling == 0) s["oversampling"].error("0 should be at least 1 (samples per cycle)");
+            }
             if (se.position >= 0 && !positions.insert(se.position).second)
                 s["position"].error(SB() << se.position << " is used twice");
             for (const YamlNode& d : s["sdo"].list()) {

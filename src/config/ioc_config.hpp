@@ -26,6 +26,8 @@ struct SlaveEntry {
     std::string type;
     std::vector<SdoConfig> sdo;
     std::string type_where; // file:line:col of the type in the IOC file
+    unsigned oversampling = 1;     // samples per cycle (EL3702, EL4732; ecmccfg NELM)
+    std::string oversampling_where;
 };
 
 struct LinkConfig {

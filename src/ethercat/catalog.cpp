@@ -81,7 +81,7 @@ DeviceDesc parse_yaml_device(const config::YamlNode& root) {
     DeviceDesc d;
     if (!root.keys({"type", "variant_of", "name", "vendor", "product", "revision", "coe",
                     "dc_assign_activate", "ebus_current_ma", "sync_managers", "rx_pdos",
-                    "tx_pdos"}))
+                    "tx_pdos", "oversampling"}))
         return d;
     d.type = root.required("type").string().value_or("");
     d.variant_of = root["variant_of"].string().value_or("");
@@ -224,6 +224,39 @@ DeviceDesc parse_yaml_device(const config::YamlNode& root) {
             sm_nodes[i].error(SB() << "assigned PDOs need " << bytes
                                    << " bytes, more than an SM holds");
         sm.default_size = static_cast<uint16_t>(bytes);
+    }
+
+    // Oversampling: each listed PDO is a channel's first sample (one entry named <channel>_1),
+    // assigned by default; sample k is PDO index+k-1, so those indices must be free.
+    if (config::YamlNode o = root["oversampling"]; o && o.keys({"max", "channels"})) {
+        d.oversampling.max = uint_of<uint16_t>(o.required("max", " (the largest factor)"), 1000);
+        if (o.has("max") && d.oversampling.max < 2) o["max"].error("should be at least 2");
+        for (const config::YamlNode& c : o.required("channels", " (a list of {pdo, memmap})").list()) {
+            if (!c.keys({"pdo", "memmap"})) continue;
+            auto idx = c.required("pdo", " (the channel's first sample PDO)").unsigned_integer(0xFFFF);
+            auto mm = c.required("memmap", " (ECMC's memory map name, e.g. analogInputArray01)").string();
+            if (!idx || !mm) continue;
+            const Pdo* p = d.find_pdo(uint16_t(*idx));
+            bool assigned = std::any_of(d.pdo_assign.begin(), d.pdo_assign.end(),
+                                        [&](const auto& a) { return a.second == *idx; });
+            if (!p || !assigned) {
+                c["pdo"].error(SB() << hex(uint16_t(*idx)) << " is not a PDO assigned by default");
+                continue;
+            }
+            if (p->entries.size() != 1 || p->entries[0].name.size() < 3 ||
+                p->entries[0].name.compare(p->entries[0].name.size() - 2, 2, "_1") != 0) {
+                c["pdo"].error(SB() << hex(p->index) << " should have one entry named <channel>_1 (the first sample)");
+                continue;
+            }
+            bool clash = false;
+            for (unsigned k = 1; k < d.oversampling.max && !clash; ++k)
+                if (d.find_pdo(uint16_t(*idx + k))) {
+                    c["pdo"].error(SB() << "PDO " << hex(uint16_t(*idx + k)) << " would be sample " << k + 1
+                                        << " of " << hex(p->index) << "'s channel; it cannot be defined too");
+                    clash = true;
+                }
+            if (!clash) d.oversampling.channels.push_back({uint16_t(*idx), *mm});
+        }
     }
     return d;
 }

@@ -28,6 +28,10 @@
 // as the DC latch or SYNC registers). Entry datatype is a CoE type name (BOOL, BIT2..BIT8,
 // INT8..INT64, UINT8..UINT64, REAL32, REAL64) whose width must equal bits; padding entries
 // (index 0) have only bits. Entry names must be unique within a device.
+// Oversampling terminals (EL3702, EL4732) add
+//   oversampling: {max: 100, channels: [{pdo: 0x1a00, memmap: analogInputArray01}, ...]}
+// where each channel's first sample PDO (one entry named <channel>_1) is repeated n times for
+// factor n (DeviceDesc::with_oversampling), and the memmap names ECMC's memory map of the samples.
 #pragma once
 
 #include "ethercat/device.hpp"

@@ -53,10 +53,40 @@ struct DeviceDesc {
     bool coe = false;                 // CoE mailbox protocol supported
     uint16_t dc_assign_activate = 0;  // ESI Dc/OpMode/AssignActivate (0: no DC)
     uint16_t ebus_current_ma = 0;
+    // Oversampling (ESI Pdo@OSFac; ecmccfg NELM): each listed sample PDO is repeated n times per
+    // cycle, n = 1..max. Sample k (1-based) of a channel is PDO pdo+k-1 with entry index
+    // entry+0x10*(k-1) (Beckhoff's numbering), named <channel>_<k>; the samples follow each other
+    // in their SM. The description as loaded is factor 1 (one sample PDO per channel).
+    struct Oversampling {
+        struct Channel {
+            uint16_t pdo = 0;       // its first sample PDO
+            std::string memmap;     // ECMC's memory map name, "analogInputArray01"
+        };
+        uint16_t max = 0;           // 0: the device does not oversample
+        std::vector<Channel> channels;
+    } oversampling;
+
+    // A run of equal entries read or written as one array: ECMC's memory map
+    // (`ec<m>.s<k>.mm.<name>`), here one per oversampled channel.
+    struct MemMap {
+        std::string name;       // "analogInputArray01"
+        std::string first;      // its first entry, "analogInputArray01_1"
+        uint16_t count = 0;     // elements (the oversampling factor)
+        uint8_t bits = 0;       // per element
+        std::string datatype;   // CoE type of an element ("INT16")
+        bool output = false;
+    };
 
     const Pdo* find_pdo(uint16_t index) const;
     // Bytes of process data of the SM with the given index under the default assignment.
     uint32_t sm_bytes(uint8_t sm_index) const;
+    // This description with oversampling factor n (1..oversampling.max): the sample PDOs 2..n of
+    // every channel added after the first and assigned to its SM. Throws Error for a bad n.
+    DeviceDesc with_oversampling(unsigned n) const;
+    // The memory maps of this description (one per oversampled channel; none for other devices).
+    std::vector<MemMap> memmaps() const;
+    // The factor of this description: samples per channel (1 for a device that does not oversample).
+    unsigned oversampling_factor() const;
 };
 
 } // namespace beamctl::ethercat

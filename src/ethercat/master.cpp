@@ -236,6 +236,17 @@ void Master::reserve_default_layout(SlaveInfo& s) const {
     s.rx_pdos = s.sii.rx_pdos;
     s.tx_pdos = s.sii.tx_pdos;
     s.pdo_from_coe = false;
+    apply_oversampling(s);
+}
+
+void Master::apply_oversampling(SlaveInfo& s) const {
+    // A terminal without CoE takes its factor from the SM lengths: the master assigns the sample
+    // PDOs itself (as IgH does), from the catalog's description of the identity it verified.
+    if (s.oversampling <= 1 || s.pdo_from_coe) return;
+    DeviceDesc d = catalog_.find(s.type)->with_oversampling(s.oversampling);
+    s.pdo_assign = d.pdo_assign;
+    s.rx_pdos = d.rx_pdos;
+    s.tx_pdos = d.tx_pdos;
 }
 
 bool Master::read_al_state(std::size_t i, uint8_t& state, uint16_t& code) {
@@ -354,6 +365,7 @@ void Master::bring_up() {
         s.position = c.position;
         s.station = uint16_t(kStationBase + c.position);
         s.type = c.type;
+        s.oversampling = c.oversampling;
         slaves_.push_back(std::move(s));
         SlaveInfo& si = slaves_.back();
         const DeviceDesc* want = catalog_.find(c.type);
@@ -850,7 +862,10 @@ void Master::read_pdo_layout(SlaveInfo& s) {
     s.rx_pdos = s.sii.rx_pdos;
     s.tx_pdos = s.sii.tx_pdos;
     s.pdo_from_coe = false;
-    if (!(s.sii.protocols & kSiiProtocolCoE) || !s.sii.rx_mbx_size || !s.sii.tx_mbx_size) return;
+    if (!(s.sii.protocols & kSiiProtocolCoE) || !s.sii.rx_mbx_size || !s.sii.tx_mbx_size) {
+        apply_oversampling(s);
+        return;
+    }
     auto read = [&](uint16_t index, uint8_t sub, std::size_t min_bytes) {
         std::vector<uint8_t> v = sdo_upload(s.position, index, sub);
         if (v.size() < min_bytes)
@@ -1407,15 +1422,19 @@ void Master::configure_dc_at(std::size_t i, const uint32_t* t_ref, uint64_t mast
         throw Error(SB() << slave_name(s) << ": no answer configuring DC offset");
     uint16_t aa = s.sii.dc_assign_activate;
     uint16_t off = 0;
-    uint8_t cyc[4];
-    put_le32(cyc, uint32_t(cycle_ns_));
+    // An oversampling terminal takes n samples per cycle: SYNC0 every cycle/n, SYNC1 the rest of
+    // the cycle (ecmccfg's ecmcEL3702.cmd).
+    uint32_t sync0 = uint32_t(cycle_ns_ / std::max(s.oversampling, 1u));
+    uint8_t cyc[8];
+    put_le32(cyc, sync0);
+    put_le32(cyc + 4, s.oversampling > 1 ? uint32_t(cycle_ns_) - sync0 : 0);
     uint8_t st[8] = {};
     transact(kFprd, s.station, 0x0910, st, 8);
     uint64_t start = (le64(st) + 100'000'000ull) / cycle_ns_ * cycle_ns_;
     uint8_t start_b[8];
     put_le64(start_b, start);
     uint8_t act[2] = {uint8_t(aa), uint8_t(aa >> 8)};
-    if (transact(kFpwr, s.station, 0x0980, &off, 2) != 1 || transact(kFpwr, s.station, 0x09A0, cyc, 4) != 1 ||
+    if (transact(kFpwr, s.station, 0x0980, &off, 2) != 1 || transact(kFpwr, s.station, 0x09A0, cyc, s.oversampling > 1 ? 8 : 4) != 1 ||
         transact(kFpwr, s.station, 0x0990, start_b, 8) != 1 || transact(kFpwr, s.station, 0x0980, act, 2) != 1)
         throw Error(SB() << slave_name(s) << ": no answer configuring SYNC0");
 }

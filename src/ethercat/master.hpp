@@ -53,6 +53,7 @@ struct SlaveConfig {
     int position = 0;
     std::string type;             // catalog type, e.g. "EL1008"
     std::vector<StartupSdo> sdos; // in order; only for CoE devices
+    unsigned oversampling = 1;    // samples per cycle of an oversampling terminal (EL3702, EL4732)
 };
 
 // An SDO transfer the slave aborted; what() names bus, position, object and the abort code.
@@ -83,6 +84,7 @@ struct SlaveInfo {
     int position = 0;
     uint16_t station = 0;
     std::string type;
+    unsigned oversampling = 1; // SlaveConfig::oversampling: sample PDOs per channel, DC SYNC0 = cycle/n
     SiiInfo sii;
     // PDO layout in use: read over CoE (0x1C12/0x1C13 and the mappings) in PREOP for CoE
     // slaves, else the SII defaults.
@@ -279,6 +281,7 @@ private:
     void read_identity(SlaveInfo& s);
     // The layout a slave absent at start gets reserved: the catalog device's SII defaults.
     void reserve_default_layout(SlaveInfo& s) const;
+    void apply_oversampling(SlaveInfo& s) const; // the sample PDOs of SlaveInfo::oversampling
     // Brings slave i (present at its station address) from whatever state to OP: INIT, identity,
     // SMs, PREOP, start-up SDOs, PDO layout (must match the reserved one), FMMUs, DC, SAFEOP, OP.
     // `full_sii`: read the whole SII (a slave never configured); else only its identity.

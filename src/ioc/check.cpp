@@ -61,7 +61,17 @@ public:
             const config::BusConfig& bc = cfg.buses[b];
             bool types_ok = true;
             for (const auto& s : bc.slaves) {
-                if (catalog.find(s.type)) continue;
+                if (const ethercat::DeviceDesc* d = catalog.find(s.type)) {
+                    if (s.oversampling != 1) {
+                        try {
+                            (void)d->with_oversampling(s.oversampling);
+                        } catch (const Error& e) {
+                            errors_.add(SB() << s.oversampling_where << ": buses[" << b << "] position " << s.position
+                                             << ": " << e.what());
+                        }
+                    }
+                    continue;
+                }
                 types_ok = false;
                 SB msg;
                 msg << s.type_where << ": buses[" << b << "] position " << s.position

@@ -262,9 +262,17 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
             if (!catalog_.find(s.type))
                 throw Error(SB() << cfg_.path << ": bus " << bc.id << " position " << s.position
                                  << ": unknown device type '" << s.type << "'");
+            if (s.oversampling != 1) {
+                try {
+                    (void)catalog_.find(s.type)->with_oversampling(s.oversampling);
+                } catch (const Error& e) {
+                    throw Error(SB() << s.oversampling_where << ": " << e.what());
+                }
+            }
             std::vector<ethercat::StartupSdo> sdos;
             for (const auto& d : s.sdo) sdos.push_back({d.index, d.sub, d.value, d.size});
             slaves.emplace_back(s.position, s.type, std::move(sdos));
+            slaves.back().oversampling = s.oversampling;
         }
         std::unique_ptr<ethercat::Link> link;
         if (bc.link.type == "sim") {
@@ -315,6 +323,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     std::vector<motion::AxisConfig> axis_configs;
     for (std::size_t i = 0; i < axes_->size(); ++i) axis_configs.push_back(axes_->config(i));
     storages_ = std::make_unique<IocStorages>(cfg_, db_);
+    memmaps_ = std::make_unique<IocMemMaps>(cfg_, catalog_, db_);
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
@@ -396,8 +405,10 @@ void Ioc::declare_bus_signals() {
             declare(pre + "ONE", "UDINT", false);
             declare(pre + "ZERO", "UDINT", false);
             declare(pre + "valid", "UDINT", false);
-            const ethercat::DeviceDesc* d = catalog_.find(sc.type);
-            if (!d) continue;
+            const ethercat::DeviceDesc* base = catalog_.find(sc.type);
+            if (!base) continue;
+            const ethercat::DeviceDesc os = base->with_oversampling(sc.oversampling); // every sample's entry
+            const ethercat::DeviceDesc* d = &os;
             std::set<std::string> seen; // an entry in two alternative PDOs is one signal
             for (bool out : {true, false})
                 for (const auto& pd : out ? d->rx_pdos : d->tx_pdos)
@@ -640,7 +651,10 @@ void Ioc::bring_up() {
         bus_ok.push_back(registry_.bind(std::string(SB() << "ec" << b.bus->id() << ".masterstatus"), why));
     }
     storages_->bind(*engine_);
-    plcs_->bind(*engine_, axes_->group(), std::move(bus_ok), storages_->storages());
+    std::vector<ethercat::Bus*> buses;
+    for (auto& b : buses_) buses.push_back(b.bus.get());
+    memmaps_->bind(registry_, buses);
+    plcs_->bind(*engine_, axes_->group(), std::move(bus_ok), storages_->storages(), memmaps_->memmaps());
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
@@ -673,6 +687,7 @@ void Ioc::publish() {
     storages_->publish();
     engine_stats_ = engine_->stats(); // read by the engine items' device support
     for (auto& b : buses_) b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
+    memmaps_->publish(EventLoop::now_s());
     const rt::EngineStats& es = engine_stats_;
     for (auto& b : buses_) {
         // the status PVs read their items (scan_io_intr below); the histogram is an array

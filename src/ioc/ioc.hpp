@@ -13,6 +13,7 @@
 #include "ethercat/catalog.hpp"
 #include "ioc/axes.hpp"
 #include "ioc/kinematics.hpp"
+#include "ioc/memmaps.hpp"
 #include "ioc/plcs.hpp"
 #include "ioc/storages.hpp"
 #include "ethercat/sim/plant.hpp"
@@ -107,6 +108,7 @@ private:
     registry::Registry registry_;
     std::unique_ptr<IocAxes> axes_;
     std::unique_ptr<IocStorages> storages_; // before plcs_: the PLCs' storages outlive them
+    std::unique_ptr<IocMemMaps> memmaps_;   // before plcs_ too
     std::unique_ptr<IocPlcs> plcs_;
     std::unique_ptr<IocKinematics> kinematics_;
     bool brought_up_ = false;

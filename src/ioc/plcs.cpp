@@ -317,10 +317,11 @@ std::unique_ptr<pv::LinkDevice> IocPlcs::make_device(std::string_view name, int 
 }
 
 void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok,
-                   std::vector<daq::DataStorage*> storages) {
+                   std::vector<daq::DataStorage*> storages, std::vector<registry::MemMap*> memmaps) {
     if (sources_.empty() && plugins_.empty()) return;
     plc::PlcRuntime::Options o;
     o.storages = std::move(storages);
+    o.memmaps = std::move(memmaps);
     o.groups = groups_;
     for (const auto& [id, t] : luts_) o.luts.emplace_back(id, t.get());
     o.m2m = m2m_.get();

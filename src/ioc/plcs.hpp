@@ -54,7 +54,7 @@ public:
     // ax names to the axes), adds the general PLCs' stage and the axis PLCs' hook.
     // `storages`: the IOC's data storages (ds<n> of PLC code).
     void bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok,
-              std::vector<daq::DataStorage*> storages = {});
+              std::vector<daq::DataStorage*> storages = {}, std::vector<registry::MemMap*> memmaps = {});
     // IOC loop: statuses into PVs, output lines to stdout, faults to the log.
     void publish();
 

@@ -774,6 +774,74 @@ struct Builtins {
         std::size_t n = std::size_t(std::min(want, double(src->size() - from)));
         return ds_result(rt, dst->append(src->data() + from, n));
     }
+    // ---- ec_*mm*: memory maps (ECMC's libEc); errors go to ec_get_err -------------------------
+    static registry::MemMap* memmap(PlcRuntime& rt, double id) noexcept {
+        if (!(id >= 0 && id < double(rt.opt_.memmaps.size()))) {
+            rt.ec_error_ = registry::MemMap::kNull;
+            return nullptr;
+        }
+        return rt.opt_.memmaps[std::size_t(id)];
+    }
+    // ec_mm_cp(src, dst): the bytes of src into dst (as many as dst holds); 0 or the error
+    static double mm_cp(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        rt.ec_error_ = 0;
+        registry::MemMap *src = memmap(rt, a[0]), *dst = memmap(rt, a[1]);
+        if (!src || !dst) return rt.ec_error_ = registry::MemMap::kNull;
+        if (src->data() && dst->data()) std::memmove(dst->data(), src->data(), std::min(src->bytes(), dst->bytes()));
+        return 0;
+    }
+    static double mm_type(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        rt.ec_error_ = 0;
+        registry::MemMap* m = memmap(rt, a[0]);
+        return m ? double(m->type) : -rt.ec_error_;
+    }
+    static double mm_size(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        rt.ec_error_ = 0;
+        registry::MemMap* m = memmap(rt, a[0]);
+        return m ? double(m->count) : 0;
+    }
+    static double mm_get(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        rt.ec_error_ = 0;
+        registry::MemMap* m = memmap(rt, a[0]);
+        double v = 0;
+        if (m)
+            if (uint32_t e = m->get(a[1], v)) rt.ec_error_ = e, v = 0;
+        return v;
+    }
+    static double mm_set(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        rt.ec_error_ = 0;
+        registry::MemMap* m = memmap(rt, a[0]);
+        if (!m) return 0; // as ECMC: 0, the error in ec_get_err
+        return rt.ec_error_ = m->set(a[1], a[2]);
+    }
+    // ec_mm_append_to_ds[_scale_offset](mm, ds[, scale, offset]): every element appended, in order
+    template <bool Scaled> static double mm_append(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        rt.ec_error_ = 0;
+        registry::MemMap* m = memmap(rt, a[0]);
+        if (!m) return rt.ec_error_;
+        daq::DataStorage* d = storage(rt, a[1]);
+        if (!d) return rt.ec_error_ = rt.ds_error_;
+        for (uint32_t i = 0; i < m->count; ++i) {
+            double v = 0;
+            if (uint32_t e = m->get(i, v)) return rt.ec_error_ = e;
+            if (Scaled) v = v * a[2] + a[3];
+            if (uint32_t e = d->append(v)) return rt.ec_error_ = e;
+        }
+        return 0;
+    }
+    static double mm_push(void* c, const double* a, int) noexcept {
+        auto& rt = *static_cast<PlcRuntime*>(c);
+        registry::MemMap* m = memmap(rt, a[0]);
+        if (!m) return rt.ec_error_;
+        m->pushes.fetch_add(1, std::memory_order_release);
+        return 0;
+    }
     static double ds_get_err(void* c, const double*, int) noexcept { return static_cast<PlcRuntime*>(c)->ds_error_; }
     static double ds_err_rst(void* c, const double*, int) noexcept {
         static_cast<PlcRuntime*>(c)->ds_error_ = 0;
@@ -1072,6 +1140,12 @@ std::optional<Host::FunctionInfo> PlcRuntime::Plc::function(std::string_view nam
         {"ds_get_min", Builtins::ds_stat<1>, 1, 1, false},     {"ds_get_max", Builtins::ds_stat<2>, 1, 1, false},
         {"ds_append_to_ds", Builtins::ds_append_to_ds, 4, 4, false}, {"ds_get_err", Builtins::ds_get_err, 0, 0, false},
         {"ds_err_rst", Builtins::ds_err_rst, 0, 0, false},
+        {"ec_mm_cp", Builtins::mm_cp, 2, 2, false},            {"ec_get_mm_type", Builtins::mm_type, 1, 1, false},
+        {"ec_get_mm_data", Builtins::mm_get, 2, 2, false},     {"ec_set_mm_data", Builtins::mm_set, 3, 3, false},
+        {"ec_get_mm_size", Builtins::mm_size, 1, 1, false},
+        {"ec_mm_append_to_ds", Builtins::mm_append<false>, 2, 2, false},
+        {"ec_mm_append_to_ds_scale_offset", Builtins::mm_append<true>, 4, 4, false},
+        {"ec_mm_push_asyn", Builtins::mm_push, 1, 1, false},
         {"epics_get_state", Builtins::epics_state, 0, 0, false}, {"epics_get_started", Builtins::epics_started, 0, 0, false},
         {"mc_grp_get_enable", Builtins::grp_get_enable, 1, 1, true},
         {"mc_grp_get_any_enable", Builtins::grp_get_any_enable, 1, 1, true},

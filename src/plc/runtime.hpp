@@ -35,6 +35,7 @@
 #include "plc/m2m.hpp"
 #include "plc/plugin.hpp"
 #include "plc/program.hpp"
+#include "registry/memmap.hpp"
 #include "registry/signal.hpp"
 #include "rt/engine.hpp"
 
@@ -89,6 +90,7 @@ public:
         // ECMC axis groups (axis.group): the axis ids of group g, for mc_grp_*(g, ...)
         std::vector<std::vector<int>> groups;
         std::vector<daq::DataStorage*> storages; // ds<id> by DataStorage::id()
+        std::vector<registry::MemMap*> memmaps;  // ec_*_mm_*(id): ECMC's memory map ids in order
         std::vector<std::pair<int, const LookupTable*>> luts; // lut_get_value(id, x): id 0..15
         M2m* m2m = nullptr; // m2m_* (null: their calls report 0x2005A, shared memory not valid)
         // check_only: the storage ids that exist (nullopt: any id 0..31)

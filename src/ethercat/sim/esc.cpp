@@ -62,6 +62,13 @@ Esc::Esc(const DeviceDesc& desc, std::vector<uint16_t> sii) : desc_(desc), sii_(
         if (s.type == SmType::MailboxOut) mbx_out_ = s.index;
         if (s.type == SmType::MailboxIn) mbx_in_ = s.index;
     }
+    if (desc_.oversampling.max > 0 && !desc_.coe)
+        for (unsigned k = 1; k <= desc_.oversampling.max; ++k) {
+            DeviceDesc d = desc_.with_oversampling(k);
+            std::vector<uint32_t> bytes(desc_.sms.size(), 0);
+            for (const auto& sm : desc_.sms) bytes[sm.index] = d.sm_bytes(sm.index);
+            os_sm_bytes_.push_back(std::move(bytes));
+        }
     if (desc_.coe && mbx_out_ >= 0 && mbx_in_ >= 0) {
         uint32_t serial = 0;
         if (sii_.size() > kSiiSerialWord + 1)
@@ -391,11 +398,23 @@ bool Esc::check_mailbox_sms() const noexcept {
     return true;
 }
 
-uint16_t Esc::check_process_sms() const noexcept {
+uint16_t Esc::check_process_sms() noexcept {
+    // An oversampling terminal accepts the SM lengths of any factor it supports, and samples
+    // with the factor they give.
+    for (std::size_t k = 0; k < os_sm_bytes_.size(); ++k)
+        if (check_process_sms(&os_sm_bytes_[k]) == 0) {
+            oversampling_ = unsigned(k + 1);
+            return 0;
+        }
+    oversampling_ = 1;
+    return check_process_sms(nullptr);
+}
+
+uint16_t Esc::check_process_sms(const std::vector<uint32_t>* os_bytes) const noexcept {
     for (const auto& s : desc_.sms) {
         if (s.type != SmType::Outputs && s.type != SmType::Inputs) continue;
         if (s.is_virtual) continue;
-        uint32_t want = expected_sm_bytes(s.index);
+        uint32_t want = os_bytes ? (*os_bytes)[s.index] : expected_sm_bytes(s.index);
         const uint8_t* r = &mem_[reg::kSm + 8 * s.index];
         bool active = r[6] & 1;
         uint16_t code = s.type == SmType::Outputs ? kAlInvalidOutputs : kAlInvalidInputs;

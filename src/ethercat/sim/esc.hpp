@@ -78,6 +78,9 @@ public:
     // Bytes of process data SM `sm` must have for SAFEOP: from the current CoE PDO assignment,
     // or the device's default assignment without CoE.
     uint32_t expected_sm_bytes(uint8_t sm) const;
+    // Samples per channel of an oversampling terminal, taken from the SM lengths the master
+    // configured when it asked for SAFEOP (1 for every other device).
+    unsigned oversampling() const noexcept { return oversampling_; }
 
     // Counters of what the slave saw (for tests and diagnostics).
     uint64_t frames_seen = 0;
@@ -98,7 +101,8 @@ private:
     void al_control_written() noexcept;
     void sii_command() noexcept;
     bool check_mailbox_sms() const noexcept;
-    uint16_t check_process_sms() const noexcept; // 0 or the AL status code
+    uint16_t check_process_sms() noexcept; // 0 or the AL status code (sets oversampling_)
+    uint16_t check_process_sms(const std::vector<uint32_t>* os_bytes) const noexcept;
     void set_al(uint8_t state, uint16_t code) noexcept;
     void check_watchdog() noexcept;
 
@@ -112,6 +116,9 @@ private:
     int mbx_out_ = -1, mbx_in_ = -1; // SM indices of the mailboxes (-1: none)
     uint8_t last_counter_ = 0;       // counter of the last request served (repeat detection)
     uint8_t reply_counter_ = 0;
+    unsigned oversampling_ = 1;
+    // Oversampling without CoE: os_sm_bytes_[k-1][sm] = SM bytes for factor k (k = 1..max).
+    std::vector<std::vector<uint32_t>> os_sm_bytes_;
     std::array<uint8_t, 65536> mem_{};
 };
 

@@ -88,11 +88,18 @@ void IoPoint::set(Segment& seg, uint64_t v) const noexcept {
     write_bits(seg.slave(std::size_t(slave)).sm_buffer(loc.sm), loc.bit, loc.bits, v);
 }
 
+unsigned IoPoint::samples(Segment& seg) const noexcept {
+    return oversampled && slave >= 0 ? seg.slave(std::size_t(slave)).oversampling() : 1;
+}
+
 IoPoint bind_io(Segment& seg, int position, std::string_view entry) {
     if (position < 0 || std::size_t(position) >= seg.size())
         throw Error(SB() << "no slave at position " << position << " (the segment has " << seg.size() << ")");
     try {
-        return IoPoint{position, locate_entry(seg.slave(std::size_t(position)).desc(), entry)};
+        const DeviceDesc& d = seg.slave(std::size_t(position)).desc();
+        IoPoint p{position, locate_entry(d, entry)};
+        for (const auto& m : d.memmaps()) p.oversampled |= m.first == entry;
+        return p;
     } catch (const Error& e) {
         throw Error(SB() << "slave " << position << ": " << e.what());
     }

@@ -30,6 +30,7 @@ bool has_entry(const DeviceDesc& d, std::string_view entry);
 struct IoPoint {
     int slave = -1; // segment position; -1: not bound (get() is 0, set() does nothing)
     EntryLocation loc;
+    bool oversampled = false; // the first sample of an oversampling channel (EL3702, EL4732)
 
     bool bound() const noexcept { return slave >= 0; }
     // Raw value, zero-extended. An output reads 0 unless its slave is in OP (outputs valid):
@@ -38,6 +39,14 @@ struct IoPoint {
     int64_t get_signed(Segment& seg) const noexcept; // sign-extended from loc.bits
     bool bit(Segment& seg, unsigned n) const noexcept { return get(seg) >> n & 1; }
     void set(Segment& seg, uint64_t v) const noexcept; // truncated to loc.bits
+    // Samples per cycle behind this point: the terminal's factor for an oversampling channel, else 1.
+    unsigned samples(Segment& seg) const noexcept;
+    // Sample k (0-based) of an oversampling channel: the samples follow each other in the SM.
+    IoPoint sample(unsigned k) const noexcept {
+        IoPoint p = *this;
+        p.loc.bit += k * loc.bits;
+        return p;
+    }
 };
 
 // Binds `entry` of the slave at `position`; throws Error naming both if there is no such entry.

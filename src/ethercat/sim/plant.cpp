@@ -151,8 +151,16 @@ void Plant::step(Segment& seg) noexcept {
         for (auto& s : st.switches) s.update(seg, st.position());
     }
     t_ += dt;
-    for (auto& s : signals) s.channel->set_volts(seg, s.volts(t_, rng_), dt > 0);
-    for (auto& w : wires) w.to.set(seg, w.from.get(seg));
+    for (auto& s : signals) {
+        // An oversampling channel takes its n samples at its SYNC0 events across the step.
+        unsigned n = s.channel->samples(seg);
+        for (unsigned k = 0; k < n; ++k)
+            s.channel->set_volts(seg, s.volts(t_ - dt + dt * double(k + 1) / double(n), rng_), dt > 0, k);
+    }
+    for (auto& w : wires) {
+        unsigned n = std::min(w.from.samples(seg), w.to.samples(seg)); // oversampled ends: every sample
+        for (unsigned k = 0; k < n; ++k) w.to.sample(k).set(seg, w.from.sample(k).get(seg));
+    }
     if (dt > 0)
         for (auto& c : cycle_counters) c.update(seg);
     for (auto& l : latches) l.update(seg);

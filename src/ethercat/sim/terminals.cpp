@@ -264,11 +264,11 @@ AnalogInputChannel::AnalogInputChannel(Segment& seg, int slave, const std::strin
         status_ = bind_optional(seg, slave, "status" + channel_of(entry));
 }
 
-void AnalogInputChannel::set_volts(Segment& seg, double volts, bool new_sample) noexcept {
+void AnalogInputChannel::set_volts(Segment& seg, double volts, bool new_sample, unsigned k) noexcept {
     double d = volts * digits_per_volt_;
     bool over = d > 32767.0, under = d < -32768.0;
     int64_t digits = std::isfinite(d) ? std::llround(std::clamp(d, -32768.0, 32767.0)) : 0;
-    value_.set(seg, uint64_t(digits));
+    value_.sample(k).set(seg, uint64_t(digits));
     if (!status_.bound()) return;
     if (new_sample) toggle_ = !toggle_;
     uint16_t st = 0;

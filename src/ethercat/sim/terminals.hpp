@@ -4,7 +4,7 @@
 //             and setpoints into a DriveCommand for the plant and report status back;
 //   encoders  turn a plant position into counter values (incremental or absolute, set counter);
 //   analog    inputs turn volts into digits with under/overrange status;
-//   EL3702    cycle counters; EL1252 time stamps of input edges.
+//   EL3702    cycle counters, n samples per cycle (oversampling); EL1252 time stamps of input edges.
 // The plant (plant.hpp) calls these after every frame on the segment's thread; none allocates
 // once built (CoE parameters are read only when a slave enters OP).
 #pragma once
@@ -158,7 +158,9 @@ private:
 class AnalogInputChannel {
 public:
     AnalogInputChannel(Segment& seg, int slave, const std::string& entry, double full_scale = 10);
-    void set_volts(Segment& seg, double volts, bool new_sample) noexcept;
+    // Sample `k` (0-based; > 0 only for an oversampling channel, see samples()).
+    void set_volts(Segment& seg, double volts, bool new_sample, unsigned k = 0) noexcept;
+    unsigned samples(Segment& seg) const noexcept { return value_.samples(seg); }
 
 private:
     IoPoint value_, status_;

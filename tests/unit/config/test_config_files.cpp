@@ -138,7 +138,7 @@ TEST(ConfigFiles, CatalogDirectoryReportsEveryBadFileAndLoadsTheGoodOnes) {
         d + "/c.yaml:3:9: vendor should be an unsigned integer, got '-2'",
         d + "/c.yaml:6:1: unknown key 'foo' in the device (expected one of: type, variant_of, "
             "name, vendor, product, revision, coe, dc_assign_activate, ebus_current_ma, "
-            "sync_managers, rx_pdos, tx_pdos)",
+            "sync_managers, rx_pdos, tx_pdos, oversampling)",
     };
     EXPECT_EQ(e, want) << joined(e);
     EXPECT_EQ(cat.types(), std::vector<std::string>{"B"});

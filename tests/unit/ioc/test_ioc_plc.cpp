@@ -4,6 +4,7 @@
 // against the IOC's buses and axes.
 #include "../temp_dir.hpp"
 #include "../alloc_counter.hpp"
+#include "virtual_ioc.hpp"
 #include "config/ioc_config.hpp"
 #include "ioc/ioc.hpp"
 #include "plc/runtime.hpp"
@@ -25,6 +26,7 @@ namespace {
 const std::string kSource = BEAMCTL_SOURCE_DIR;
 
 using beamctl::test::TempDir;
+using beamctl::test::VirtualIoc;
 
 // A small IOC: two digital terminals wired output 1 -> input 1, and virtual axes.
 std::string ioc_yaml(const std::string& axes, const std::string& plcs, const std::string& extra = "") {
@@ -45,29 +47,6 @@ std::string virtual_axis(int id, const std::string& extra_macros = "") {
            ", AX_NAME: V" + std::to_string(id) + ", DESC: v, LOW: -100, HIGH: 100" + extra_macros + "}}\n";
 }
 
-struct VirtualIoc {
-    rt::VirtualClock clock;
-    std::unique_ptr<ioc::Ioc> ioc;
-    explicit VirtualIoc(const std::string& path) {
-        ioc = std::make_unique<ioc::Ioc>(config::IocConfig::load(path), clock);
-        ioc->bring_up();
-    }
-    void cycles(int n) { ioc->engine().run_cycles(uint64_t(n)); }
-    plc::PlcRuntime& plcs() { return *ioc->plcs().runtime(); }
-    double stat(std::size_t plc, const std::string& name) {
-        const double* v = plcs().static_variable(plc, name);
-        if (!v) throw std::runtime_error("no static " + name);
-        return *v;
-    }
-    motion::Axis& axis(const std::string& name) {
-        int i = ioc->axes().find(name);
-        if (i < 0) throw std::runtime_error("no axis " + name);
-        return ioc->axes().group()->axis(std::size_t(i));
-    }
-    void send(const std::string& name, motion::AxisCommand c) {
-        ASSERT_NE(ioc->axes().send(std::size_t(ioc->axes().find(name)), c), 0u);
-    }
-};
 
 } // namespace
 
