@@ -171,7 +171,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -366,6 +366,13 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         if (auto d = as.required("dir", " (the directory of the .sav files)").string()) e.dir = resolve(dir, *d);
         e.period_s = as["period_s"].number(between(0.1, 86400)).value_or(e.period_s);
         cfg.autosave = e;
+    }
+    if (YamlNode pv = root["pvt"]; pv.keys({"trigger", "trigger_duration_s"}) && pv) {
+        PvtEntry e;
+        e.where = pv.where();
+        e.trigger = pv["trigger"].string().value_or("");
+        e.trigger_duration_s = pv["trigger_duration_s"].number(between(0.0001, 3600)).value_or(e.trigger_duration_s);
+        cfg.pvt = e;
     }
     rd.take_errors(errors);
     return cfg;

@@ -157,6 +157,14 @@ struct AutosaveEntry {
     std::string where;   // file:line:col of the entry
 };
 
+// PVT profile moves (docs/motion.md): `pvt: {trigger: ec0.s2.binaryOutput01, trigger_duration_s: 0.1}`,
+// ecmccfg's pvtControllerConfig.cmd TRG_EC_ENTRY and TRG_DUR_S.
+struct PvtEntry {
+    std::string trigger;             // an output bit pulsed at each profile trigger ("": none)
+    double trigger_duration_s = 0.1; // [s] high time of a pulse
+    std::string where;
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -178,6 +186,7 @@ struct IocConfig {
     std::string acf;                 // resolved path
     std::string acf_where;           // file:line:col of `acf`
     std::optional<AutosaveEntry> autosave;
+    std::optional<PvtEntry> pvt;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

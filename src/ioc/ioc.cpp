@@ -327,6 +327,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
+    pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
     for (const auto& d : cfg_.db) {
         db_.load(pv::load_db_file(d.file, d.macros));
         try {
@@ -645,6 +646,7 @@ void Ioc::bring_up() {
         },
         *engine_);
     kinematics_->bind();
+    pvt_->bind(*engine_, registry_);
     std::vector<registry::BoundSignal> bus_ok;
     for (auto& b : buses_) {
         std::string why;
@@ -683,6 +685,7 @@ void Ioc::bring_up() {
 void Ioc::publish() {
     axes_->publish();
     kinematics_->publish();
+    pvt_->publish();
     plcs_->publish();
     storages_->publish();
     engine_stats_ = engine_->stats(); // read by the engine items' device support

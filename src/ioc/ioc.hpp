@@ -15,6 +15,7 @@
 #include "ioc/kinematics.hpp"
 #include "ioc/memmaps.hpp"
 #include "ioc/plcs.hpp"
+#include "ioc/pvt.hpp"
 #include "ioc/storages.hpp"
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
@@ -56,6 +57,7 @@ public:
     IocPlcs& plcs() { return *plcs_; }
     IocStorages& storages() { return *storages_; }
     IocKinematics& kinematics() { return *kinematics_; }
+    IocPvt& pvt() { return *pvt_; }
     // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
     // (`beamctl signals`). Frozen once the IOC is built.
     const registry::Registry& signals() const { return registry_; }
@@ -111,6 +113,7 @@ private:
     std::unique_ptr<IocMemMaps> memmaps_;   // before plcs_ too
     std::unique_ptr<IocPlcs> plcs_;
     std::unique_ptr<IocKinematics> kinematics_;
+    std::unique_ptr<IocPvt> pvt_; // profile moves of the axes with epics.motorRecord.pvt
     bool brought_up_ = false;
     std::unique_ptr<pv::Autosave> autosave_; // ioc.yaml autosave:
     std::string shell_socket_;

@@ -122,6 +122,16 @@ void Axis::start_stop(double d) noexcept {
         homing_.abort();
         seq_ = Seq::Stopping;
     }
+    if (seq_ == Seq::Pvt) { // a profile stopped is one that ended short; ramp down from where it is
+        st_.move_failed = true;
+        pvt_ = nullptr;
+        const TrajectoryState here = traj_.state();
+        TrajectoryLimits l = p_.trajectory;
+        l.velocity = std::fabs(here.velocity);
+        seq_ = Seq::Stopping;
+        if (!(l.velocity > 0) || !(l.acceleration > 0) || traj_.move_velocity(here.velocity, l) == TrajectoryResult::InvalidLimits)
+            traj_.reset({here.position, 0, 0});
+    }
     if (!traj_.busy()) {
         if (seq_ != Seq::Idle) {
             st_.target_pos = traj_.state().position;
@@ -159,7 +169,7 @@ double Axis::hold_at_limits(double x) noexcept {
 
 // A limit or interlock stops the motion in progress: it ends short (move_failed).
 void Axis::interlock_stop() noexcept {
-    if (seq_ == Seq::Moving || seq_ == Seq::Homing) st_.move_failed = true;
+    if (seq_ == Seq::Moving || seq_ == Seq::Homing || seq_ == Seq::Pvt) st_.move_failed = true;
     start_stop(decel());
 }
 
@@ -218,6 +228,32 @@ void Axis::abort_motion(uint32_t id, Interlock why) noexcept {
     start_stop(emergency_decel());
 }
 
+uint32_t Axis::start_pvt(const PvtPath* path, double offset) noexcept {
+    bool enabled = p_.virtual_axis ? enable_req_ : drive_.enabled();
+    if (!path || path->points().size() < 2 || !std::isfinite(offset)) return error_id::kVelocityZero;
+    if (st_.error_id) return st_.error_id;
+    if (!enabled || !enable_req_) return error_id::kNotEnabled;
+    if (seq_ != Seq::Idle || has_pending_) return error_id::kBusy;
+    if (traj_source_ != 0) return error_id::kTrajSourceNotInternal;
+    if (vars_.blockcom != 0) return error_id::kBlockCom;
+    pvt_ = path;
+    pvt_t_ = 0;
+    pvt_seg_ = 0;
+    pvt_offset_ = offset;
+    seq_ = Seq::Pvt;
+    tag_ = 0;
+    st_.command = CommandType::MovePvt;
+    st_.target_pos = path->points().back().p + offset;
+    st_.move_failed = false;
+    st_.warning_id = 0;
+    st_.last_interlock = Interlock::None;
+    st_.busy = true;
+    st_.at_target = false;
+    move_time_ = 0;
+    stall_wait_ = -1;
+    return 0;
+}
+
 uint32_t Axis::command(const AxisCommand& c) noexcept {
     // A refused command finishes at once; its reason is the axis warning, or for error ids
     // (ECMC setErrorID) the latched axis error, which also stops a running move.
@@ -236,6 +272,7 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
         enable_req_ = c.on;
         st_.enable_cmd = c.on;
         if (!c.on && seq_ != Seq::Idle) { // disabling drops the command at once (no ramp)
+            if (seq_ == Seq::Pvt) st_.move_failed = true, pvt_ = nullptr;
             seq_ = Seq::Idle;
             finish(tag_);
         }
@@ -277,6 +314,11 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     default: break;
     }
     // Motion commands. Homing 15/25 (set position) works without enable.
+    if (seq_ == Seq::Pvt) { // a profile runs (Halt/Stop end it): refused without touching it
+        finish(c.tag);
+        if (c.tag) st_.refused_tag = c.tag;
+        return error_id::kBusy;
+    }
     if (vars_.blockcom != 0) return refuse(error_id::kBlockCom); // ECMC: latched as the axis error
     if (st_.error_id) return refuse(st_.error_id);
     bool allowed = c.type == CommandType::Home           ? p_.allow_homing
@@ -778,8 +820,22 @@ void Axis::run(double dt) noexcept {
         seq_ = Seq::Idle;
         finish(tag_);
     }
+    if (seq_ == Seq::Pvt) { // the profile gives the setpoint, one cycle further each cycle
+        pvt_t_ += dt;
+        double p = 0, v = 0, a = 0;
+        pvt_->eval(pvt_t_, pvt_seg_, p, v, a);
+        traj_.reset({p + pvt_offset_, v, a});
+        if (pvt_t_ >= pvt_->end_time()) {
+            traj_.reset({p + pvt_offset_, 0, 0});
+            st_.target_pos = p + pvt_offset_;
+            seq_ = Seq::Idle;
+            pvt_ = nullptr;
+            finish(tag_);
+        }
+    }
     if (!enabled && seq_ != Seq::Idle) { // a disabled axis does not move: the command ends
         if (seq_ == Seq::Homing) homing_.abort();
+        if (seq_ == Seq::Pvt) pvt_ = nullptr;
         if (seq_ != Seq::Stopping) st_.move_failed = true;
         seq_ = Seq::Idle;
         finish(tag_);

@@ -16,6 +16,7 @@
 #include "motion/drive.hpp"
 #include "motion/encoder.hpp"
 #include "motion/homing.hpp"
+#include "motion/pvt.hpp"
 #include "motion/trajectory.hpp"
 #include "registry/signal.hpp"
 
@@ -169,6 +170,7 @@ struct AxisIo {
 
 enum class CommandType : uint8_t {
     None = 0, MoveVelocity = 1, MoveRelative = 2, MoveAbsolute = 3, Home = 10,
+    MovePvt = 9,     // a PVT path (Axis::start_pvt; ECMC_CMD_MOVEPVTABS), never sent as a command
     Halt = 20,       // ramp down with the command's (or configured) deceleration
     Stop = 21,       // ramp down with the emergency deceleration
     Power = 22,      // enable (on) or disable
@@ -258,6 +260,13 @@ public:
     // kinematics group stop together, at once, when one of them reaches a limit (the geometry
     // holds: a slit's centre does not shift). Released when the group is at rest.
     void hold_external(bool on) noexcept { ext_hold_ = on; }
+    // RT: follows `path` (plus `offset`) from its time 0, one cycle at a time, from where the
+    // setpoint is (the caller moved the axis to path->start_position() + offset first). Refused
+    // (the id returned, nothing latched) unless enabled, idle, without error, on its own
+    // trajectory. The path must stay valid until in_pvt() is false. Limits, lag, errors, Halt and
+    // Stop end it with a ramp from where it is and move_failed set; disabling ends it at once.
+    [[nodiscard]] uint32_t start_pvt(const PvtPath* path, double offset) noexcept;
+    bool in_pvt() const noexcept { return seq_ == Seq::Pvt; }
     // RT: the trajectory's velocity, acceleration, deceleration, jerk for the next moves (ECMC
     // mc_set_traj_*); a value <= 0 or not finite leaves that one as it is.
     void set_trajectory_limits(double v, double a, double d, double j) noexcept;
@@ -306,7 +315,7 @@ public:
     Trajectory& trajectory() noexcept { return traj_; }
 
 private:
-    enum class Seq : uint8_t { Idle, Moving, Stopping, Homing };
+    enum class Seq : uint8_t { Idle, Moving, Stopping, Homing, Pvt };
     void read_inputs() noexcept;
     void take_variables() noexcept;    // PLC writes -> commands, sources, interlocks
     void publish_variables() noexcept; // status -> ax<n>.* variables
@@ -338,6 +347,9 @@ private:
     bool plc_ilock_fwd_ = false, plc_ilock_bwd_ = false; // motion blocked by PLC interlocks
 
     Seq seq_ = Seq::Idle;
+    const PvtPath* pvt_ = nullptr; // Seq::Pvt: the path, its time [s], segment cursor, offset
+    double pvt_t_ = 0, pvt_offset_ = 0;
+    std::size_t pvt_seg_ = 0;
     uint64_t tag_ = 0;       // of the running command
     bool enable_req_ = false;
     bool was_enabled_ = false;
