@@ -382,6 +382,38 @@ void BM_DsAppend_plc(benchmark::State& state) {
 }
 BENCHMARK(BM_DsAppend_plc)->Arg(0)->Arg(1);
 
+// Memory maps (an EL3702 channel at oversampling 100: 100 INT16 samples), from PLC code: one
+// `ec_mm_append_to_ds(0, 0)` per scan (arg 0) or a loop of 100 `ec_get_mm_data(0, i)` (arg 1);
+// per sample.
+void BM_MemMap_plc(benchmark::State& state) {
+    std::vector<uint8_t> image(256, 0);
+    for (int i = 0; i < 100; ++i) image[std::size_t(2 * i)] = uint8_t(i);
+    beamctl::registry::MemMap mm;
+    mm.name = "ec0.s1.mm.analogInputArray01";
+    mm.first = beamctl::registry::BoundSignal{image.data(), 0, 16, true, -1};
+    mm.count = 100;
+    mm.type = beamctl::registry::ecmc_data_type("INT16");
+    beamctl::daq::DataStorage d(0, 1000, beamctl::daq::BufferType::Ring);
+    beamctl::plc::PlcRuntime::Options o;
+    o.storages = {&d};
+    o.memmaps = {&mm};
+    beamctl::plc::PlcRuntime rt(o);
+    beamctl::plc::PlcSource src;
+    src.file = "mm.plc";
+    src.text = state.range(0) == 0 ? "ec_mm_append_to_ds(0, 0);\n"
+                                   : "static.s := 0;\nfor (var i := 0; i < 100; i += 1) { static.s += ec_get_mm_data(0, i); };\n";
+    rt.add(src);
+    uint64_t cycle = 0;
+    for (auto _ : state) {
+        rt.run(beamctl::rt::CycleInfo{cycle++, 0, 1000000});
+        benchmark::ClobberMemory();
+    }
+    if (state.range(0) == 0 && d.appended() != 100 * cycle) state.SkipWithError("values were lost");
+    state.counters["ns_per_sample"] = benchmark::Counter(100.0 * double(state.iterations()),
+                                                         benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_MemMap_plc)->Arg(0)->Arg(1);
+
 } // namespace
 
 int main(int argc, char** argv) {

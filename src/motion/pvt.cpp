@@ -235,8 +235,8 @@ void PvtController::run(const rt::CycleInfo&) noexcept {
                 break;
             }
         if (st_ != State::WaitAtStart) break;
-        for (std::size_t k = 0; k < job_.n; ++k) seg_[k] = 0;
         t_ = 0;
+        point_ = 0;
         st_ = State::Executing;
         break;
     }
@@ -259,9 +259,8 @@ void PvtController::run(const rt::CycleInfo&) noexcept {
         }
         if (st_ != State::Executing) break;
         const PvtPath& p = *job_.axes[0].path;
-        int32_t cp = 0;
-        while (std::size_t(cp) < p.real_points() && t_ >= p.point_time(std::size_t(cp))) ++cp;
-        current_point_.store(cp, std::memory_order_relaxed);
+        while (point_ < p.real_points() && t_ >= p.point_time(point_)) ++point_; // cursor: t only grows
+        current_point_.store(int32_t(point_), std::memory_order_relaxed);
         pulses_and_readbacks();
         if (!running) finish(Result::Success);
         break;

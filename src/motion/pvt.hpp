@@ -131,7 +131,7 @@ private:
     Result pending_result_ = Result::Undefined;
     double t_ = 0, waited_ = 0;
     std::array<double, kMaxAxes> offset_{}, start_{};
-    std::array<std::size_t, kMaxAxes> seg_{};
+    std::size_t point_ = 0;      // points the path has passed (CurrentPoint)
     std::size_t next_point_ = 0; // readback per point: the next point to sample at
     uint32_t pulse_id_ = 0;  // pulses emitted
     double high_until_ = 0;  // the trigger output is high until this path time [s]
