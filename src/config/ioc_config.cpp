@@ -340,7 +340,9 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     }
     if (YamlNode bridges = root["bridges"]; bridges.keys({"rcp"})) {
         if (YamlNode r = bridges["rcp"];
-            r.keys({"listen", "port", "prefix", "timeout_s", "db_out", "pv_pattern", "motor_fields"}) && r) {
+            r.keys({"listen", "port", "prefix", "timeout_s", "db_out", "pv_pattern", "motor_fields", "machines", "allow",
+                    "max_applications", "max_objects", "max_model_changes_per_minute"}) &&
+            r) {
             RcpBridgeEntry e;
             e.prefix = r["prefix"].string().value_or(cfg.prefix + "RCP:");
             e.listen = r["listen"].string().value_or(e.listen);
@@ -349,6 +351,18 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             if (auto o = r["db_out"].string()) e.db_out = resolve(dir, *o);
             e.pv_pattern = r["pv_pattern"].string().value_or("");
             e.motor_fields = r["motor_fields"].string_pairs();
+            for (const YamlNode& m : r["machines"].list()) {
+                if (!m.keys({"name", "address"})) continue;
+                auto name = m.required("name", " (the application name its beacons carry)").string();
+                auto addr = m.required("address", " (its IPv4 address or network, e.g. 10.0.3.7)").string();
+                if (name && addr) e.machines.emplace_back(*name, *addr);
+            }
+            for (const YamlNode& a : r["allow"].list())
+                if (auto t = a.string()) e.allow.push_back(*t);
+            e.max_applications = std::size_t(r["max_applications"].unsigned_integer(1000).value_or(e.max_applications));
+            e.max_objects = std::size_t(r["max_objects"].unsigned_integer(255).value_or(e.max_objects));
+            e.max_model_changes_per_minute =
+                std::size_t(r["max_model_changes_per_minute"].unsigned_integer(100000).value_or(e.max_model_changes_per_minute));
             e.where = r.where();
             cfg.rcp = e;
         }
@@ -376,6 +390,12 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     }
     rd.take_errors(errors);
     return cfg;
+}
+
+std::vector<std::pair<int, std::string>> positions_and_types(const BusConfig& bc) {
+    std::vector<std::pair<int, std::string>> v;
+    for (const auto& s : bc.slaves) v.emplace_back(s.position, s.type);
+    return v;
 }
 
 } // namespace beamctl::config

@@ -110,7 +110,7 @@ struct PluginEntry {
 
 // The UDP bridge to rapid-control-prototyping machines (`bridges: rcp:`; docs/rcp.md).
 struct RcpBridgeEntry {
-    std::string listen = "0.0.0.0"; // IPv4 address the bridge's sockets bind to
+    std::string listen;             // IPv4 address the sockets bind to; "": chosen (BridgeConfig)
     uint16_t port = 18065;          // beacon port (data is accepted on it too)
     std::string prefix;             // PV prefix; default: the IOC prefix + "RCP:"
     double timeout_s = 3;           // [s] silence before an application's PVs go INVALID/COMM
@@ -119,6 +119,10 @@ struct RcpBridgeEntry {
     // Fields of every generated motor record, added to (or replacing) the bridge's defaults,
     // e.g. {DHLM: 45, DLLM: -45}: the protocol does not carry limits.
     std::vector<std::pair<std::string, std::string>> motor_fields;
+    // Who may talk to the bridge and how much (docs/rcp.md, "Who may talk to the bridge").
+    std::vector<std::pair<std::string, std::string>> machines; // {application name, address or network}
+    std::vector<std::string> allow;                            // networks
+    std::size_t max_applications = 32, max_objects = 255, max_model_changes_per_minute = 30;
     std::string where;
 };
 
@@ -198,6 +202,9 @@ struct IocConfig {
     static IocConfig load(const std::string& path, ErrorList& errors, const MacroMap& macros = {});
     static IocConfig parse(const std::string& text, const std::string& path, ErrorList& errors);
 };
+
+// The slaves of a bus as {position, catalog type}.
+std::vector<std::pair<int, std::string>> positions_and_types(const BusConfig& bc);
 
 // The IOC file's text with its macro references expanded, as `beamctl run -m NAME=VALUE` asks:
 // $(NAME) and ${NAME} take the value given in `macros`, $(NAME=default) that value or else the

@@ -77,6 +77,24 @@ public:
     void drain_changes() noexcept;
     uint64_t writes_dropped() const { return writes_dropped_.load(); }
 
+    // The bus as its users (the IOC, its records, axes and PLCs) see it; the master behind it is
+    // not theirs to reach (a scanner client will stand behind the same calls). Non-RT; the layout
+    // (slaves, signals, bus_bytes) is fixed once bring_up() returned.
+    const std::vector<SlaveInfo>& slaves() const { return master_->slaves(); }
+    const std::vector<SignalInfo>& signals() const { return master_->signals(); }
+    const SignalInfo* find_signal(std::string_view name) const { return master_->find_signal(name); }
+    // A signal bound to the image the cycle exchanges (RT code reads and writes it).
+    registry::BoundSignal bind(std::string_view name, int bit = -1) { return master_->bind(name, bit); }
+    std::size_t bus_bytes() const { return master_->bus_bytes(); } // exchanged with the slaves (then the master's own words)
+    SlaveHealth slave_health(std::size_t i) const { return master_->slave_health(i); }
+    std::string slave_last_error(std::size_t i) const { return master_->slave_last_error(i); }
+    uint64_t health_version() const { return master_->health_version(); }
+    // Before bring_up(): refuse to start with a configured slave missing or failing.
+    void set_strict(bool strict) { master_->set_strict(strict); }
+    // Shutdown, while the cycle still runs: the slaves taking part to SAFEOP.
+    void to_safe_op() { master_->to_safe_op(); }
+
+    // The master itself: for this bus's stages and for tests of the master's own behaviour.
     Master& master() { return *master_; }
     int id() const { return id_; }
     const char* link_kind() const { return link_->kind(); }

@@ -131,17 +131,17 @@ private:
             return ok;
         }
         case Item::LinkUp: return s.link_up;
-        case Item::SlaveCounter: return double(bus_->master().slaves().size());
+        case Item::SlaveCounter: return double(bus_->slaves().size());
         case Item::SlavesResponding: return s.link_up ? std::max(s.responding, 0) : 0;
         case Item::SlavesOp: {
             int n = 0;
             for (uint8_t v : s.slave_valid) n += v;
             return n;
         }
-        case Item::SlaveState: return double(int(bus_->master().slave_health(std::size_t(slave_)).state));
-        case Item::SlaveLost: return bus_->master().slave_health(std::size_t(slave_)).lost;
-        case Item::SlaveReconf: return bus_->master().slave_health(std::size_t(slave_)).reconfigured;
-        case Item::SlaveErrorId: return bus_->master().slave_health(std::size_t(slave_)).error_id;
+        case Item::SlaveState: return double(int(bus_->slave_health(std::size_t(slave_)).state));
+        case Item::SlaveLost: return bus_->slave_health(std::size_t(slave_)).lost;
+        case Item::SlaveReconf: return bus_->slave_health(std::size_t(slave_)).reconfigured;
+        case Item::SlaveErrorId: return bus_->slave_health(std::size_t(slave_)).error_id;
         case Item::Wc: return s.wkc;
         case Item::WcExpected: return s.expected_wkc;
         case Item::WcComplete: return s.wkc_ok;

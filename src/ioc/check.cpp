@@ -95,14 +95,7 @@ public:
                 // The plant against the bus as the IOC builds it: its slaves in position order,
                 // an EK1100 in every gap.
                 ethercat::sim::Segment seg;
-                int last = -1;
-                for (const auto& s : bc.slaves) last = std::max(last, s.position);
-                for (int p = 0; p <= last; ++p) {
-                    std::string type = "EK1100";
-                    for (const auto& s : bc.slaves)
-                        if (s.position == p) type = s.type;
-                    seg.add(*catalog.find(type));
-                }
+                seg.add_configured(config::positions_and_types(bc), catalog);
                 sim.build(seg, catalog, plant_errors);
             }
             errors_.append(plant_errors);

@@ -50,8 +50,8 @@ class EcLinkDevice : public pv::LinkDevice {
 public:
     EcLinkDevice(ethercat::Bus& bus, const ethercat::SignalInfo& sig, int bit, int watch)
         : bus_(bus), sig_(sig), bit_(bit), watch_(watch) {
-        const auto& sl = bus.master().slaves();
-        for (std::size_t i = 0; i < sl.size() && sig.bit_offset / 8 < bus.master().bus_bytes(); ++i)
+        const auto& sl = bus.slaves();
+        for (std::size_t i = 0; i < sl.size() && sig.bit_offset / 8 < bus.bus_bytes(); ++i)
             if (sl[i].position == sig.slave) slave_ = int(i); // an entry exchanged on the bus
     }
     bool read(double& v) override {
@@ -278,14 +278,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
         if (bc.link.type == "sim") {
             // The simulated segment has exactly the configured slaves; gaps get an EK1100.
             b.segment = std::make_unique<ethercat::sim::Segment>();
-            int last = -1;
-            for (const auto& s : bc.slaves) last = std::max(last, s.position);
-            for (int p = 0; p <= last; ++p) {
-                std::string type = "EK1100";
-                for (const auto& s : bc.slaves)
-                    if (s.position == p) type = s.type;
-                b.segment->add(*catalog_.find(type));
-            }
+            b.segment->add_configured(config::positions_and_types(bc), catalog_);
             // The plant: the file's stages, signals and wiring; every drive it does not name
             // moves a default stage (also without a plant file).
             ethercat::sim::SimConfig sim;
@@ -312,7 +305,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
             link = std::make_unique<ethercat::UdpLink>(bc.link.host, bc.link.port);
         }
         b.bus = std::make_unique<ethercat::Bus>(bc.id, std::move(link), std::move(slaves), catalog_);
-        b.bus->master().set_strict(bc.strict);
+        b.bus->set_strict(bc.strict);
         b.bus->add_stages(*engine_);
         buses_.push_back(std::move(b));
     }
@@ -344,7 +337,7 @@ bool Ioc::ethercat_report(const std::vector<std::string>& argv, std::ostream& os
         ethercat::Bus& bus = *buses_[bi].bus;
         if (argv.size() > 1 && argv[1] != std::to_string(bus.id())) continue;
         any = true;
-        ethercat::Master& m = bus.master();
+        ethercat::Bus& m = bus;
         const ethercat::BusSnapshot& s = bus.looked();
         int valid = 0;
         for (uint8_t v : s.slave_valid) valid += v;
@@ -418,7 +411,7 @@ void Ioc::declare_bus_signals() {
         }
         ethercat::Bus* busp = buses_[i].bus.get();
         registry_.set_binder(bus + ".", [busp](const registry::Signal& s, int bit, std::string& why) {
-            const ethercat::SignalInfo* si = busp->master().find_signal(s.name);
+            const ethercat::SignalInfo* si = busp->find_signal(s.name);
             if (!si) {
                 why = SB() << "no signal '" << s.name << "' on bus " << busp->id()
                            << " after bring-up (not in the PDO assignment the slave reported)";
@@ -428,7 +421,7 @@ void Ioc::declare_bus_signals() {
                 why = SB() << "'" << s.name << "' has " << int(si->bits) << " bits, no bit " << bit;
                 return registry::BoundSignal{};
             }
-            return busp->master().bind(s.name, bit);
+            return busp->bind(s.name, bit);
         });
     }
 }
@@ -599,7 +592,7 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         return devices_.back().get();
     }
     for (auto& b : buses_)
-        for (const auto& si : b.bus->master().signals()) {
+        for (const auto& si : b.bus->signals()) {
             if (si.name != sig->name) continue;
             if (output && !si.output) return fail(SB() << "'" << sig->name << "' is an input; an output link cannot write it");
             if (entry_pv && !output) r.val_read_only = true; // an input's PV: the bus writes it
@@ -702,7 +695,7 @@ void Ioc::publish() {
         set_array_if_changed(db_, *b.lat_hist, hist, rt::kLatencyBuckets);
         set_array_if_changed(db_, *b.lat_edges, edges, rt::kLatencyBuckets);
         // the slaves' last errors in words (-ErrMsg), when the health pass changed any
-        ethercat::Master& m = b.bus->master();
+        ethercat::Bus& m = *b.bus;
         if (uint64_t v = m.health_version(); v != b.health_seen) {
             b.health_seen = v;
             for (std::size_t i = 0; i < b.err_msg.size() && i < m.slaves().size(); ++i) {
@@ -754,6 +747,11 @@ int Ioc::run() {
         bc.port = cfg_.rcp->port;
         bc.prefix = cfg_.rcp->prefix;
         bc.timeout_s = cfg_.rcp->timeout_s;
+        for (const auto& [name, addr] : cfg_.rcp->machines) bc.machines.push_back({name, addr});
+        bc.allow = cfg_.rcp->allow;
+        bc.max_applications = cfg_.rcp->max_applications;
+        bc.max_objects = cfg_.rcp->max_objects;
+        bc.max_model_changes_per_minute = cfg_.rcp->max_model_changes_per_minute;
         bc.db_out = cfg_.rcp->db_out;
         if (!cfg_.rcp->pv_pattern.empty()) bc.pv_pattern = cfg_.rcp->pv_pattern;
         for (const auto& fv : cfg_.rcp->motor_fields) { // replaces a default of the same field
@@ -873,7 +871,7 @@ void Ioc::shutdown(LoopSignals* signals) {
     again();
     for (auto& b : buses_) {
         try {
-            if (engine_->running()) b.bus->master().to_safe_op();
+            if (engine_->running()) b.bus->to_safe_op();
         } catch (const Error& e) {
             LOG_WARN(lg, "stopping: ec" << b.bus->id() << ": " << e.what());
         }

@@ -119,7 +119,7 @@ void IocMemMaps::bind(registry::Registry& reg, const std::vector<ethercat::Bus*>
         ethercat::Bus& bus = *buses_.at(it.bus);
         it.sig.clear();
         for (uint32_t k = 0; k < it.map.count; ++k) {
-            const ethercat::SignalInfo* si = bus.master().find_signal(it.elements[k]);
+            const ethercat::SignalInfo* si = bus.find_signal(it.elements[k]);
             uint32_t want = it.map.first.bit_offset + k * it.map.first.bits;
             if (!si || si->bit_offset != want || si->bits != it.map.first.bits)
                 throw Error(SB() << "memory map " << it.map.name << ": " << it.elements[k]
@@ -138,7 +138,7 @@ std::vector<registry::MemMap*> IocMemMaps::memmaps() {
 
 bool IocMemMaps::fresh(const Item& it, const ethercat::BusSnapshot& s, std::size_t& slave_index) const {
     if (!s.link_up || !s.wkc_ok) return false;
-    const auto& sl = buses_[it.bus]->master().slaves();
+    const auto& sl = buses_[it.bus]->slaves();
     for (std::size_t i = 0; i < sl.size(); ++i)
         if (sl[i].position == it.slave) slave_index = i;
     return slave_index < s.slave_valid.size() && s.slave_valid[slave_index];

@@ -41,6 +41,17 @@ private:
     uint64_t t_ = 1'000'000'000;
 };
 
+// An external cycle source: the tick of a bus scanner whose cycle an IOC's engine follows. The
+// engine waits for the next tick instead of sleeping on its own schedule.
+// Threading: wait() is called on the RT thread only.
+class TickSource {
+public:
+    virtual ~TickSource() = default;
+    // Waits for the next tick until `deadline_ns` (engine clock). True with the tick's time
+    // [ns, the engine clock's time base] when one came; false at the deadline.
+    virtual bool wait(uint64_t deadline_ns, uint64_t& tick_ns) noexcept = 0;
+};
+
 // Stage order within a cycle (ARCHITECTURE.md §2).
 enum class StageOrder : int { BusReceive = 1, Axes = 2, GeneralPlcs = 3, Triggers = 4, BusSend = 5, Publish = 6 };
 
@@ -90,6 +101,8 @@ struct EngineStats {
     uint64_t latency_total_ns = 0; // sum of those latencies
     std::array<uint64_t, kLatencyBuckets> latency_hist{}; // counts per bucket of kLatencyEdgesUs
     uint64_t resets = 0;           // resets the RT thread has applied so far
+    uint64_t ticks = 0;            // cycles started by the tick source (Engine::set_tick_source)
+    uint64_t free_run = 0;         // cycles run on the engine's own clock because no tick came
     std::vector<StageStats> stages;
     double latency_mean_ns() const { return latency_samples ? double(latency_total_ns) / double(latency_samples) : 0.0; }
 };
@@ -106,6 +119,15 @@ public:
     // Runs n cycles on the calling thread (virtual time in tests; no sleeping if the clock is
     // virtual). Returns when done.
     void run_cycles(uint64_t n) noexcept;
+    // Before start: cycles follow `tick` (not owned). A cycle starts at each tick, at the tick's
+    // time (wake-up latency is then measured from the tick); when no tick comes within `grace_ns`
+    // after the cycle was due, the engine runs that cycle on its own clock (counted as free_run:
+    // axes decelerate, PVs update) and keeps waiting for ticks, which it follows again when they
+    // return. nullptr: the engine's own schedule.
+    void set_tick_source(TickSource* tick, uint64_t grace_ns) noexcept {
+        tick_ = tick;
+        grace_ns_ = grace_ns;
+    }
     // Starts the RT thread (real time setup logged once); stop() joins it.
     void start();
     void stop();
@@ -141,6 +163,9 @@ private:
     std::array<std::atomic<uint64_t>, kLatencyBuckets> lat_hist_{};
     std::atomic<uint64_t> reset_req_{0}, reset_done_{0};
     uint64_t next_ns_ = 0, last_start_ns_ = 0;
+    TickSource* tick_ = nullptr;
+    uint64_t grace_ns_ = 0;
+    std::atomic<uint64_t> ticks_{0}, free_run_{0};
     std::atomic<bool> running_{false}, stop_{false};
     std::thread thread_;
     std::string rt_setup_;

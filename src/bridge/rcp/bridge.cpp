@@ -8,6 +8,7 @@
 #include <array>
 #include <cerrno>
 #include <cstring>
+#include <ifaddrs.h>
 #include <netinet/in.h>
 #include <sys/epoll.h>
 #include <sys/socket.h>
@@ -32,11 +33,38 @@ sockaddr_in to_sockaddr(const Endpoint& e) {
     return sa;
 }
 
+// The address to listen on when the configuration names none: the local interface on the
+// first machine's network, loopback when only loopback is accepted, else every interface.
+std::string default_listen(const BridgeConfig& cfg) {
+    if (cfg.machines.empty()) return cfg.allow.empty() ? "127.0.0.1" : "0.0.0.0";
+    Ipv4Net m;
+    if (!parse_ipv4_net(cfg.machines[0].address, m)) return "0.0.0.0";
+    ifaddrs* list = nullptr;
+    if (getifaddrs(&list) != 0) return "0.0.0.0";
+    std::string found;
+    for (ifaddrs* i = list; i && found.empty(); i = i->ifa_next) {
+        if (!i->ifa_addr || i->ifa_addr->sa_family != AF_INET || !i->ifa_netmask) continue;
+        uint32_t ip = ntohl(reinterpret_cast<sockaddr_in*>(i->ifa_addr)->sin_addr.s_addr);
+        uint32_t mask = ntohl(reinterpret_cast<sockaddr_in*>(i->ifa_netmask)->sin_addr.s_addr);
+        if ((ip & mask) == (m.ip & mask)) found = ipv4_to_string(ip);
+    }
+    freeifaddrs(list);
+    if (found.empty())
+        LOG_WARN(lg, "no local interface is on the network of machine " << cfg.machines[0].name << " ("
+                                                                         << cfg.machines[0].address
+                                                                         << "): listening on every interface");
+    return found.empty() ? "0.0.0.0" : found;
+}
+
 } // namespace
 
 RcpBridge::RcpBridge(pv::Database& db, EventLoop& loop, BridgeConfig cfg)
     : loop_(loop) {
     cfg.validate();
+    if (cfg.listen_address.empty()) cfg.listen_address = default_listen(cfg);
+    if (cfg.machines.empty() && cfg.allow.empty())
+        LOG_INFO(lg, "accepting RCP beacons and data from loopback only; to accept a prototyping machine, set "
+                     "bridges.rcp.machines: [{name: APP, address: 10.0.3.7}] (or bridges.rcp.allow: [10.0.3.0/24])");
     parse_ipv4(cfg.listen_address, listen_ip_);
     fd_ = open_socket(cfg.port);
     if (fd_ < 0)

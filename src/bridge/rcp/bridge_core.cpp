@@ -41,6 +41,12 @@ bool has_pv(Malformed m, bool per_app) {
            !(per_app && m == Malformed::UnknownApplication);
 }
 
+// Refusals with a Refused-<Reason> PV: every one bridge-wide; per application those that can be
+// told to one (a source not allowed, or an application beyond the limit, is not one of them).
+bool has_refusal_pv(Refusal r, bool per_app) {
+    return !per_app || (r != Refusal::NotAllowed && r != Refusal::TooManyApplications);
+}
+
 pv::DbRecord make_record(const char* type, std::string name,
                          std::vector<std::pair<std::string, std::string>> fields) {
     pv::DbRecord r;
@@ -94,9 +100,42 @@ std::string Endpoint::str() const {
     return ipv4_to_string(ip) + ":" + std::to_string(port);
 }
 
+bool parse_ipv4_net(std::string_view text, Ipv4Net& out) {
+    std::size_t slash = text.find('/');
+    uint32_t ip = 0;
+    if (!parse_ipv4(text.substr(0, slash), ip)) return false;
+    int bits = 32;
+    if (slash != std::string_view::npos) {
+        std::string_view b = text.substr(slash + 1);
+        if (b.empty() || b.size() > 2 || b.find_first_not_of("0123456789") != std::string_view::npos) return false;
+        bits = std::stoi(std::string(b));
+        if (bits > 32) return false;
+    }
+    out.mask = bits == 0 ? 0 : ~uint32_t(0) << (32 - bits);
+    out.ip = ip & out.mask;
+    return true;
+}
+
+std::string Ipv4Net::str() const {
+    int bits = 0;
+    for (uint32_t m = mask; m; m <<= 1) ++bits;
+    return ipv4_to_string(ip) + "/" + std::to_string(bits);
+}
+
+const char* to_string(Refusal r) {
+    switch (r) {
+    case Refusal::NotAllowed: return "NotAllowed";
+    case Refusal::ForeignWriteAddress: return "ForeignWriteAddress";
+    case Refusal::TooManyApplications: return "TooManyApplications";
+    case Refusal::TooManyObjects: return "TooManyObjects";
+    case Refusal::TooManyChanges: return "TooManyChanges";
+    }
+    return "?";
+}
+
 void BridgeConfig::validate() const {
     uint32_t ip;
-    if (!parse_ipv4(listen_address, ip))
+    if (!listen_address.empty() && !parse_ipv4(listen_address, ip))
         throw Error(SB() << "rcp bridge: listen address '" << listen_address
                          << "' should be an IPv4 address such as 0.0.0.0");
     if (!(timeout_s > 0) || !std::isfinite(timeout_s))
@@ -108,6 +147,18 @@ void BridgeConfig::validate() const {
         throw Error(SB() << "rcp bridge: motor_ack_timeout_s should be > 0 (got "
                          << motor_ack_timeout_s << ")");
     if (max_applications == 0) throw Error("rcp bridge: max_applications should be >= 1");
+    if (max_objects == 0 || max_objects > 255) throw Error(SB() << "rcp bridge: max_objects should be 1..255 (got " << max_objects << ")");
+    if (max_model_changes_per_minute == 0) throw Error("rcp bridge: max_model_changes_per_minute should be >= 1");
+    Ipv4Net net;
+    for (std::size_t i = 0; i < machines.size(); ++i) {
+        if (machines[i].name.empty()) throw Error(SB() << "rcp bridge: machines[" << i << "]: name (the application's name) is empty");
+        if (!parse_ipv4_net(machines[i].address, net))
+            throw Error(SB() << "rcp bridge: machines[" << i << "] (" << machines[i].name << "): address '" << machines[i].address
+                             << "' should be an IPv4 address or network such as 10.0.3.7 or 10.0.3.0/24");
+    }
+    for (std::size_t i = 0; i < allow.size(); ++i)
+        if (!parse_ipv4_net(allow[i], net))
+            throw Error(SB() << "rcp bridge: allow[" << i << "]: '" << allow[i] << "' should be an IPv4 network such as 10.0.3.0/24");
     if (pv_pattern.find("<name>") == std::string::npos)
         throw Error(SB() << "rcp bridge: pv_pattern '" << pv_pattern << "' should contain <name>");
 }
@@ -142,6 +193,7 @@ struct BridgeCore::Impl {
         pv::Record *rx = nullptr, *tx = nullptr, *age = nullptr, *online = nullptr,
                    *count = nullptr, *before_beacon = nullptr;
         std::array<pv::Record*, kMalformedReasons> malformed{};
+        std::array<pv::Record*, kRefusals> refused{};
         std::vector<pv::DbRecord> defs;
     };
 
@@ -157,6 +209,7 @@ struct BridgeCore::Impl {
         std::vector<BeaconObject> pending;
         double last_rx_s = 0, last_beacon_s = 0;
         double model_time = 0; // latest RCP timestamp [s], written into our packets
+        std::vector<double> changes_s; // when beacons changed the model, the last minute [s]
         bool online = true;
         Counters counters;
         Diag diag;
@@ -182,6 +235,11 @@ struct BridgeCore::Impl {
     Diag global;
     Counters totals;
     std::array<LogLimit, kMalformedReasons> limits;
+    std::array<LogLimit, kRefusals> refusal_limits;
+    // Who may talk to the bridge (BridgeConfig::machines/allow): parsed once.
+    std::vector<std::pair<std::string, Ipv4Net>> machines;
+    std::vector<Ipv4Net> allow;
+    bool loopback_only = true;
     LogLimit send_limit, refused_limit, early_limit;
     // Data before a beacon: since when it has gone on (-1: not now), and the latest [s].
     double early_first_s = -1, early_last_s = -1;
@@ -201,7 +259,58 @@ struct BridgeCore::Impl {
         : db(d)
         , cfg(std::move(c))
         , send(std::move(s))
-        , clock(std::move(k)) {}
+        , clock(std::move(k)) {
+        for (const auto& m : cfg.machines) {
+            Ipv4Net n;
+            parse_ipv4_net(m.address, n); // validated
+            machines.emplace_back(m.name, n);
+        }
+        for (const auto& a : cfg.allow) {
+            Ipv4Net n;
+            parse_ipv4_net(a, n);
+            allow.push_back(n);
+        }
+        loopback_only = machines.empty() && allow.empty();
+    }
+
+    static bool is_loopback(uint32_t ip) { return (ip >> 24) == 127; }
+    // The source may send anything at all (a machine's address, an allowed network, loopback
+    // when nothing is configured).
+    bool source_allowed(const Endpoint& from) const {
+        if (loopback_only) return is_loopback(from.ip);
+        for (const Ipv4Net& n : allow)
+            if (n.contains(from.ip)) return true;
+        for (const auto& [name, n] : machines)
+            if (n.contains(from.ip)) return true;
+        return false;
+    }
+    // A beacon of `app` from `from`: an allowed network, or a machine of that name there.
+    bool beacon_allowed(std::string_view app, const Endpoint& from) const {
+        if (loopback_only) return is_loopback(from.ip);
+        for (const Ipv4Net& n : allow)
+            if (n.contains(from.ip)) return true;
+        for (const auto& [name, n] : machines)
+            if (name == app && n.contains(from.ip)) return true;
+        return false;
+    }
+
+    void refuse(App* a, Refusal r, const Endpoint& from, std::string_view why) {
+        totals.refused[std::size_t(r)]++;
+        if (a) a->counters.refused[std::size_t(r)]++;
+        LogLimit& l = refusal_limits[std::size_t(r)];
+        if (now < l.next_s) {
+            ++l.suppressed;
+            return;
+        }
+        if (lg.enabled(log::Level::warn)) {
+            SB m;
+            m << "refused a packet from " << from.str() << " (" << to_string(r) << "): " << why;
+            if (l.suppressed) m << " (" << l.suppressed << " more refused for this reason in the last second)";
+            lg.write(log::Level::warn, m.str());
+        }
+        l.next_s = now + 1;
+        l.suppressed = 0;
+    }
 
     ~Impl() {
         for (auto& a : apps) {
@@ -412,6 +521,9 @@ struct BridgeCore::Impl {
             if (has_pv(Malformed(m), per_app))
                 counter(std::string("Malformed-") + to_string(Malformed(m)),
                         std::string("Malformed: ") + to_string(Malformed(m)));
+        for (std::size_t r = 0; r < kRefusals; ++r)
+            if (has_refusal_pv(Refusal(r), per_app))
+                counter(std::string("Refused-") + to_string(Refusal(r)), std::string("Refused: ") + to_string(Refusal(r)));
         // Names too long for a record are left out (the counters stay in totals()/the log);
         // RxCount, the shortest, decides whether the application gets diagnostics at all.
         std::string skipped;
@@ -443,6 +555,9 @@ struct BridgeCore::Impl {
         for (std::size_t m = 0; m < kMalformedReasons; ++m)
             if (has_pv(Malformed(m), per_app))
                 d.malformed[m] = db.find(base + "Malformed-" + to_string(Malformed(m)));
+        for (std::size_t r = 0; r < kRefusals; ++r)
+            if (has_refusal_pv(Refusal(r), per_app))
+                d.refused[r] = db.find(base + "Refused-" + to_string(Refusal(r)));
         for (const auto& r : d.defs) db.find(r.name)->val_read_only = true;
         return true;
     }
@@ -625,9 +740,9 @@ struct BridgeCore::Impl {
     // ---------------------------------------------------------------- beacons
     App* create_app(const std::string& name, const Endpoint& from) {
         if (apps.size() >= cfg.max_applications) {
-            report(nullptr, {Malformed::UnknownApplication, 9}, from,
-                   (SB() << "application " << name << " refused: the limit of "
-                         << cfg.max_applications << " applications is reached")
+            refuse(nullptr, Refusal::TooManyApplications, from,
+                   (SB() << "application " << name << ": the limit of " << cfg.max_applications
+                         << " applications (bridges.rcp.max_applications) is reached")
                        .str());
             return nullptr;
         }
@@ -664,8 +779,39 @@ struct BridgeCore::Impl {
                                                  : app_by_source(from);
             return report(a, {r.reason, r.offset}, from);
         }
+        // Who may announce what, and how much: refused before anything changes.
+        if (!beacon_allowed(beacon.application, from))
+            return refuse(nullptr, Refusal::NotAllowed, from,
+                          (SB() << "application " << beacon.application << " is not configured for this address "
+                                << "(bridges.rcp.machines / allow)")
+                              .str());
         App* a = find_app(beacon.application, from.ip);
+        for (const BeaconObject& o : beacon.objects)
+            if (o.ip_rcp != 0 && o.ip_rcp != from.ip)
+                return refuse(a, Refusal::ForeignWriteAddress, from,
+                              (SB() << "application " << beacon.application << ": object '" << o.name
+                                    << "' asks for writes to " << Endpoint{o.ip_rcp, o.port_rcp}.str()
+                                    << ", not the address its beacons come from")
+                                  .str());
+        std::size_t announced = beacon.objects.size() +
+                                (beacon.continuation && a && a->assembling ? a->pending.size() : 0);
+        if (announced > cfg.max_objects)
+            return refuse(a, Refusal::TooManyObjects, from,
+                          (SB() << "application " << beacon.application << ": " << announced << " objects, more than "
+                                << cfg.max_objects << " (bridges.rcp.max_objects)")
+                              .str());
+        if (a && changes_model(*a)) {
+            auto& c = a->changes_s;
+            c.erase(std::remove_if(c.begin(), c.end(), [&](double t) { return now - t >= 60; }), c.end());
+            if (c.size() >= cfg.max_model_changes_per_minute)
+                return refuse(a, Refusal::TooManyChanges, from,
+                              (SB() << "application " << a->name << ": " << c.size()
+                                    << " beacons changed its objects in the last minute (bridges.rcp.max_model_changes_per_minute)")
+                                  .str());
+            c.push_back(now);
+        }
         if (!a && !(a = create_app(beacon.application, from))) return;
+        if (a->changes_s.empty()) a->changes_s.push_back(now); // its first model
         bool use = true;
         if (beacon.continuation) {
             if (!a->assembling || now - a->assembly_start_s > cfg.continuation_window_s) {
@@ -700,6 +846,16 @@ struct BridgeCore::Impl {
             a->assembly_start_s = now;
             apply_model(*a, cfg.continuation_window_s <= 0);
         }
+    }
+
+    // The beacon in `beacon` lists an object that the application does not have as listed.
+    bool changes_model(const App& a) const {
+        for (const BeaconObject& n : beacon.objects) {
+            const auto& cur = a.objects[n.id];
+            if (!cur || cur->desc.type != n.type || cur->desc.data_type != n.data_type || cur->desc.name != n.name)
+                return true;
+        }
+        return false;
     }
 
     Endpoint resolve(const BeaconObject& d, const Endpoint& from) const {
@@ -994,6 +1150,7 @@ struct BridgeCore::Impl {
         set_if_changed(d.tx, double(c.tx));
         for (std::size_t m = 0; m < kMalformedReasons; ++m)
             set_if_changed(d.malformed[m], double(c.malformed[m]));
+        for (std::size_t r = 0; r < kRefusals; ++r) set_if_changed(d.refused[r], double(c.refused[r]));
         if (a) {
             set_if_changed(d.age, now - a->last_beacon_s);
             set_if_changed(d.online, a->online ? 1 : 0);
@@ -1057,6 +1214,10 @@ struct BridgeCore::Impl {
     void handle(std::span<const uint8_t> p, const Endpoint& from, double t) {
         now = t;
         totals.rx++;
+        if (!source_allowed(from))
+            return refuse(nullptr, Refusal::NotAllowed, from,
+                          loopback_only ? "only loopback is accepted (set bridges.rcp.machines or bridges.rcp.allow)"
+                                        : "not a configured machine or allowed network");
         if (classify(p) == PacketKind::Beacon)
             on_beacon(p, from);
         else

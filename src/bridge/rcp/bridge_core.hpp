@@ -14,7 +14,8 @@
 //     Malformed-<Reason> (ai) for every reason of protocol.hpp but None, NotWritable and
 //     UnknownApplication.
 //   bridge-wide: $(P)RxCount TxCount DataBeforeBeacon (ai), Applications (longin),
-//     Malformed-<Reason> (ai, all but None and NotWritable).
+//     Malformed-<Reason> (ai, all but None and NotWritable), Refused-<Reason> (ai, every Refusal);
+//     per application also Refused-ForeignWriteAddress, -TooManyObjects, -TooManyChanges.
 // Counters and BeaconAge are published once per second by tick(). A PV whose name would be
 // longer than 60 characters is left out (logged); an object whose PV names are taken or too long
 // gets no PVs (logged) and its data is accepted and ignored.
@@ -54,8 +55,31 @@ struct Endpoint {
     std::string str() const; // "127.0.0.1:18065"
 };
 
+// An IPv4 network: `address/bits` ("10.0.3.0/24"; a bare address is /32).
+struct Ipv4Net {
+    uint32_t ip = 0, mask = 0;
+    bool contains(uint32_t a) const { return (a & mask) == (ip & mask); }
+    std::string str() const;
+};
+// Parses "10.0.3.0/24" or "10.0.3.7"; false if it is neither.
+bool parse_ipv4_net(std::string_view text, Ipv4Net& out);
+
+// Why the bridge refused a well-formed packet (issue 19: who may talk to it, and how much).
+enum class Refusal : uint8_t {
+    NotAllowed,          // from an address outside `machines`/`allow` (loopback only when neither)
+    ForeignWriteAddress, // a beacon whose ip_rcp names another host than its own source
+    TooManyApplications, // max_applications reached
+    TooManyObjects,      // a beacon announcing more than max_objects objects
+    TooManyChanges,      // more than max_model_changes_per_minute beacons changing the model
+};
+inline constexpr std::size_t kRefusals = std::size_t(Refusal::TooManyChanges) + 1;
+const char* to_string(Refusal r); // "NotAllowed", ...
+
 struct BridgeConfig {
-    std::string listen_address = "0.0.0.0"; // IPv4 dotted quad the sockets bind to
+    // IPv4 dotted quad the sockets bind to; "" (the default): the local interface on the network
+    // of the first machine when `machines` is set, 127.0.0.1 when neither `machines` nor `allow`
+    // is, else 0.0.0.0 (RcpBridge chooses and logs it).
+    std::string listen_address;
     uint16_t port = kDefaultPort;           // the beacon port (data is accepted on it too)
     std::string prefix;                     // e.g. "DEMO:RCP:"
     double timeout_s = 3;                   // [s] silence before INVALID/COMM
@@ -65,6 +89,21 @@ struct BridgeConfig {
     double continuation_window_s = 0.1; // [s] a beacon and its continuations
     double motor_ack_timeout_s = 0.5;   // [s] see motor_driver.hpp
     std::size_t max_applications = 32;  // beacons of further applications are refused
+    // Who may talk to the bridge. A machine is an application name and the address (or network)
+    // its beacons and data come from; `allow` networks may announce any application. Packets
+    // from anywhere else are refused (counted, logged at most once a second per reason); with
+    // neither set, only loopback is accepted.
+    struct Machine {
+        std::string name;    // the application name its beacons carry
+        std::string address; // "10.0.3.7" or "10.0.3.0/24"
+    };
+    std::vector<Machine> machines;
+    std::vector<std::string> allow; // networks, "10.0.3.0/24"
+    // Bounded resources per application: objects (PVs) one model may announce, and beacons that
+    // change its model (new or changed objects) per minute; beyond them a beacon is refused and
+    // nothing already served changes.
+    std::size_t max_objects = 255;
+    std::size_t max_model_changes_per_minute = 30;
     // Fields of every generated motor record (after the generated DESC/DTYP/OUT).
     std::vector<std::pair<std::string, std::string>> motor_fields = {
         {"MRES", "0.0001"}, {"PREC", "4"}, {"VELO", "1"}, {"ACCL", "0.5"},
@@ -97,6 +136,7 @@ public:
         // Bridge-wide only: well-formed data packets from an address that no application has
         // announced itself from (yet): ignored, not malformed.
         uint64_t before_beacon = 0;
+        std::array<uint64_t, kRefusals> refused{}; // well-formed packets refused, per reason
     };
     struct AppInfo {
         std::string name;

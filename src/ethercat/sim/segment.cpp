@@ -1,8 +1,25 @@
 #include "ethercat/sim/segment.hpp"
 
+#include "core/error.hpp"
+
+#include <algorithm>
+
 #include "ethercat/sii.hpp"
 
 namespace beamctl::ethercat::sim {
+
+void Segment::add_configured(const std::vector<std::pair<int, std::string>>& slaves, const Catalog& catalog) {
+    int last = -1;
+    for (const auto& [pos, type] : slaves) last = std::max(last, pos);
+    for (int p = 0; p <= last; ++p) {
+        std::string type = "EK1100";
+        for (const auto& [pos, t] : slaves)
+            if (pos == p) type = t;
+        const DeviceDesc* d = catalog.find(type);
+        if (!d) throw Error(SB() << "position " << p << ": unknown device type '" << type << "'");
+        add(*d);
+    }
+}
 
 Esc& Segment::add(const DeviceDesc& desc) {
     descs_.push_back(std::make_unique<DeviceDesc>(desc));

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "core/spsc_queue.hpp"
+#include "ethercat/catalog.hpp"
 #include "ethercat/device.hpp"
 #include "ethercat/sim/esc.hpp"
 #include "ethercat/sim/faults.hpp"
@@ -12,6 +13,8 @@
 #include <functional>
 #include <memory>
 #include <random>
+#include <string>
+#include <utility>
 #include <vector>
 
 namespace beamctl::ethercat::sim {
@@ -22,6 +25,10 @@ public:
     Segment() = default;
     // Appends a slave of this device type at the next position; its SII comes from build_sii.
     Esc& add(const DeviceDesc& desc);
+    // Appends the slaves of a configured bus ({position, catalog type}, any order) in position
+    // order, an EK1100 in every position not configured (the segment an IOC's or a check's
+    // simulated bus has). Throws Error for a type the catalog does not have.
+    void add_configured(const std::vector<std::pair<int, std::string>>& slaves, const Catalog& catalog);
     std::size_t size() const { return slaves_.size(); }
     Esc& slave(std::size_t position) { return *slaves_.at(position).esc; }
 

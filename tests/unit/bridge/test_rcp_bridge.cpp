@@ -362,7 +362,9 @@ TEST(RcpBridge, MalformedInputNeverChangesAPv) {
     EXPECT_EQ(h.core->totals().malformed[size_t(Malformed::UnknownApplication)], 0u);
     EXPECT_EQ(h.core->totals().before_beacon, 1u);
     // A beacon refused (its name is taken by another address) is.
-    h.feed(beacon("app", standard()), Endpoint{0x0A000063, 5000});
+    std::vector<BeaconObject> same_names = standard();
+    for (auto& o : same_names) o.ip_rcp = 0; // (naming 10.0.0.2 for writes would be refused first)
+    h.feed(beacon("app", same_names), Endpoint{0x0A000063, 5000});
     EXPECT_EQ(h.core->totals().malformed[size_t(Malformed::UnknownApplication)], 1u);
     h.advance(1);
     EXPECT_EQ(h.get("T:app:Malformed-TypeMismatch"), 3);
@@ -529,7 +531,9 @@ TEST(RcpBridge, ApplicationsAreToldApartByNameAndSource) {
     ASSERT_EQ(h.put("T:b:Z", 1), pv::PutStatus::Ok);
     EXPECT_EQ(h.sent.back().to, (Endpoint{kRcpIp, 19000}));
     // The same name from another machine would clash with the PVs: refused.
-    h.feed(beacon("a", {obj(1, OT::AI, DT::Float64, "X")}), Endpoint{0x0A000003, 5000});
+    BeaconObject other = obj(1, OT::AI, DT::Float64, "X");
+    other.ip_rcp = 0; // writes to its own address (naming 10.0.0.2 would be refused anyway)
+    h.feed(beacon("a", {other}), Endpoint{0x0A000003, 5000});
     EXPECT_EQ(h.core->applications().size(), 2u);
     EXPECT_EQ(h.core->totals().malformed[size_t(Malformed::UnknownApplication)], 1u);
     h.advance(1);
@@ -617,7 +621,9 @@ TEST(RcpBridge, ApplicationLimit) {
     h.announce("a", {obj(1, OT::AI, DT::Float64, "X")});
     h.announce("b", {obj(1, OT::AI, DT::Float64, "X")}, Endpoint{kRcpIp, 5001});
     EXPECT_FALSE(h.exists("T:b:X"));
-    EXPECT_EQ(h.core->totals().malformed[size_t(Malformed::UnknownApplication)], 1u);
+    EXPECT_EQ(h.core->totals().refused[size_t(Refusal::TooManyApplications)], 1u);
+    h.advance(1);
+    EXPECT_EQ(h.get("T:Refused-TooManyApplications"), 1);
 }
 
 TEST(RcpBridge, ConfigurationIsValidated) {

@@ -299,3 +299,78 @@ TEST(Engine, CyclesWithTheHistogramAndAResetAllocateNothing) {
     EXPECT_EQ(test::allocations(), 0);
     EXPECT_EQ(e.stats().latency_samples, 500u);
 }
+
+namespace {
+// A scanner's tick in virtual time: ticks at `first + k * period` until `stop_at`, and again from
+// `resume_at`; a wait jumps the clock to the tick (or to the deadline when none comes before it).
+struct FakeTick : rt::TickSource {
+    rt::VirtualClock& clock;
+    uint64_t first, period, stop_at, resume_at, next;
+    FakeTick(rt::VirtualClock& c, uint64_t f, uint64_t p, uint64_t s, uint64_t r)
+        : clock(c), first(f), period(p), stop_at(s), resume_at(r), next(f) {}
+    bool wait(uint64_t deadline, uint64_t& t) noexcept override {
+        while (next <= clock.now_ns() || (next >= stop_at && next < resume_at)) next += period; // passed or silent
+        if (next > deadline) {
+            clock.sleep_until(deadline);
+            return false;
+        }
+        clock.sleep_until(next);
+        t = next;
+        next += period;
+        return true;
+    }
+};
+struct TimeLog : rt::Stage {
+    std::vector<uint64_t> t;
+    const char* name() const noexcept override { return "times"; }
+    void run(const rt::CycleInfo& c) noexcept override { t.push_back(c.t_ns); }
+};
+} // namespace
+
+// An IOC on a scanner's bus cycles on the scanner's tick, at its times; without ticks it runs on
+// its own clock half a period later (free run, counted) and follows the ticks again when they return.
+TEST(Engine, FollowsATickSourceAndFreeRunsWithoutIt) {
+    rt::VirtualClock clock;
+    rt::Engine e({1000}, clock);
+    const uint64_t t0 = clock.now_ns() + 300'000; // ticks 0.3 ms off the engine's own grid
+    FakeTick tick(clock, t0, 1'000'000, t0 + 10'000'000, t0 + 20'000'000);
+    e.set_tick_source(&tick, 500'000);
+    TimeLog log;
+    e.add_stage(rt::StageOrder::Publish, log);
+    e.run_cycles(30);
+    ASSERT_EQ(log.t.size(), 30u);
+    for (int k = 0; k < 10; ++k) EXPECT_EQ(log.t[std::size_t(k)], t0 + uint64_t(k) * 1'000'000) << k; // on the tick
+    // ticks stop at t0 + 10 ms: the next cycle is due then; it runs 0.5 ms later on its own clock,
+    // then every period until the ticks return at t0 + 20 ms
+    EXPECT_EQ(log.t[10], t0 + 10'000'000 + 500'000);
+    EXPECT_EQ(log.t[11], t0 + 11'000'000 + 500'000);
+    std::size_t back = 0;
+    for (std::size_t k = 10; k < log.t.size(); ++k)
+        if ((log.t[k] - t0) % 1'000'000 == 0) {
+            back = k;
+            break;
+        }
+    ASSERT_GT(back, 10u);
+    EXPECT_GE(log.t[back], t0 + 20'000'000);
+    for (std::size_t k = back; k < log.t.size(); ++k) EXPECT_EQ((log.t[k] - t0) % 1'000'000, 0u) << k; // on the ticks again
+    for (std::size_t k = 1; k < log.t.size(); ++k) EXPECT_GT(log.t[k], log.t[k - 1]);
+    rt::EngineStats s = e.stats();
+    EXPECT_EQ(s.ticks + s.free_run, 30u);
+    EXPECT_EQ(s.free_run, back - 10);
+    EXPECT_EQ(s.latency_max_ns, 0u); // virtual time: each cycle starts at its tick
+}
+
+TEST(Engine, ATickCycleAllocatesNothing) {
+    rt::VirtualClock clock;
+    rt::Engine e({1000}, clock);
+    FakeTick tick(clock, clock.now_ns() + 1'000'000, 1'000'000, ~0ull, ~0ull);
+    e.set_tick_source(&tick, 500'000);
+    TimeLog log;
+    log.t.reserve(200);
+    e.add_stage(rt::StageOrder::Publish, log);
+    e.run_cycles(10);
+    test::count_allocations(true);
+    e.run_cycles(100);
+    test::count_allocations(false);
+    EXPECT_EQ(test::allocations(), 0);
+}
