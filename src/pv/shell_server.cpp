@@ -1,6 +1,7 @@
 #include "pv/shell_server.hpp"
 
 #include "core/error.hpp"
+#include "core/local_socket.hpp"
 #include "core/log.hpp"
 
 #include <cerrno>
@@ -83,38 +84,22 @@ void ShellServer::start(const std::string& path) {
     if (!make_address(path, addr))
         throw Error(SB() << "shell socket " << path << ": path longer than " << sizeof addr.sun_path - 1
                          << " characters");
+    group_ = core::socket_group();
     fs::path dir = fs::path(path).parent_path();
     if (!dir.empty()) {
         std::error_code ec;
         if (!fs::exists(dir, ec)) {
             fs::create_directories(dir, ec);
             if (ec) throw Error(SB() << "shell socket " << path << ": cannot create " << dir.string() << ": " << ec.message());
-            ::chmod(dir.c_str(), 0700);
+            if (group_.gid != ::getegid()) { // a directory of ours: members of the socket group must reach the socket
+                ::chown(dir.c_str(), uid_t(-1), group_.gid);
+                ::chmod(dir.c_str(), 0750);
+            } else {
+                ::chmod(dir.c_str(), 0700);
+            }
         }
     }
-    struct stat st {};
-    if (::lstat(path.c_str(), &st) == 0) {
-        if (!S_ISSOCK(st.st_mode))
-            throw Error(SB() << "shell socket " << path << ": the path exists and is not a socket");
-        int fd = connect_unix(path);
-        if (fd >= 0) {
-            ::close(fd);
-            throw Error(SB() << "shell socket " << path << ": in use by another running IOC");
-        }
-        ::unlink(path.c_str()); // stale: its IOC is gone
-    }
-    int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-    if (fd < 0) throw Error(SB() << "shell socket " << path << ": " << std::strerror(errno));
-    mode_t old = ::umask(0177); // the socket file is created 0600
-    int rc = ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-    int e = errno;
-    ::umask(old);
-    if (rc != 0 || ::listen(fd, 8) != 0) {
-        if (rc == 0) e = errno;
-        ::close(fd);
-        throw Error(SB() << "shell socket " << path << ": " << std::strerror(e));
-    }
-    ::chmod(path.c_str(), 0600);
+    int fd = core::listen_local(path, "shell socket", 8, true);
     listen_fd_ = fd;
     path_ = path;
     loop_.add_fd(fd, EPOLLIN, [this](uint32_t) { on_accept(); });
@@ -124,20 +109,18 @@ void ShellServer::on_accept() {
     while (true) {
         int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
         if (fd < 0) return; // EAGAIN, or an error of that one connection
-        // The socket file is 0600, but a mode can be changed: the kernel's word on who connected
-        // decides. This IOC's own user and root may use the shell, nobody else.
-        ucred peer{};
-        socklen_t len = sizeof peer;
-        if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &peer, &len) != 0 ||
-            (peer.uid != ::geteuid() && peer.uid != 0)) {
+        // The socket file is 0660, but a mode can be changed: the kernel's word on who connected
+        // decides. This IOC's own user, root and members of the socket group may use the shell.
+        core::Peer peer;
+        if (!core::peer_allowed(fd, group_, peer)) {
             ++refused_;
             const auto now = std::chrono::steady_clock::now();
             if (refused_ == 1 || now - last_refusal_log_ >= std::chrono::seconds(10)) {
                 last_refusal_log_ = now;
                 lg.write(log::Level::warn,
                          SB() << "shell socket " << path_ << ": refused a connection from uid " << peer.uid
-                              << " (pid " << peer.pid << "): only uid " << ::geteuid()
-                              << " and root may use it (" << refused_ << " refused so far)");
+                              << " (pid " << peer.pid << "): only uid " << ::geteuid() << ", root and group "
+                              << group_.name << " may use it (" << refused_ << " refused so far)");
             }
             const std::string msg = SB() << "error: uid " << peer.uid << " may not use this IOC's shell\n";
             (void)!::send(fd, msg.data(), msg.size(), MSG_NOSIGNAL | MSG_DONTWAIT);

@@ -8,6 +8,7 @@
 #pragma once
 
 #include "core/event_loop.hpp"
+#include "core/local_socket.hpp"
 #include "pv/db_shell.hpp"
 
 #include <chrono>
@@ -62,6 +63,7 @@ private:
     std::unordered_map<int, std::unique_ptr<Conn>> conns_;
     std::uint64_t refused_ = 0;
     std::chrono::steady_clock::time_point last_refusal_log_{};
+    core::SocketGroup group_; // who besides this user and root may connect
 };
 
 // Starts the shell socket of an IOC: `path` if given (the command line), else

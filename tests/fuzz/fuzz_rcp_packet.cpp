@@ -10,7 +10,11 @@
 //   bit 4: +0.07 s before the packet (inside a beacon's continuation window)
 //   bit 5: +1.5 s and tick before the packet (silence builds up)
 //   bit 6: after the packet, write to an output PV and the motor (value from the control byte)
-// Every packet the bridge sends must parse as a data packet.
+//   bit 7: from a stranger's address instead (refused: not a configured machine or network)
+// The bridge is configured as on a shared network (issue 19): the application's machine by name
+// and address, one more allowed network, and small caps on applications, objects and model
+// changes, so that fuzzed beacons reach every refusal path. Every packet the bridge sends must
+// parse as a data packet, and go to the address of a machine it heard from.
 #include "bridge/rcp/bridge_core.hpp"
 #include "bridge/rcp/protocol.hpp"
 #include "core/log.hpp"
@@ -94,11 +98,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     double t = 100;
     BridgeConfig cfg;
     cfg.prefix = "F:";
+    cfg.machines = {{"fz", "10.0.0.2"}};
+    cfg.allow = {"10.0.0.8/29"}; // source 2 (10.0.0.9): any application
+    cfg.max_applications = 3;
+    cfg.max_objects = 12;
+    cfg.max_model_changes_per_minute = 4;
     BridgeCore core(
         db, cfg,
-        [](const Endpoint&, std::span<const uint8_t> p) {
+        [](const Endpoint& to, std::span<const uint8_t> p) {
             static DataPacket d;
             if (p.size() != kPacketSize || !parse_data(p, d)) __builtin_trap();
+            if (to.ip != 0x0A000002 && to.ip != 0x0A000009) __builtin_trap(); // only machines it heard from
             return true;
         },
         [&] { return t; });
@@ -117,7 +127,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
             t += 1.5;
             core.tick(t);
         }
-        core.handle_packet(std::span<const uint8_t>(packet), kSources[(ctrl >> 1) & 3], t);
+        const Endpoint stranger{0xC0A80101, 5000};
+        core.handle_packet(std::span<const uint8_t>(packet), (ctrl & 0x80) ? stranger : kSources[(ctrl >> 1) & 3], t);
         if (ctrl & 0x40) {
             double v = double(int8_t(ctrl)) / 4;
             put(db, "F:fz:b", v);

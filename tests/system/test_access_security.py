@@ -176,3 +176,22 @@ def test_bad_acf_is_a_load_error(ioc):
     assert r.returncode != 0, "a bad ACF must stop the server from starting"
     assert "bad.acf" in r.stderr, f"the error must name the file, got {r.stderr!r}"
     assert "ready:" not in r.stdout
+
+
+def test_the_control_room_example_lets_only_operators_there_move_motors(ioc):
+    """docs/softioc.md's example ACF (examples/acf/control_room.acf): a motor record in group MOTORS
+    is writable only for an operator's user name on a control-room host; everyone reads it; other
+    records stay writable."""
+    from pathlib import Path
+    acf = Path(__file__).resolve().parents[2] / "examples" / "acf" / "control_room.acf"
+    db = """
+record(motor, "$(P)m1") { field(DTYP, "Sim Motor") field(ASG, "MOTORS") field(MRES, "0.001") }
+record(ao, "$(P)other") { field(VAL, "1") field(PINI, "YES") }
+"""
+    s = ioc.start(db, acf=str(acf))
+    m1, other = ioc.prefix + "m1", ioc.prefix + "other"
+    cases = [("opr1", "cr-ws1", 3), ("opr2", "CR-WS2", 3), ("guest", "cr-ws1", 1), ("opr1", "laptop", 1)]
+    for user, host, access in cases:
+        with raw.Circuit("127.0.0.1", s.port, user=user, hostname=host) as c:
+            assert c.create(m1)["access"] == access, (user, host)
+            assert c.create(other)["access"] == 3, (user, host)

@@ -1,11 +1,13 @@
 #include "ethercat/sim/fault_server.hpp"
 
 #include "core/error.hpp"
+#include "core/local_socket.hpp"
 #include "core/log.hpp"
 #include "ethercat/catalog.hpp"
 
 #include <cerrno>
 #include <cstring>
+#include <ctime>
 #include <poll.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
@@ -28,18 +30,9 @@ sockaddr_un address(const std::string& path) {
 
 FaultServer::FaultServer(Segment& seg, const Catalog& catalog, std::string path)
     : seg_(seg), catalog_(catalog), path_(std::move(path)) {
-    sockaddr_un a = address(path_);
-    fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    if (fd_ < 0) throw Error(SB() << "control socket " << path_ << ": " << std::strerror(errno));
-    ::unlink(path_.c_str()); // a stale socket of an earlier run
-    mode_t old = ::umask(0177);
-    int rc = ::bind(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a);
-    ::umask(old);
-    if (rc != 0 || ::listen(fd_, 4) != 0) {
-        int e = errno;
-        ::close(fd_);
-        throw Error(SB() << "control socket " << path_ << ": " << std::strerror(e));
-    }
+    (void)address(path_); // checks the length, naming the path
+    group_ = core::socket_group();
+    fd_ = core::listen_local(path_, "control socket", 4, false); // 0660, the socket group; a stale file replaced
     thread_ = std::thread([this] { serve(); });
 }
 
@@ -69,11 +62,19 @@ void FaultServer::serve() {
         if (::poll(&p, 1, 100) <= 0) continue;
         int c = ::accept4(fd_, nullptr, nullptr, SOCK_CLOEXEC);
         if (c < 0) continue;
-        ucred peer{};
-        socklen_t len = sizeof peer;
+        core::Peer peer;
         std::string reply;
-        if (::getsockopt(c, SOL_SOCKET, SO_PEERCRED, &peer, &len) != 0 || (peer.uid != ::geteuid() && peer.uid != 0)) {
+        if (!core::peer_allowed(c, group_, peer)) {
             ++refused_;
+            timespec ts{};
+            clock_gettime(CLOCK_MONOTONIC, &ts);
+            double now = double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+            if (now - refusal_logged_s_ >= 10) { // at most every 10 s
+                refusal_logged_s_ = now;
+                LOG_WARN(lg, "control socket " << path_ << ": refused a connection from uid " << peer.uid << " (pid "
+                                               << peer.pid << "): only uid " << ::geteuid() << ", root and group "
+                                               << group_.name << " may inject faults (" << refused_ << " refused so far)");
+            }
             reply = SB() << "error: uid " << peer.uid << " may not inject faults here\n";
         } else {
             // One line (up to 512 bytes), read within a second.

@@ -5,6 +5,7 @@
 // Threading: the server runs its own thread; it only parses and posts to the segment.
 #pragma once
 
+#include "core/local_socket.hpp"
 #include "ethercat/sim/segment.hpp"
 
 #include <atomic>
@@ -35,6 +36,8 @@ private:
     int fd_ = -1;
     std::atomic<bool> stop_{false};
     std::atomic<uint64_t> posted_{0}, refused_{0};
+    core::SocketGroup group_; // who besides this user and root may connect
+    double refusal_logged_s_ = -1e300;
     std::thread thread_;
 };
 

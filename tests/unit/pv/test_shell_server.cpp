@@ -55,7 +55,7 @@ TEST_F(ShellServerTest, AnswersLinesAndRefusesHugeOnes) {
         server.start(path);
         struct stat st {};
         ASSERT_EQ(::stat(path.c_str(), &st), 0);
-        EXPECT_EQ(st.st_mode & 0777, 0600u);
+        EXPECT_EQ(st.st_mode & 0777, 0660u); // this user and the socket group (core/local_socket.hpp)
         EXPECT_THROW(ShellServer(loop, shell).start(path), Error); // in use: a live socket
         std::thread t([&] { loop.run(); });
 
