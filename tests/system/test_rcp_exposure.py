@@ -104,10 +104,12 @@ def test_only_the_allowed_machine_is_heard_and_writes_go_only_to_it(require_netn
         cfg = tmp_path / "ioc.yaml"
         cfg.write_text(f'ioc: {{name: {name}, prefix: "{prefix}"}}\n'
                        f'bridges:\n  rcp: {{port: 18065, prefix: "{prefix}RCP:", timeout_s: 30,\n'
-                       f'    allow: ["{a_rcp}/32"], max_applications: 4, max_objects: 30}}\n')
+                       f'    machines: [{{name: sg1, address: {a_rcp}}}], allow: ["{a_rcp}/32"],\n'
+                       f'    max_applications: 4, max_objects: 30}}\n')
         srv = NsRun(tmp_path, cfg, port, net.hosts["ioc"]).start()
         err = srv.stderr()
-        assert f"listening for RCP beacons and data on udp 0.0.0.0:18065" in err, err[-2000:]
+        # no listen address given: the interface on the machine's network, not every interface
+        assert f"listening for RCP beacons and data on udp {a_ioc}:18065" in err, err[-2000:]
 
         def shell(cmd):
             r = subprocess.run([str(BEAMCTL), "shell", name, "-c", cmd], capture_output=True, text=True, timeout=30)
