@@ -341,7 +341,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     if (YamlNode bridges = root["bridges"]; bridges.keys({"rcp"})) {
         if (YamlNode r = bridges["rcp"];
             r.keys({"listen", "port", "prefix", "timeout_s", "db_out", "pv_pattern", "motor_fields", "machines", "allow",
-                    "max_applications", "max_objects", "max_model_changes_per_minute"}) &&
+                    "max_applications", "max_applications_per_address", "max_objects", "max_model_changes_per_minute"}) &&
             r) {
             RcpBridgeEntry e;
             e.prefix = r["prefix"].string().value_or(cfg.prefix + "RCP:");
@@ -361,6 +361,8 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
                 if (auto t = a.string()) e.allow.push_back(*t);
             e.max_applications = std::size_t(r["max_applications"].unsigned_integer(1000).value_or(e.max_applications));
             e.max_objects = std::size_t(r["max_objects"].unsigned_integer(255).value_or(e.max_objects));
+            e.max_applications_per_address =
+                std::size_t(r["max_applications_per_address"].unsigned_integer(1000).value_or(e.max_applications_per_address));
             e.max_model_changes_per_minute =
                 std::size_t(r["max_model_changes_per_minute"].unsigned_integer(100000).value_or(e.max_model_changes_per_minute));
             e.where = r.where();

@@ -122,7 +122,7 @@ struct RcpBridgeEntry {
     // Who may talk to the bridge and how much (docs/rcp.md, "Who may talk to the bridge").
     std::vector<std::pair<std::string, std::string>> machines; // {application name, address or network}
     std::vector<std::string> allow;                            // networks
-    std::size_t max_applications = 32, max_objects = 255, max_model_changes_per_minute = 30;
+    std::size_t max_applications = 32, max_applications_per_address = 8, max_objects = 255, max_model_changes_per_minute = 30;
     std::string where;
 };
 

@@ -750,6 +750,7 @@ int Ioc::run() {
         for (const auto& [name, addr] : cfg_.rcp->machines) bc.machines.push_back({name, addr});
         bc.allow = cfg_.rcp->allow;
         bc.max_applications = cfg_.rcp->max_applications;
+        bc.max_applications_per_address = cfg_.rcp->max_applications_per_address;
         bc.max_objects = cfg_.rcp->max_objects;
         bc.max_model_changes_per_minute = cfg_.rcp->max_model_changes_per_minute;
         bc.db_out = cfg_.rcp->db_out;

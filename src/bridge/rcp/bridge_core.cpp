@@ -149,6 +149,7 @@ void BridgeConfig::validate() const {
     if (max_applications == 0) throw Error("rcp bridge: max_applications should be >= 1");
     if (max_objects == 0 || max_objects > 255) throw Error(SB() << "rcp bridge: max_objects should be 1..255 (got " << max_objects << ")");
     if (max_model_changes_per_minute == 0) throw Error("rcp bridge: max_model_changes_per_minute should be >= 1");
+    if (max_applications_per_address == 0) throw Error("rcp bridge: max_applications_per_address should be >= 1");
     Ipv4Net net;
     for (std::size_t i = 0; i < machines.size(); ++i) {
         if (machines[i].name.empty()) throw Error(SB() << "rcp bridge: machines[" << i << "]: name (the application's name) is empty");
@@ -743,6 +744,15 @@ struct BridgeCore::Impl {
             refuse(nullptr, Refusal::TooManyApplications, from,
                    (SB() << "application " << name << ": the limit of " << cfg.max_applications
                          << " applications (bridges.rcp.max_applications) is reached")
+                       .str());
+            return nullptr;
+        }
+        std::size_t same_address = 0;
+        for (const auto& x : apps) same_address += x->ip == from.ip;
+        if (same_address >= cfg.max_applications_per_address) {
+            refuse(nullptr, Refusal::TooManyApplications, from,
+                   (SB() << "application " << name << ": " << same_address << " applications from " << ipv4_to_string(from.ip)
+                         << " already (bridges.rcp.max_applications_per_address)")
                        .str());
             return nullptr;
         }

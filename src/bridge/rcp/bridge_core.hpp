@@ -104,6 +104,7 @@ struct BridgeConfig {
     // nothing already served changes.
     std::size_t max_objects = 255;
     std::size_t max_model_changes_per_minute = 30;
+    std::size_t max_applications_per_address = 8; // one machine cannot take every application slot
     // Fields of every generated motor record (after the generated DESC/DTYP/OUT).
     std::vector<std::pair<std::string, std::string>> motor_fields = {
         {"MRES", "0.0001"}, {"PREC", "4"}, {"VELO", "1"}, {"ACCL", "0.5"},

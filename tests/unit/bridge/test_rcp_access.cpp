@@ -129,6 +129,20 @@ TEST(RcpAccess, ObjectAndChangeCapsHoldAndChangeNothing) {
     EXPECT_TRUE(h.exists("T:app:C"));
 }
 
+// One machine cannot take every application slot: max_applications_per_address.
+TEST(RcpAccess, ApplicationsPerAddress) {
+    BridgeConfig c = Harness::config();
+    c.max_applications_per_address = 2;
+    Harness h(c);
+    h.announce("a", {local(1, OT::AI, "X")});
+    h.announce("b", {local(1, OT::AI, "X")});
+    h.announce("c", {local(1, OT::AI, "X")});
+    EXPECT_FALSE(h.exists("T:c:X"));
+    EXPECT_EQ(refused(h, Refusal::TooManyApplications), 1u);
+    h.announce("c", {local(1, OT::AI, "X")}, Endpoint{0x0A000003, 5000}); // another machine still gets in
+    EXPECT_TRUE(h.exists("T:c:X"));
+}
+
 // A flood of beacons with random application and object names from an allowed network: the
 // number of applications and PVs stays bounded, nothing crashes, and the log is rate-limited.
 TEST(RcpAccess, FloodOfRandomBeaconsStaysBounded) {
