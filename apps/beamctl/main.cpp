@@ -31,6 +31,8 @@
 #include "ioc/ioc.hpp"
 #include "plc/runtime.hpp"
 #include "rt/engine.hpp"
+#include "scanner/client.hpp"
+#include "scanner/scanner.hpp"
 #include "ethercat/sim/fault_server.hpp"
 #include "ethercat/sim/raw_server.hpp"
 #include "ethercat/sim/sim_config.hpp"
@@ -339,6 +341,40 @@ int run_sim(const std::string& file, const std::string& bind, int port, const st
     return 0;
 }
 
+// `beamctl scanner SCANNER.yaml`: run the buses of the file and serve IOCs until SIGTERM/SIGINT.
+int run_scanner(const std::string& file) {
+    scanner::ScannerConfig cfg = scanner::ScannerConfig::load(file);
+    rt::MonotonicClock clock;
+    scanner::Scanner sc(cfg, ethercat::Catalog::builtin(), clock);
+    EventLoop loop;
+    LoopSignals sig(loop, [] {});
+    sc.start();
+    sc.serve(loop);
+    std::printf("ready: scanner '%s', %zu bus(es), socket %s\n", cfg.name.c_str(), sc.bus_count(), cfg.socket.c_str());
+    std::fflush(stdout);
+    loop.run();
+    sc.stop("the scanner is stopping");
+    LOG_INFO(lg, "scanner stopped");
+    return 0;
+}
+
+// `beamctl scanner status SOCKET|SCANNER.yaml`: the scanner's cycle, counters and clients.
+int scanner_status(const std::string& where) {
+    std::string socket = where;
+    if (where.ends_with(".yaml") || where.ends_with(".yml")) socket = scanner::ScannerConfig::load(where).socket;
+    scanner::Channel ch;
+    ch.connect(socket);
+    scanner::proto::Message r = ch.call(scanner::proto::StatusRequest{}, 5);
+    const auto* st = std::get_if<scanner::proto::Status>(&r.body);
+    if (!st) throw Error(SB() << "scanner " << socket << ": unexpected answer " << scanner::proto::to_string(r.type()));
+    std::printf("cycle %llu, frames lost %llu, WKC errors %llu, %zu client(s)\n", (unsigned long long)st->cycle,
+                (unsigned long long)st->frames_lost, (unsigned long long)st->wkc_errors, st->clients.size());
+    for (const auto& c : st->clients)
+        std::printf("  %s (pid %u): %u slave(s), %u claim(s), drops %llu, late %llu\n", c.name.c_str(), c.pid, unsigned(c.slaves),
+                    unsigned(c.claims), (unsigned long long)c.drops, (unsigned long long)c.late);
+    return 0;
+}
+
 // `beamctl run` / `check` options: the IOC file, -m macros for its text, --ca-port.
 struct IocOptions {
     std::string file;
@@ -532,6 +568,11 @@ int main(int argc, char** argv) {
     runcmd->add_option("--shell-socket", run_shell_socket,
                        "UNIX socket of 'beamctl shell' (default $XDG_RUNTIME_DIR/beamctl/NAME.sock, else "
                        "/tmp/beamctl-UID/NAME.sock; $BEAMCTL_SHELL_SOCKET; 'none': no shell)");
+    std::string scanner_file, scanner_where;
+    auto* scannercmd = app.add_subcommand("scanner", "Run an EtherCAT bus scanner that several IOCs share (SCANNER.yaml)");
+    scannercmd->add_option("file", scanner_file, "Scanner configuration (scanner:, engine:, buses:)");
+    auto* scanstatus = scannercmd->add_subcommand("status", "Show a running scanner's cycle, counters and clients");
+    scanstatus->add_option("socket", scanner_where, "The scanner's socket, or its SCANNER.yaml")->required();
     auto* checkcmd = app.add_subcommand("check", "Load an IOC configuration and report errors (exit 1 on any)");
     add_ioc_options(*checkcmd, checko);
     IocOptions sigo;
@@ -668,6 +709,11 @@ int main(int argc, char** argv) {
         if (*simcmd) {
             if (sim_file.empty()) throw Error("beamctl sim: the simulator configuration file is required (beamctl sim SIM.yaml)");
             return run_sim(sim_file, sim_bind, sim_port, sim_iface, sim_busy_poll, sim_control);
+        }
+        if (*scanstatus) return scanner_status(scanner_where);
+        if (*scannercmd) {
+            if (scanner_file.empty()) throw Error("beamctl scanner: the scanner configuration file is required (beamctl scanner SCANNER.yaml)");
+            return run_scanner(scanner_file);
         }
         if (*runcmd) {
             rt::MonotonicClock clock;

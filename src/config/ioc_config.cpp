@@ -31,6 +31,21 @@ int int_of(const YamlNode& n, int def, double lo, double hi) {
 }
 
 void read_buses(const YamlNode& buses, const std::string& dir, IocConfig& cfg) {
+    cfg.buses = read_bus_list(buses, dir, false);
+}
+
+// `include: [dirs]`, `libraries: [files]`: resolved paths.
+std::vector<std::string> paths_of(const YamlNode& n, const std::string& dir) {
+    std::vector<std::string> out;
+    for (const YamlNode& item : n.list())
+        if (auto s = item.string()) out.push_back(resolve(dir, *s));
+    return out;
+}
+
+} // namespace
+
+std::vector<BusConfig> read_bus_list(const YamlNode& buses, const std::string& dir, bool scanner_file) {
+    std::vector<BusConfig> out;
     std::set<int> ids;
     const auto items = buses.list();
     for (std::size_t i = 0; i < items.size(); ++i) {
@@ -40,8 +55,37 @@ void read_buses(const YamlNode& buses, const std::string& dir, IocConfig& cfg) {
         bc.id = int_of(b["id"], int(i), 0, 15);
         bc.strict = b["strict"].boolean().value_or(false);
         if (!ids.insert(bc.id).second) b.error(SB() << "bus id " << bc.id << " used twice");
-        if (YamlNode l = b["link"]; l.keys({"type", "plant", "host", "port", "iface", "busy_poll", "faults"}) && l) {
-            bc.link.type = l.required("type", " (sim, udp or raw)").one_of({"sim", "udp", "raw"}).value_or("sim");
+        if (YamlNode l = b["link"]; l.keys({"type", "plant", "host", "port", "iface", "busy_poll", "faults", "socket", "slaves", "tick_timeout_ms", "claims"}) && l) {
+            bc.link.where = l.where();
+            if (scanner_file)
+                bc.link.type = l.required("type", " (sim, udp or raw)").one_of({"sim", "udp", "raw"}).value_or("sim");
+            else
+                bc.link.type = l.required("type", " (sim, udp, raw or scanner)").one_of({"sim", "udp", "raw", "scanner"}).value_or("sim");
+            const bool scanner = bc.link.type == "scanner";
+            for (const char* k : {"socket", "slaves", "tick_timeout_ms", "claims"})
+                if (l.has(k) && !scanner) l[k].error("is a key of a scanner link (type: scanner)");
+            for (const char* k : {"plant", "host", "port", "iface", "busy_poll", "faults"})
+                if (l.has(k) && scanner) l[k].error("belongs to the scanner's file: the scanner runs this bus");
+            if (scanner) {
+                bc.link.socket = resolve(dir, l.required("socket", " (the scanner's socket, its file's scanner.socket)").string().value_or(""));
+                bc.link.attach_where = l["slaves"].where();
+                for (const YamlNode& a : l["slaves"].list())
+                    if (auto t = a.string()) bc.link.attach.push_back(*t);
+                bc.link.tick_timeout_s = l["tick_timeout_ms"].number(between(1, 10000)).value_or(100) / 1000.0;
+                if (YamlNode c = l["claims"]; c && c.is_scalar()) {
+                    bc.link.claim_all = c.one_of({"all", "none"}).value_or("all") == "all";
+                } else if (c) {
+                    bc.link.claim_all = false;
+                    for (const YamlNode& e : c.list()) {
+                        std::string t = e.string().value_or("");
+                        std::size_t colon = t.find(':');
+                        if (colon == std::string::npos || colon == 0 || colon + 1 == t.size())
+                            e.error(SB() << "'" << t << "' should be SLAVE:entry or SLAVE:* (SLAVE a name or position)");
+                        else
+                            bc.link.claims.emplace_back(t.substr(0, colon), t.substr(colon + 1));
+                    }
+                }
+            }
             if (auto p = l["plant"].string()) {
                 bc.link.plant = resolve(dir, *p);
                 bc.link.plant_where = l["plant"].where();
@@ -60,14 +104,31 @@ void read_buses(const YamlNode& buses, const std::string& dir, IocConfig& cfg) {
             if (bc.link.type == "raw" && bc.link.iface.empty() && (!l.has("iface") || l["iface"].is_scalar()))
                 l.error("a raw link needs 'iface' (the network interface of the segment)");
         }
-        YamlNode slaves = b.required("slaves", " (a list of {position, type})");
+        const bool attach_only = bc.link.type == "scanner" && !bc.link.attach.empty();
+        if (bc.link.type == "scanner" && !b.has("slaves") && bc.link.attach.empty() && b["link"].has("socket"))
+            b["link"].error("a scanner link needs 'slaves' (the scanner's slaves this IOC attaches: names or positions) or the bus's 'slaves' list");
+        if (attach_only && b.has("slaves"))
+            b["slaves"].error("give the slaves once: link.slaves (resolved with the scanner) or this list, not both");
+        YamlNode slaves = attach_only || bc.link.type == "scanner" && !b.has("slaves") ? b["slaves"]
+                                                                                       : b.required("slaves", " (a list of {position, type})");
+        std::set<std::string> names;
         std::set<int> positions;
         for (const YamlNode& s : slaves.list()) {
-            if (!s.keys({"position", "type", "sdo", "oversampling"})) continue;
+            if (!s.keys({"position", "type", "sdo", "oversampling", "name", "revision"})) continue;
             SlaveEntry se;
             se.position = int_of(s.required("position"), -1, 0, 65534);
             se.type = s.required("type", " (a device of the catalog, e.g. EL1008)").string().value_or("");
             se.type_where = s["type"].where();
+            if (auto nm = scanner_file ? s.required("name", " (the slave's unique name, e.g. OUT0)").string() : s["name"].string()) {
+                if (nm->empty() || nm->find_first_of(" \t,\"'") != std::string::npos ||
+                    nm->find_first_not_of("0123456789") == std::string::npos)
+                    s["name"].error(SB() << "'" << *nm << "' should be a word (not a number, no spaces or commas)");
+                else if (!names.insert(*nm).second)
+                    s["name"].error(SB() << "'" << *nm << "' is used twice");
+                else
+                    se.name = *nm;
+            }
+            se.revision = uint32_t(s["revision"].unsigned_integer(0xFFFFFFFF).value_or(0));
             if (s.has("oversampling")) { // checked against the device's range once its type is known
                 se.oversampling = unsigned(s["oversampling"].unsigned_integer(1000).value_or(1));
                 se.oversampling_where = s["oversampling"].where();
@@ -94,19 +155,10 @@ void read_buses(const YamlNode& buses, const std::string& dir, IocConfig& cfg) {
             }
             if (se.position >= 0) bc.slaves.push_back(se);
         }
-        cfg.buses.push_back(bc);
+        out.push_back(bc);
     }
-}
-
-// `include: [dirs]`, `libraries: [files]`: resolved paths.
-std::vector<std::string> paths_of(const YamlNode& n, const std::string& dir) {
-    std::vector<std::string> out;
-    for (const YamlNode& item : n.list())
-        if (auto s = item.string()) out.push_back(resolve(dir, *s));
     return out;
 }
-
-} // namespace
 
 std::string expand_ioc_macros(const std::string& text, const MacroMap& macros, const std::string& path) {
     // A reference is expanded when its name (up to '=', ',' or the closing bracket) has a value

@@ -24,6 +24,8 @@ struct SdoConfig {
 struct SlaveEntry {
     int position = 0;
     std::string type;
+    std::string name;       // a scanner's chain: the slave's unique name (seed 002, "OUT0"); "" if none
+    uint32_t revision = 0;  // the expected revision (0: the catalog's newest)
     std::vector<SdoConfig> sdo;
     std::string type_where; // file:line:col of the type in the IOC file
     unsigned oversampling = 1;     // samples per cycle (EL3702, EL4732; ecmccfg NELM)
@@ -31,7 +33,7 @@ struct SlaveEntry {
 };
 
 struct LinkConfig {
-    std::string type = "sim"; // sim | udp | raw
+    std::string type = "sim"; // sim | udp | raw | scanner
     std::string plant;        // sim: simulator file (wiring, plants), resolved path; may be empty
     std::string host = "127.0.0.1";
     uint16_t port = 0x88A4;   // udp
@@ -40,6 +42,16 @@ struct LinkConfig {
     std::vector<std::string> faults; // sim: fault commands applied before bring-up ("power 3 off")
     std::vector<std::string> faults_where;
     std::string plant_where;  // file:line:col of `plant` in the IOC file
+    // scanner: the bus is run by `beamctl scanner`; this IOC attaches to it (docs/scanner.md).
+    std::string socket;               // the scanner's socket
+    std::vector<std::string> attach;  // link.slaves: the slaves to attach, names or positions
+    std::string attach_where;
+    // claims: the outputs this IOC writes: all of its slaves' (default), none (it only looks), or
+    // a list of "SLAVE:entry" / "SLAVE:*" (SLAVE a name or position).
+    bool claim_all = true;
+    std::vector<std::pair<std::string, std::string>> claims;
+    double tick_timeout_s = 0.1;     // no tick for this long: the cycle runs on its own, without bus data
+    std::string where;                // file:line:col of the link
 };
 
 struct BusConfig {
@@ -48,6 +60,11 @@ struct BusConfig {
     LinkConfig link;
     std::vector<SlaveEntry> slaves;
 };
+
+// Reads a `buses:` list (the IOC file's, or a scanner's chain with `scanner_file`: slave names
+// required and unique, no scanner links). Errors go to the node's reader.
+class YamlNode;
+std::vector<BusConfig> read_bus_list(const YamlNode& buses, const std::string& dir, bool scanner_file);
 
 struct DbConfig {
     std::string file; // resolved path

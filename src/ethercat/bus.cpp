@@ -12,9 +12,7 @@ struct Bus::ReceiveStage : rt::Stage {
     explicit ReceiveStage(Bus& bus) : b(bus) {}
     const char* name() const noexcept override { return "bus receive"; }
     void run(const rt::CycleInfo& c) noexcept override {
-        if (c.cycle == 0) return; // nothing in flight yet
-        int timeout_us = int(c.period_ns / 2000); // half a period at most
-        b.last_ = b.master_->receive_process_data(timeout_us);
+        b.last_ = b.backend_->receive(c);
     }
 };
 
@@ -23,8 +21,7 @@ struct Bus::SendStage : rt::Stage {
     explicit SendStage(Bus& bus) : b(bus) {}
     const char* name() const noexcept override { return "bus send"; }
     void run(const rt::CycleInfo& c) noexcept override {
-        (void)c;
-        b.master_->send_process_data();
+        b.backend_->send(c);
     }
 };
 
@@ -34,22 +31,10 @@ struct Bus::PublishStage : rt::Stage {
     const char* name() const noexcept override { return "publish"; }
     void run(const rt::CycleInfo& c) noexcept override {
         BusSnapshot& s = b.snap_.write_buffer();
-        Master& m = *b.master_;
+        BusBackend& m = *b.backend_;
         std::memcpy(s.image.data(), m.image(), s.image.size());
         s.cycle = c.cycle;
-        s.wkc = m.wkc();
-        s.expected_wkc = m.expected_wkc();
-        s.frames_lost = m.frames_lost();
-        s.frames_late = m.frames_late();
-        s.wkc_errors = m.wkc_errors();
-        s.link_up = b.last_ != CycleStatus::FrameLost && b.last_ != CycleStatus::LinkError;
-        s.wkc_ok = b.last_ == CycleStatus::Ok;
-        s.responding = m.responding();
-        for (std::size_t i = 0; i < s.slave_al.size(); ++i) {
-            s.slave_al[i] = m.slave_al_status(i);
-            s.slave_online[i] = m.slave_online(i) && s.link_up;
-            s.slave_valid[i] = m.slave_valid(i);
-        }
+        m.fill(s, b.last_);
         const std::size_t nw = b.watch_offset_.size();
         bool changed = detect_changes(m.image(), b.watch_offset_.data(), b.watch_bits_.data(), b.watch_last_.data(),
                                       b.watch_changes_.data(), nw);
@@ -80,9 +65,48 @@ bool detect_changes(const uint8_t* img, const uint32_t* bit_offset, const uint8_
     return changed;
 }
 
-Bus::Bus(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, const Catalog& catalog)
-    : id_(id), link_(std::move(link)) {
+LocalBackend::LocalBackend(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, const Catalog& catalog)
+    : link_(std::move(link)) {
     master_ = std::make_unique<Master>(*link_, id, std::move(slaves), catalog);
+}
+
+CycleStatus LocalBackend::receive(const rt::CycleInfo& c) noexcept {
+    if (c.cycle == 0) return CycleStatus::Ok; // nothing in flight yet
+    int timeout_us = int(c.period_ns / 2000); // half a period at most
+    return master_->receive_process_data(timeout_us);
+}
+
+void LocalBackend::send(const rt::CycleInfo&) noexcept { master_->send_process_data(); }
+
+void LocalBackend::fill(BusSnapshot& s, CycleStatus last) noexcept {
+    Master& m = *master_;
+    s.wkc = m.wkc();
+    s.expected_wkc = m.expected_wkc();
+    s.frames_lost = m.frames_lost();
+    s.frames_late = m.frames_late();
+    s.wkc_errors = m.wkc_errors();
+    s.link_up = last != CycleStatus::FrameLost && last != CycleStatus::LinkError;
+    s.wkc_ok = last == CycleStatus::Ok;
+    s.responding = m.responding();
+    for (std::size_t i = 0; i < s.slave_al.size(); ++i) {
+        s.slave_al[i] = m.slave_al_status(i);
+        s.slave_online[i] = m.slave_online(i) && s.link_up;
+        s.slave_valid[i] = m.slave_valid(i);
+    }
+}
+
+std::vector<uint8_t> LocalBackend::sdo_read(int position, uint16_t index, uint8_t sub) {
+    return master_->sdo_upload(position, index, sub);
+}
+
+void LocalBackend::sdo_write(int position, uint16_t index, uint8_t sub, const std::vector<uint8_t>& data) {
+    master_->sdo_download(position, index, sub, data.data(), data.size());
+}
+
+Bus::Bus(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, const Catalog& catalog)
+    : Bus(id, std::make_unique<LocalBackend>(id, std::move(link), std::move(slaves), catalog)) {}
+
+Bus::Bus(int id, std::unique_ptr<BusBackend> backend) : id_(id), backend_(std::move(backend)) {
     receive_ = std::make_unique<ReceiveStage>(*this);
     send_ = std::make_unique<SendStage>(*this);
     publish_ = std::make_unique<PublishStage>(*this);
@@ -100,7 +124,7 @@ int Bus::watch(const SignalInfo& s) {
         if (watch_offset_[i] == s.bit_offset && watch_bits_[i] == s.bits) return int(i);
     watch_offset_.push_back(s.bit_offset);
     watch_bits_.push_back(s.bits);
-    watch_last_.push_back(registry::image_read(master_->image(), s.bit_offset, s.bits));
+    watch_last_.push_back(registry::image_read(backend_->image(), s.bit_offset, s.bits));
     watch_changes_.push_back(0);
     std::size_t n = watch_offset_.size();
     snap_.init([n](BusSnapshot& b) { b.changes.assign(n, 0); });
@@ -116,14 +140,14 @@ void Bus::drain_changes() noexcept {
 
 void Bus::start_health(double period_s) {
     if (health_.joinable()) return;
-    master_->start_cycling();
+    backend_->start_cycling();
     health_stop_ = false;
     health_ = std::thread([this, period_s] {
         // A pass every period, and at once (within 10 ms) when the cycle shows a slave lost or
         // the number of slaves answering changed (a slave plugged in or powered up).
         while (!health_stop_.load()) {
-            master_->check_and_recover();
-            for (double t = 0; t < period_s && !health_stop_.load() && !master_->health_due(); t += 0.01)
+            backend_->health_pass();
+            for (double t = 0; t < period_s && !health_stop_.load() && !backend_->health_due(); t += 0.01)
                 std::this_thread::sleep_for(std::chrono::milliseconds(10));
         }
     });
@@ -135,8 +159,8 @@ void Bus::stop_health() {
 }
 
 void Bus::bring_up() {
-    master_->bring_up();
-    std::size_t n = master_->image_size(), k = master_->slaves().size();
+    backend_->bring_up();
+    std::size_t n = backend_->image_size(), k = backend_->slaves().size();
     snap_.init([n, k](BusSnapshot& s) {
         s.image.assign(n, 0);
         s.slave_al.assign(k, 0);
@@ -146,7 +170,8 @@ void Bus::bring_up() {
 }
 
 void Bus::add_stages(rt::Engine& e) {
-    master_->set_cycle_time_ns(e.period_ns());
+    backend_->set_cycle_time_ns(e.period_ns());
+    if (rt::TickSource* t = backend_->tick_source()) e.set_tick_source(t, backend_->tick_grace_ns());
     e.add_stage(rt::StageOrder::BusReceive, *receive_);
     e.add_stage(rt::StageOrder::BusSend, *send_);
     e.add_stage(rt::StageOrder::Publish, *publish_);
@@ -161,13 +186,25 @@ bool Bus::write(const SignalInfo& s, uint64_t value) noexcept {
 
 void Bus::apply_writes() noexcept {
     OutputWrite w;
-    uint8_t* img = master_->image();
+    uint8_t* img = backend_->image();
     while (writes_.pop(w)) registry::image_write(img, w.bit_offset, w.bits, w.value);
 }
 
 const BusSnapshot& Bus::snapshot() noexcept {
     snap_.update();
     return snap_.read_buffer();
+}
+
+registry::BoundSignal Bus::bind(std::string_view name, int bit) {
+    const SignalInfo* s = backend_->find_signal(name);
+    if (!s || (bit >= 0 && bit >= s->bits)) return {};
+    return registry::BoundSignal{backend_->image(), s->bit_offset, s->bits, s->is_signed, bit};
+}
+
+Master& Bus::master() {
+    Master* m = backend_->local_master();
+    if (!m) throw Error(SB() << "ec" << id_ << ": the bus is run by a scanner, not by this process");
+    return *m;
 }
 
 uint64_t Bus::get(const std::vector<uint8_t>& image, const SignalInfo& s) noexcept {

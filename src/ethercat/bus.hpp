@@ -1,4 +1,4 @@
-// One EtherCAT bus in a running IOC: the master, its link, the RT stages that exchange process data, the snapshot the cycle publishes for
+// One EtherCAT bus in a running IOC: what stands behind it (BusBackend), the RT stages that exchange process data, the snapshot the cycle publishes for
 // non-RT readers and the queue of output writes coming from them.
 // Threading: stages run on the RT thread; write()/snapshot() on ONE non-RT thread (the IOC loop).
 #pragma once
@@ -26,6 +26,10 @@ struct BusSnapshot {
     std::vector<uint8_t> slave_al;     // per configured slave: AL status (state | 0x10 error)
     std::vector<uint8_t> slave_online; // per configured slave: answered its last status poll
     std::vector<uint32_t> changes;     // per watch (Bus::watch): cycles in which the entry changed
+    // A bus run by a scanner (scanner::ClientBackend): attached now, the scanner's last cycle
+    // seen, its cycles this IOC never saw (ring drops and time detached), ring drops alone, attaches.
+    bool scanner_attached = false;
+    uint64_t scanner_cycle = 0, scanner_missed = 0, scanner_drops = 0, scanner_attaches = 0;
 };
 
 struct OutputWrite {
@@ -40,14 +44,92 @@ struct OutputWrite {
 bool detect_changes(const uint8_t* image, const uint32_t* bit_offset, const uint8_t* bits, uint64_t* last,
                     uint32_t* changes, std::size_t n) noexcept;
 
+// What stands behind a Bus: the bus master of this process (LocalBackend: Master + Link), or a
+// bus scanner this IOC is a client of (scanner::ClientBackend). Nothing above the Bus knows which.
+// The image is laid out as the master lays it out (outputs, inputs, status bytes, then the
+// master's own words), so bound signals are offsets into image() either way.
+// Threading: receive/send/fill on the RT thread; the rest non-RT (bring-up, the health thread,
+// the IOC loop) as marked.
+class BusBackend {
+public:
+    virtual ~BusBackend() = default;
+    virtual const char* kind() const noexcept = 0; // "sim", "udp", "raw", "scanner"
+    virtual void bring_up() = 0;                   // non-RT, before the cycle; throws Error
+    virtual void set_cycle_time_ns(uint64_t ns) = 0;
+    virtual void set_strict(bool strict) = 0;
+    virtual void to_safe_op() = 0;
+    // Layout, fixed once bring_up() returned.
+    virtual const std::vector<SlaveInfo>& slaves() const = 0;
+    virtual const std::vector<SignalInfo>& signals() const = 0;
+    virtual const SignalInfo* find_signal(std::string_view name) const = 0;
+    virtual uint8_t* image() noexcept = 0;
+    virtual std::size_t image_size() const = 0;
+    virtual std::size_t bus_bytes() const = 0;
+    // RT: this cycle's inputs into image(); the outputs in image() out; the cycle's status.
+    virtual CycleStatus receive(const rt::CycleInfo& c) noexcept = 0;
+    virtual void send(const rt::CycleInfo& c) noexcept = 0;
+    // RT: everything of the snapshot but the image and the watches.
+    virtual void fill(BusSnapshot& s, CycleStatus last) noexcept = 0;
+    // Health thread (non-RT): once the cycle runs, then a pass every period or when due.
+    virtual void start_cycling() = 0;
+    virtual void health_pass() = 0;
+    virtual bool health_due() const = 0;
+    virtual SlaveHealth slave_health(std::size_t i) const = 0;
+    virtual std::string slave_last_error(std::size_t i) const = 0;
+    virtual uint64_t health_version() const = 0;
+    // Acyclic CoE access (non-RT, while cycling); throw SdoAbort / Error naming bus, slave, object.
+    virtual std::vector<uint8_t> sdo_read(int position, uint16_t index, uint8_t sub) = 0;
+    virtual void sdo_write(int position, uint16_t index, uint8_t sub, const std::vector<uint8_t>& data) = 0;
+    // The cycle this bus imposes on the engine (a scanner's tick), or nullptr: the engine's own.
+    virtual rt::TickSource* tick_source() noexcept { return nullptr; }
+    virtual uint64_t tick_grace_ns() const noexcept { return 0; }
+    // The master of this process, if it is one (tests of the master, the scanner's own buses).
+    virtual Master* local_master() noexcept { return nullptr; }
+};
+
+// The bus master of this process on a link.
+class LocalBackend : public BusBackend {
+public:
+    LocalBackend(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, const Catalog& catalog);
+    const char* kind() const noexcept override { return link_->kind(); }
+    void bring_up() override { master_->bring_up(); }
+    void set_cycle_time_ns(uint64_t ns) override { master_->set_cycle_time_ns(ns); }
+    void set_strict(bool strict) override { master_->set_strict(strict); }
+    void to_safe_op() override { master_->to_safe_op(); }
+    const std::vector<SlaveInfo>& slaves() const override { return master_->slaves(); }
+    const std::vector<SignalInfo>& signals() const override { return master_->signals(); }
+    const SignalInfo* find_signal(std::string_view name) const override { return master_->find_signal(name); }
+    uint8_t* image() noexcept override { return master_->image(); }
+    std::size_t image_size() const override { return master_->image_size(); }
+    std::size_t bus_bytes() const override { return master_->bus_bytes(); }
+    CycleStatus receive(const rt::CycleInfo& c) noexcept override;
+    void send(const rt::CycleInfo& c) noexcept override;
+    void fill(BusSnapshot& s, CycleStatus last) noexcept override;
+    void start_cycling() override { master_->start_cycling(); }
+    void health_pass() override { master_->check_and_recover(); }
+    bool health_due() const override { return master_->health_due(); }
+    SlaveHealth slave_health(std::size_t i) const override { return master_->slave_health(i); }
+    std::string slave_last_error(std::size_t i) const override { return master_->slave_last_error(i); }
+    uint64_t health_version() const override { return master_->health_version(); }
+    std::vector<uint8_t> sdo_read(int position, uint16_t index, uint8_t sub) override;
+    void sdo_write(int position, uint16_t index, uint8_t sub, const std::vector<uint8_t>& data) override;
+    Master* local_master() noexcept override { return master_.get(); }
+
+private:
+    std::unique_ptr<Link> link_;
+    std::unique_ptr<Master> master_;
+};
+
 class Bus {
 public:
     // The master code never depends on the simulator: an in-process segment behind `link` is
     // owned by whoever assembles the IOC.
     Bus(int id, std::unique_ptr<Link> link, std::vector<SlaveConfig> slaves, const Catalog& catalog);
+    Bus(int id, std::unique_ptr<BusBackend> backend);
     ~Bus();
 
     void bring_up(); // non-RT, before the engine starts; throws Error
+    // The bus's stages; an engine that follows a scanner's tick is set to it here.
     void add_stages(rt::Engine& e);
     // Starts the non-RT health thread (once the RT cycle runs): lost slaves are reported and
     // brought back to OP when they return, using acyclic datagrams carried by the cycle.
@@ -77,29 +159,39 @@ public:
     void drain_changes() noexcept;
     uint64_t writes_dropped() const { return writes_dropped_.load(); }
 
-    // The bus as its users (the IOC, its records, axes and PLCs) see it; the master behind it is
-    // not theirs to reach (a scanner client will stand behind the same calls). Non-RT; the layout
-    // (slaves, signals, bus_bytes) is fixed once bring_up() returned.
-    const std::vector<SlaveInfo>& slaves() const { return master_->slaves(); }
-    const std::vector<SignalInfo>& signals() const { return master_->signals(); }
-    const SignalInfo* find_signal(std::string_view name) const { return master_->find_signal(name); }
-    // A signal bound to the image the cycle exchanges (RT code reads and writes it).
-    registry::BoundSignal bind(std::string_view name, int bit = -1) { return master_->bind(name, bit); }
-    std::size_t bus_bytes() const { return master_->bus_bytes(); } // exchanged with the slaves (then the master's own words)
-    SlaveHealth slave_health(std::size_t i) const { return master_->slave_health(i); }
-    std::string slave_last_error(std::size_t i) const { return master_->slave_last_error(i); }
-    uint64_t health_version() const { return master_->health_version(); }
+    // The bus as its users (the IOC, its records, axes and PLCs) see it; what stands behind it
+    // (a master of this process, a scanner) is not theirs to reach. Non-RT; the layout (slaves,
+    // signals, bus_bytes) is fixed once bring_up() returned.
+    const std::vector<SlaveInfo>& slaves() const { return backend_->slaves(); }
+    const std::vector<SignalInfo>& signals() const { return backend_->signals(); }
+    const SignalInfo* find_signal(std::string_view name) const { return backend_->find_signal(name); }
+    // A signal bound to the image the cycle exchanges (RT code reads and writes it): `bit` >= 0
+    // selects one bit. Unbound (image nullptr) if there is no such signal.
+    registry::BoundSignal bind(std::string_view name, int bit = -1);
+    std::size_t bus_bytes() const { return backend_->bus_bytes(); } // exchanged with the slaves (then the master's own words)
+    SlaveHealth slave_health(std::size_t i) const { return backend_->slave_health(i); }
+    std::string slave_last_error(std::size_t i) const { return backend_->slave_last_error(i); }
+    uint64_t health_version() const { return backend_->health_version(); }
     // Before bring_up(): refuse to start with a configured slave missing or failing.
-    void set_strict(bool strict) { master_->set_strict(strict); }
+    void set_strict(bool strict) { backend_->set_strict(strict); }
     // Shutdown, while the cycle still runs: the slaves taking part to SAFEOP.
-    void to_safe_op() { master_->to_safe_op(); }
+    void to_safe_op() { backend_->to_safe_op(); }
+    // Acyclic CoE access (non-RT, while cycling).
+    std::vector<uint8_t> sdo_read(int position, uint16_t index, uint8_t sub) { return backend_->sdo_read(position, index, sub); }
+    void sdo_write(int position, uint16_t index, uint8_t sub, const std::vector<uint8_t>& data) {
+        backend_->sdo_write(position, index, sub, data);
+    }
 
-    // The master itself: for this bus's stages and for tests of the master's own behaviour.
-    Master& master() { return *master_; }
+    // The master itself, when this process runs it: for this bus's tests and the scanner. Throws
+    // Error for a bus behind a scanner.
+    Master& master();
+    BusBackend& backend() { return *backend_; }
     int id() const { return id_; }
-    const char* link_kind() const { return link_->kind(); }
+    const char* link_kind() const { return backend_->kind(); }
 
     static uint64_t get(const std::vector<uint8_t>& image, const SignalInfo& s) noexcept;
+    // RT thread, after this cycle's receive stage: how the cycle went.
+    CycleStatus last_status() const noexcept { return last_; }
 
 private:
     struct ReceiveStage;
@@ -108,8 +200,7 @@ private:
     void apply_writes() noexcept;
 
     int id_;
-    std::unique_ptr<Link> link_;
-    std::unique_ptr<Master> master_;
+    std::unique_ptr<BusBackend> backend_;
     SpscQueue<OutputWrite> writes_{4096};
     std::atomic<uint64_t> writes_dropped_{0};
     TripleBuffer<BusSnapshot> snap_;
@@ -122,7 +213,8 @@ private:
     std::vector<uint32_t> watch_offset_;
     std::vector<uint8_t> watch_bits_;
     std::vector<uint64_t> watch_last_;
-    std::vector<uint32_t> watch_changes_;    bool watches_frozen_ = false;
+    std::vector<uint32_t> watch_changes_;
+    bool watches_frozen_ = false;
     int change_fd_ = -1;
     std::atomic<bool> change_pending_{false}; // RT wrote change_fd_ and the loop has not drained it
     std::thread health_;

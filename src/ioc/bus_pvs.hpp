@@ -31,6 +31,9 @@ namespace beamctl::ioc {
 
 const PvTable& bus_table();   // $(P) = "<prefix>m<m>", signals "ec<m>." (and "ecmc.thread.")
 const PvTable& slave_table(); // $(P) = "<prefix>m<m>s<kkk>", signals "ec<m>.s<k>."
+// A scanner link's bus (ec<m>.scanner.attached, .cycle, .missed, .drops, .attaches):
+// $(P)m<m>-ScnConn -ScnCycle -ScnMissed -ScnDrops -ScnAttaches.
+const PvTable& scanner_table();
 
 // Declares the items of bus `id` with its configured slave positions; `engine` once per IOC.
 void declare_bus_items(registry::Registry& r, int id, const std::vector<int>& slave_positions);

@@ -13,10 +13,9 @@
 #include "core/log.hpp"
 #include "ioc/rcp_signals.hpp"
 #include "core/signals.hpp"
-#include "ethercat/raw_link.hpp"
 #include "ethercat/sim/faults.hpp"
-#include "ethercat/sim/inprocess_link.hpp"
-#include "ethercat/sim/sim_config.hpp"
+#include "ethercat/sim/local_bus.hpp"
+#include "scanner/client.hpp"
 #include "pv/convert.hpp"
 #include "pv/db_file.hpp"
 
@@ -33,13 +32,6 @@ namespace beamctl::ioc {
 namespace {
 log::Logger lg("ioc");
 
-// The simulator follows the engine clock (ns since 2000-01-01 in the slaves' DC registers).
-struct SimTimeStage : rt::Stage {
-    ethercat::sim::Segment& seg;
-    explicit SimTimeStage(ethercat::sim::Segment& s) : seg(s) {}
-    const char* name() const noexcept override { return "simulator time"; }
-    void run(const rt::CycleInfo& c) noexcept override { seg.set_time(c.t_ns); }
-};
 
 // Device support "beamctl": a record's "@ec0.s3.positionActual01" (or "...Input01.2", a bit) link
 // reads the entry from the bus snapshot of the IOC loop and writes an output through the bus's
@@ -252,60 +244,46 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     ec.cpu = cfg_.cpu;
     ec.priority = cfg_.priority;
     engine_ = std::make_unique<rt::Engine>(ec, clock_);
+    for (auto& bc : cfg_.buses) // a scanner link naming only link.slaves: the scanner says what they are
+        if (bc.link.type == "scanner" && !bc.link.attach.empty()) {
+            try {
+                for (const auto& c : scanner::ClientBackend::resolve(bc.link.socket, bc.id, bc.link.attach, 30)) {
+                    config::SlaveEntry se;
+                    se.position = c.position;
+                    se.type = c.type;
+                    se.name = c.name;
+                    se.oversampling = c.oversampling;
+                    se.type_where = bc.link.attach_where;
+                    bc.slaves.push_back(se);
+                }
+            } catch (const Error& e) {
+                throw Error(SB() << bc.link.attach_where << ": " << e.what());
+            }
+        }
     for (auto& bc : cfg_.buses) // the master keeps its slaves in position order; so do the PVs
         std::sort(bc.slaves.begin(), bc.slaves.end(),
                   [](const auto& a, const auto& b) { return a.position < b.position; });
     for (const auto& bc : cfg_.buses) {
         BusRt b;
-        std::vector<ethercat::SlaveConfig> slaves;
-        for (const auto& s : bc.slaves) {
-            if (!catalog_.find(s.type))
-                throw Error(SB() << cfg_.path << ": bus " << bc.id << " position " << s.position
-                                 << ": unknown device type '" << s.type << "'");
-            if (s.oversampling != 1) {
-                try {
-                    (void)catalog_.find(s.type)->with_oversampling(s.oversampling);
-                } catch (const Error& e) {
-                    throw Error(SB() << s.oversampling_where << ": " << e.what());
-                }
-            }
-            std::vector<ethercat::StartupSdo> sdos;
-            for (const auto& d : s.sdo) sdos.push_back({d.index, d.sub, d.value, d.size});
-            slaves.emplace_back(s.position, s.type, std::move(sdos));
-            slaves.back().oversampling = s.oversampling;
-        }
-        std::unique_ptr<ethercat::Link> link;
-        if (bc.link.type == "sim") {
-            // The simulated segment has exactly the configured slaves; gaps get an EK1100.
-            b.segment = std::make_unique<ethercat::sim::Segment>();
-            b.segment->add_configured(config::positions_and_types(bc), catalog_);
-            // The plant: the file's stages, signals and wiring; every drive it does not name
-            // moves a default stage (also without a plant file).
-            ethercat::sim::SimConfig sim;
-            if (!bc.link.plant.empty()) {
-                sim = ethercat::sim::SimConfig::load(bc.link.plant, catalog_);
-                if (!sim.slaves.empty())
-                    throw Error(SB() << bc.link.plant << ": a plant file used by an IOC takes its slaves from the IOC file; remove 'slaves:'");
-            }
-            b.plant = sim.build(*b.segment, catalog_);
-            // link.faults: the segment starts with them (a slave without power, a refusal, ...).
-            for (std::size_t k = 0; k < bc.link.faults.size(); ++k) {
-                try {
-                    b.segment->apply(ethercat::sim::parse_fault(bc.link.faults[k], catalog_, b.segment->size()));
-                } catch (const Error& e) {
-                    throw Error(SB() << bc.link.faults_where[k] << ": " << e.what());
-                }
-            }
-            link = std::make_unique<ethercat::sim::InProcessLink>(*b.segment);
-            b.sim_stage = std::make_unique<SimTimeStage>(*b.segment);
-            engine_->add_stage(rt::StageOrder::BusSend, *b.sim_stage);
-        } else if (bc.link.type == "raw") {
-            link = std::make_unique<ethercat::RawLink>(bc.link.iface, bc.link.busy_poll);
+        if (bc.link.type == "scanner") { // the bus is run by `beamctl scanner`; this IOC attaches to it
+            scanner::ClientConfig cc;
+            cc.socket = bc.link.socket;
+            cc.bus = bc.id;
+            cc.ioc = cfg_.name;
+            for (const auto& s : bc.slaves) cc.slaves.push_back(s.name.empty() ? std::to_string(s.position) : s.name);
+            if (bc.link.claim_all)
+                for (const auto& s : cc.slaves) cc.claims.push_back({s, "*"});
+            for (const auto& [slave, entry] : bc.link.claims) cc.claims.push_back({slave, entry});
+            cc.tick_timeout_s = bc.link.tick_timeout_s;
+            b.bus = std::make_unique<ethercat::Bus>(bc.id, std::make_unique<scanner::ClientBackend>(cc));
         } else {
-            link = std::make_unique<ethercat::UdpLink>(bc.link.host, bc.link.port);
+            ethercat::sim::LocalBus lb = ethercat::sim::make_local_bus(bc, catalog_, cfg_.path);
+            b.segment = std::move(lb.segment);
+            b.plant = std::move(lb.plant);
+            b.sim_stage = std::move(lb.sim_stage);
+            b.bus = std::move(lb.bus);
+            if (b.sim_stage) engine_->add_stage(rt::StageOrder::BusSend, *b.sim_stage);
         }
-        b.bus = std::make_unique<ethercat::Bus>(bc.id, std::move(link), std::move(slaves), catalog_);
-        b.bus->set_strict(bc.strict);
         b.bus->add_stages(*engine_);
         buses_.push_back(std::move(b));
     }
@@ -436,6 +414,10 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
     PvInstance bus{m, "", {{"BUS", SB() << "ec" << bc.id << "."}, {"NB", std::to_string(rt::kLatencyBuckets)}}};
     pv::DbFile f = make_records(bus_table(), bus, registry_);
     name_pvs(bus_table(), bus, registry_);
+    if (bc.link.type == "scanner") {
+        pv::merge_db(f, make_records(scanner_table(), bus, registry_));
+        name_pvs(scanner_table(), bus, registry_);
+    }
     for (const auto& s : bc.slaves) {
         char sp[16];
         std::snprintf(sp, sizeof sp, "s%03d", s.position);
@@ -624,8 +606,16 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
 }
 
 void Ioc::bring_up() {
-    for (auto& b : buses_) {
-        b.bus->bring_up();
+    for (std::size_t bi = 0; bi < buses_.size(); ++bi) {
+        ethercat::Bus& bus = *buses_[bi].bus;
+        bus.bring_up();
+        // A scanner's slaves are what its chain says: the IOC file's types must be theirs.
+        const config::BusConfig& bc = cfg_.buses[bi];
+        if (bc.link.type == "scanner")
+            for (std::size_t i = 0; i < bc.slaves.size() && i < bus.slaves().size(); ++i)
+                if (bc.slaves[i].type != bus.slaves()[i].type)
+                    throw Error(SB() << bc.slaves[i].type_where << ": ec" << bc.id << " s" << bc.slaves[i].position << " is "
+                                     << bc.slaves[i].type << " in this file, " << bus.slaves()[i].type << " in the scanner's chain");
     }
     axes_->bind(
         [this](const motion::SignalRef& r) {

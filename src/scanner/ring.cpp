@@ -58,6 +58,7 @@ void RingWriter::publish(uint64_t cycle, uint64_t t_ns, uint64_t publish_ns, uin
     if (n) std::memcpy(reinterpret_cast<uint8_t*>(s + 1), data, n);
     atomic(s->seq).store(2 * k + 2, std::memory_order_release);
     atomic(h_->head).store(k + 1, std::memory_order_release);
+    std::atomic_ref<uint32_t>(h_->tick).fetch_add(1, std::memory_order_seq_cst);
 }
 
 uint64_t RingWriter::published() const noexcept { return atomic(h_->head).load(std::memory_order_relaxed); }
@@ -77,6 +78,12 @@ RingReader::RingReader(const void* mem, std::size_t bytes)
 
 uint64_t RingReader::layout_hash() const noexcept { return h_->layout_hash; }
 uint64_t RingReader::instance() const noexcept { return h_->instance; }
+
+bool RingReader::pending() const noexcept { return atomic(h_->head).load(std::memory_order_acquire) > next_; }
+
+uint32_t RingReader::tick() const noexcept {
+    return std::atomic_ref<uint32_t>(const_cast<uint32_t&>(h_->tick)).load(std::memory_order_seq_cst);
+}
 
 RingReader::Result RingReader::read(CycleSlot& slot, uint8_t* data) noexcept {
     for (;;) {

@@ -26,7 +26,7 @@ struct RingHeader {
     uint32_t depth;        // slots (a power of two)
     uint32_t slot_stride;  // [bytes] from one slot to the next
     uint32_t data_bytes;   // [bytes] of data per slot
-    uint32_t reserved2;
+    uint32_t tick;         // futex word: +1 after every publish (atomic; the reader sleeps on it)
     uint64_t layout_hash;  // the client's layout (Attached::layout_hash)
     uint64_t instance;     // the scanner's instance (Welcome::instance)
     uint64_t head;         // cycles published (atomic)
@@ -60,6 +60,8 @@ public:
     // `n` bytes of data (at most data_bytes), times and flags.
     void publish(uint64_t cycle, uint64_t t_ns, uint64_t publish_ns, uint32_t flags, const uint8_t* data, uint32_t n) noexcept;
     uint64_t published() const noexcept;
+    // The futex word publish() bumps: the scanner wakes a sleeping reader on it (futex_wake).
+    const uint32_t* tick_word() const noexcept { return &h_->tick; }
 
 private:
     uint8_t* mem_;
@@ -87,6 +89,11 @@ public:
     uint32_t data_bytes() const noexcept { return data_bytes_; }
     uint64_t layout_hash() const noexcept;
     uint64_t instance() const noexcept;
+    // Whether a cycle newer than the last one read has been published (acquire).
+    bool pending() const noexcept;
+    // The futex word to sleep on (futex_wait_until with its current value, read before pending()).
+    const uint32_t* tick_word() const noexcept { return &h_->tick; }
+    uint32_t tick() const noexcept;
 
 private:
     const uint8_t* mem_;
