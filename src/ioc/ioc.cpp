@@ -261,7 +261,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
         for (const auto& s : bc.slaves) {
             if (!catalog_.find(s.type))
                 throw Error(SB() << cfg_.path << ": bus " << bc.id << " position " << s.position
-                                 << ": unknown device type '" << s.type << "'");
+                                 << ": " << catalog_.unknown_type_error(s.type));
             if (s.oversampling != 1) {
                 try {
                     (void)catalog_.find(s.type)->with_oversampling(s.oversampling);
