@@ -113,17 +113,19 @@ public:
                 digit = c - 'a' + 10;
             else
                 fail(e, SB() << what << " '" << t << "' is not a number"
-                             << (t.size() > 1 && t[0] == '0' && (t[1] == 'x' || t[1] == 'X') ? " (ESI writes hex as #x..)" : ""));
+                             << (t.size() > 1 && t[0] == '0' && (t[1] == 'x' || t[1] == 'X')
+                                     ? " (ESI writes hex as #x..)"
+                                     : ""));
             v = v * base + digit;
         }
         return neg ? -v : v;
     }
 
-    uint64_t unsigned_in(const XMLElement* e, const char* what, const char* s,
-                         uint64_t max) const {
+    uint64_t unsigned_in(const XMLElement* e, const char* what, const char* s, uint64_t max) const {
         int64_t v = number(e, what, s);
         if (v < 0 || static_cast<uint64_t>(v) > max)
-            fail(e, SB() << what << " " << trimmed(s) << " is out of range (maximum " << max << ")");
+            fail(e,
+                 SB() << what << " " << trimmed(s) << " is out of range (maximum " << max << ")");
         return static_cast<uint64_t>(v);
     }
 
@@ -161,10 +163,11 @@ std::string esi_name(const XMLElement* e) {
 // (and are an error unless they are CoE names).
 std::string normalize_datatype(std::string t) {
     static const std::map<std::string, std::string> kMap{
-        {"BIT", "BOOL"},    {"BIT1", "BOOL"},    {"SINT", "INT8"},    {"INT", "INT16"},
-        {"DINT", "INT32"},  {"LINT", "INT64"},   {"USINT", "UINT8"},  {"BYTE", "UINT8"},
-        {"UINT", "UINT16"}, {"WORD", "UINT16"},  {"UDINT", "UINT32"}, {"DWORD", "UINT32"},
-        {"ULINT", "UINT64"}, {"REAL", "REAL32"}, {"LREAL", "REAL64"}, {"FLOAT", "REAL32"},
+        {"BIT", "BOOL"},      {"BIT1", "BOOL"},       {"SINT", "INT8"},       {"INT", "INT16"},
+        {"DINT", "INT32"},    {"LINT", "INT64"},      {"USINT", "UINT8"},     {"BYTE", "UINT8"},
+        {"UINT", "UINT16"},   {"WORD", "UINT16"},     {"UDINT", "UINT32"},    {"DWORD", "UINT32"},
+        {"ULINT", "UINT64"},  {"REAL", "REAL32"},     {"LREAL", "REAL64"},    {"FLOAT", "REAL32"},
+        {"BITARR8", "UINT8"}, {"BITARR16", "UINT16"}, {"BITARR32", "UINT32"}, // bit arrays: words
     };
     t = without_spaces(t);
     if (auto it = kMap.find(t); it != kMap.end()) return it->second;
@@ -178,7 +181,7 @@ struct PdoSource {
     std::vector<std::string> entry_names;   // ESI names (spaces kept), "" for padding
     std::vector<std::pair<uint16_t, const XMLElement*>> excludes;
     bool rx = false;
-    int sm = -1;       // default assignment, -1: none
+    int sm = -1; // default assignment, -1: none
     unsigned os_max = 0;
 };
 
@@ -225,8 +228,8 @@ DeviceDesc parse_device(const EsiReader& r, const XMLElement* dev, uint32_t vend
         if (mailbox && s.is_virtual) r.fail(sm, "a mailbox cannot be virtual");
         for (const SyncManagerDesc& other : d.sms)
             if (mailbox && other.type == s.type)
-                r.fail(sm, SB() << "second " << text << " sync manager (SM"
-                                << unsigned(other.index) << " is one already)");
+                r.fail(sm, SB() << "second " << text << " sync manager (SM" << unsigned(other.index)
+                                << " is one already)");
         d.sms.push_back(s);
     }
 
@@ -258,9 +261,10 @@ DeviceDesc parse_device(const EsiReader& r, const XMLElement* dev, uint32_t vend
                                     << " but the device has " << d.sms.size() << " <Sm> elements");
                 const SmType want = rx ? SmType::Outputs : SmType::Inputs;
                 if (d.sms[smi].type != want)
-                    r.fail(pe, SB() << "PDO " << hex(p.index) << " is assigned to SM" << smi << ", a "
-                                    << sm_type_name(d.sms[smi].type) << " sync manager; an " << tag
-                                    << " needs " << sm_type_name(want));
+                    r.fail(pe, SB() << "PDO " << hex(p.index) << " is assigned to SM" << smi
+                                    << ", a " << sm_type_name(d.sms[smi].type)
+                                    << " sync manager; an " << tag << " needs "
+                                    << sm_type_name(want));
                 ps.sm = static_cast<int>(smi);
             } else if (truthy(pe->Attribute("Mandatory"))) {
                 r.fail(pe, SB() << "mandatory PDO " << hex(p.index)
@@ -282,29 +286,34 @@ DeviceDesc parse_device(const EsiReader& r, const XMLElement* dev, uint32_t vend
                                        "16*(k-1): OSIndexInc 16)");
             }
 
-            for (auto* en = pe->FirstChildElement("Entry"); en; en = en->NextSiblingElement("Entry")) {
+            for (auto* en = pe->FirstChildElement("Entry"); en;
+                 en = en->NextSiblingElement("Entry")) {
                 PdoEntry e;
-                e.index = static_cast<uint16_t>(r.child_unsigned(en, "Index", "Entry Index", 0xFFFF));
+                e.index =
+                    static_cast<uint16_t>(r.child_unsigned(en, "Index", "Entry Index", 0xFFFF));
                 const XMLElement* bl = r.child(en, "BitLen");
-                uint64_t bits = r.unsigned_in(bl, "BitLen", bl->GetText() ? bl->GetText() : "", 255);
+                uint64_t bits =
+                    r.unsigned_in(bl, "BitLen", bl->GetText() ? bl->GetText() : "", 255);
                 if (bits == 0) r.fail(bl, "BitLen 0 should be > 0");
                 e.bits = static_cast<uint8_t>(bits);
                 std::string name;
                 if (e.index != 0) { // index 0 is padding: only its BitLen counts
                     if (auto* sub = en->FirstChildElement("SubIndex"))
-                        e.sub = static_cast<uint8_t>(
-                            r.unsigned_in(sub, "SubIndex", sub->GetText() ? sub->GetText() : "", 255));
+                        e.sub = static_cast<uint8_t>(r.unsigned_in(
+                            sub, "SubIndex", sub->GetText() ? sub->GetText() : "", 255));
                     const XMLElement* dt = en->FirstChildElement("DataType");
                     if (!dt)
-                        r.fail(en, SB() << "entry " << hex(e.index) << ":" << unsigned(e.sub)
-                                        << " has no <DataType> (only padding, Index 0, may omit it)");
+                        r.fail(en,
+                               SB() << "entry " << hex(e.index) << ":" << unsigned(e.sub)
+                                    << " has no <DataType> (only padding, Index 0, may omit it)");
                     const std::string raw = trimmed(dt->GetText());
                     e.datatype = normalize_datatype(raw);
                     unsigned width = coe_datatype_bits(e.datatype);
                     if (width == 0)
                         r.fail(dt, SB() << "unknown DataType '" << raw
                                         << "' (BOOL/BIT, BIT2-BIT8, SINT/INT/DINT/LINT, "
-                                           "USINT/UINT/UDINT/ULINT, BYTE/WORD/DWORD, REAL/LREAL, "
+                                           "USINT/UINT/UDINT/ULINT, BYTE/WORD/DWORD, BITARR8-32, "
+                                           "REAL/LREAL, "
                                            "INT8-INT64, UINT8-UINT64, REAL32, REAL64)");
                     if (width != e.bits)
                         r.fail(bl, SB() << "BitLen " << bits << " should be " << width
@@ -367,17 +376,19 @@ DeviceDesc parse_device(const EsiReader& r, const XMLElement* dev, uint32_t vend
             const uint16_t idx = static_cast<uint16_t>(first + k - 1);
             const Pdo* p = d.find_pdo(idx);
             if (!p) continue;
-            const PdoEntry want{static_cast<uint16_t>(e.index + 16 * (k - 1)), e.sub, e.bits, "", e.datatype};
+            const PdoEntry want{static_cast<uint16_t>(e.index + 16 * (k - 1)), e.sub, e.bits, "",
+                                e.datatype};
             const bool sample = p->entries.size() == 1 && p->entries[0].index == want.index &&
                                 p->entries[0].sub == want.sub && p->entries[0].bits == want.bits &&
                                 p->entries[0].datatype == want.datatype &&
                                 src.at(idx).rx == src.at(first).rx;
             if (!sample)
-                r.fail(src.at(idx).pdo,
-                       SB() << "PDO " << hex(idx) << " is where sample " << k << " of oversampled PDO "
-                            << hex(first) << " goes (OSMax " << d.oversampling.max
-                            << "), but it is not that sample (one entry " << hex(want.index) << ":"
-                            << unsigned(want.sub) << ", " << e.datatype << ")");
+                r.fail(src.at(idx).pdo, SB() << "PDO " << hex(idx) << " is where sample " << k
+                                             << " of oversampled PDO " << hex(first)
+                                             << " goes (OSMax " << d.oversampling.max
+                                             << "), but it is not that sample (one entry "
+                                             << hex(want.index) << ":" << unsigned(want.sub) << ", "
+                                             << e.datatype << ")");
             repeats.insert(idx);
         }
     }
@@ -386,9 +397,10 @@ DeviceDesc parse_device(const EsiReader& r, const XMLElement* dev, uint32_t vend
             list->erase(std::remove_if(list->begin(), list->end(),
                                        [&](const Pdo& p) { return repeats.count(p.index) != 0; }),
                         list->end());
-        d.pdo_assign.erase(std::remove_if(d.pdo_assign.begin(), d.pdo_assign.end(),
-                                          [&](const auto& a) { return repeats.count(a.second) != 0; }),
-                           d.pdo_assign.end());
+        d.pdo_assign.erase(
+            std::remove_if(d.pdo_assign.begin(), d.pdo_assign.end(),
+                           [&](const auto& a) { return repeats.count(a.second) != 0; }),
+            d.pdo_assign.end());
     }
 
     // Entry names: the ESI name as it is when it is an identifier used once in the device,
@@ -416,12 +428,14 @@ DeviceDesc parse_device(const EsiReader& r, const XMLElement* dev, uint32_t vend
                     !(e.name.size() > 2 && e.name.compare(e.name.size() - 2, 2, "_1") == 0))
                     e.name += "_1";
                 if (auto [it, fresh] = named.emplace(e.name, ps.entries[i]); !fresh)
-                    r.fail(ps.entries[i], SB() << "entry name '" << e.name << "' is already used by the entry at "
+                    r.fail(ps.entries[i], SB() << "entry name '" << e.name
+                                               << "' is already used by the entry at "
                                                << r.where(it->second));
             }
         }
     for (uint16_t first : channels)
-        d.oversampling.channels.push_back({first, esi_memmap_name(d.find_pdo(first)->entries[0].name)});
+        d.oversampling.channels.push_back(
+            {first, esi_memmap_name(d.find_pdo(first)->entries[0].name)});
 
     // Process-data SM sizes follow from the PDOs assigned to them (virtual SMs keep theirs).
     for (SyncManagerDesc& sm : d.sms) {
@@ -450,9 +464,10 @@ DeviceDesc parse_device(const EsiReader& r, const XMLElement* dev, uint32_t vend
                      t = t->NextSiblingElement("Transition")) {
                     std::string tr = trimmed(t->GetText());
                     static const std::set<std::string> kTransitions{"IP", "PS", "PI", "SP", "SO",
-                                                                   "SI", "OS", "OP", "OI"};
+                                                                    "SI", "OS", "OP", "OI"};
                     if (!kTransitions.count(tr))
-                        r.fail(t, SB() << "'" << tr << "' should be one of IP, PS, PI, SP, SO, SI, OS, OP, OI");
+                        r.fail(t, SB() << "'" << tr
+                                       << "' should be one of IP, PS, PI, SP, SO, SI, OS, OP, OI");
                     c.transitions += (c.transitions.empty() ? "" : " ") + tr;
                 }
                 if (c.transitions.empty()) r.fail(ic, "missing <Transition>");
@@ -468,7 +483,8 @@ DeviceDesc parse_device(const EsiReader& r, const XMLElement* dev, uint32_t vend
                     r.fail(data, SB() << "'" << hexdata
                                       << "' should be hex bytes (an even number of hex digits)");
                 for (size_t i = 0; i < hexdata.size(); i += 2)
-                    c.data.push_back(static_cast<uint8_t>(std::stoul(hexdata.substr(i, 2), nullptr, 16)));
+                    c.data.push_back(
+                        static_cast<uint8_t>(std::stoul(hexdata.substr(i, 2), nullptr, 16)));
                 c.complete_access = truthy(ic->Attribute("CompleteAccess"));
                 if (auto* cm = ic->FirstChildElement("Comment")) c.comment = trimmed(cm->GetText());
                 init_cmds.push_back(std::move(c));
@@ -477,11 +493,13 @@ DeviceDesc parse_device(const EsiReader& r, const XMLElement* dev, uint32_t vend
     }
     // DC: the first OpMode with a non-zero AssignActivate.
     if (auto* dc = dev->FirstChildElement("Dc")) {
-        for (auto* om = dc->FirstChildElement("OpMode"); om; om = om->NextSiblingElement("OpMode")) {
+        for (auto* om = dc->FirstChildElement("OpMode"); om;
+             om = om->NextSiblingElement("OpMode")) {
             auto* aa = om->FirstChildElement("AssignActivate");
             if (!aa) continue;
             uint64_t v = r.unsigned_in(aa, "AssignActivate", aa->GetText(), 0xFFFF);
-            if (v != 0 && d.dc_assign_activate == 0) d.dc_assign_activate = static_cast<uint16_t>(v);
+            if (v != 0 && d.dc_assign_activate == 0)
+                d.dc_assign_activate = static_cast<uint16_t>(v);
         }
     }
     if (auto* el = dev->FirstChildElement("Electrical")) {
@@ -506,7 +524,8 @@ std::vector<EsiDevice> parse_esi(const EsiReader& r, const tinyxml2::XMLDocument
 
     std::vector<EsiDevice> out;
     ErrorList errors; // one per bad device; the others are still read
-    for (auto* dev = devices->FirstChildElement("Device"); dev; dev = dev->NextSiblingElement("Device"))
+    for (auto* dev = devices->FirstChildElement("Device"); dev;
+         dev = dev->NextSiblingElement("Device"))
         errors.capture([&] {
             EsiDevice d;
             d.at = r.loc(dev);

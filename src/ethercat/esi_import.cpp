@@ -41,15 +41,16 @@ std::string quoted(const std::string& s) {
 // A string as a YAML scalar inside a flow mapping: plain where that reads back as the same
 // string, else double-quoted.
 std::string scalar(const std::string& s) {
-    static const std::set<std::string> kSpecial{"true", "false", "yes", "no", "on", "off",
-                                                "null", "y", "n", "~"};
+    static const std::set<std::string> kSpecial{"true", "false", "yes", "no", "on",
+                                                "off",  "null",  "y",   "n",  "~"};
     std::string lower = s;
     std::transform(lower.begin(), lower.end(), lower.begin(),
                    [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
     bool plain = !s.empty() && (std::isalpha(static_cast<unsigned char>(s[0])) || s[0] == '_') &&
                  s.back() != ' ' && !kSpecial.count(lower) &&
                  std::all_of(s.begin(), s.end(), [](unsigned char c) {
-                     return std::isalnum(c) || std::string_view(" _.()/+-").find(char(c)) != std::string_view::npos;
+                     return std::isalnum(c) ||
+                            std::string_view(" _.()/+-").find(char(c)) != std::string_view::npos;
                  });
     return plain ? s : quoted(s);
 }
@@ -125,7 +126,8 @@ std::string catalog_yaml(const DeviceDesc& d, const std::string& header,
                 if (idx == p.index) sm = SB() << ", sm: " << unsigned(smi);
             if (p.entries.size() <= 1) {
                 y << "  - {index: " << hx(p.index, 4) << ", name: " << scalar(p.name) << sm
-                  << ", entries: [" << (p.entries.empty() ? "" : entry_yaml(p.entries[0])) << "]}\n";
+                  << ", entries: [" << (p.entries.empty() ? "" : entry_yaml(p.entries[0]))
+                  << "]}\n";
                 continue;
             }
             y << "  - index: " << hx(p.index, 4) << "\n";
@@ -143,8 +145,10 @@ std::string catalog_yaml(const DeviceDesc& d, const std::string& header,
         y << "]\n";
     }
     if (!init_cmds.empty()) {
-        y << "# The ESI's InitCmds (transition: SDO). beamctl does not apply them: give those this\n"
-             "# setup needs as startup SDOs of the slave in the IOC file (sdo:, written in PREOP).\n";
+        y << "# The ESI's InitCmds (transition: SDO). beamctl does not apply them: give those "
+             "this\n"
+             "# setup needs as startup SDOs of the slave in the IOC file (sdo:, written in "
+             "PREOP).\n";
         for (const EsiInitCmd& c : init_cmds) y << init_cmd_comment(c) << "\n";
     }
     return y.str();
@@ -153,7 +157,8 @@ std::string catalog_yaml(const DeviceDesc& d, const std::string& header,
 std::string catalog_file_name(const DeviceDesc& d, bool with_revision) {
     std::string base = d.type;
     for (char& c : base)
-        if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) c = '_';
+        if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.'))
+            c = '_';
     if (with_revision) base += "_rev" + hx(d.revision, 8);
     return base + ".yaml";
 }
@@ -189,7 +194,8 @@ std::string write_checked(const std::string& path, const std::string& text, cons
     } catch (const Error& e) {
         std::error_code ec;
         fs::remove(tmp, ec);
-        throw Error(SB() << path << ": the generated entry does not load back (please report): " << e.what());
+        throw Error(SB() << path << ": the generated entry does not load back (please report): "
+                         << e.what());
     }
     return tmp;
 }
@@ -226,7 +232,8 @@ int run_esi_import(const EsiImportOptions& o, std::ostream& out, std::ostream& e
             std::vector<std::string> yaml;
             for (const auto& entry : fs::directory_iterator(o.out, ec)) {
                 const std::string p = entry.path().string();
-                if (entry.is_regular_file() && (p.ends_with(".yaml") || p.ends_with(".yml"))) yaml.push_back(p);
+                if (entry.is_regular_file() && (p.ends_with(".yaml") || p.ends_with(".yml")))
+                    yaml.push_back(p);
             }
             std::sort(yaml.begin(), yaml.end());
             for (const std::string& p : yaml) {
@@ -253,17 +260,19 @@ int run_esi_import(const EsiImportOptions& o, std::ostream& out, std::ostream& e
         std::vector<EsiDevice> devices;
     };
     std::vector<FileDevices> files;
-    std::map<std::string, std::set<uint32_t>> revisions;          // type -> revisions imported
+    std::map<std::string, std::set<uint32_t>> revisions; // type -> revisions imported
     std::map<std::tuple<uint32_t, uint32_t, uint32_t>, SourceLoc> seen; // identity -> first
     for (const std::string& f : o.files) {
         try {
             FileDevices fd{f, read_esi(f)};
             ErrorList dup;
             for (const EsiDevice& d : fd.devices) {
-                auto [it, fresh] = seen.emplace(std::make_tuple(d.desc.vendor, d.desc.product, d.desc.revision), d.at);
+                auto [it, fresh] = seen.emplace(
+                    std::make_tuple(d.desc.vendor, d.desc.product, d.desc.revision), d.at);
                 if (!fresh)
-                    dup.add(d.at, SB() << "Device: " << d.desc.type << " revision " << hx(d.desc.revision, 8)
-                                       << " is already imported from " << it->second.str());
+                    dup.add(d.at, SB() << "Device: " << d.desc.type << " revision "
+                                       << hx(d.desc.revision, 8) << " is already imported from "
+                                       << it->second.str());
             }
             dup.throw_if_any();
             for (const EsiDevice& d : fd.devices) revisions[d.desc.type].insert(d.desc.revision);
@@ -297,17 +306,19 @@ int run_esi_import(const EsiImportOptions& o, std::ostream& out, std::ostream& e
                 }
                 if (!printing && fs::exists(p.path) && !written_by_import(p.path)) {
                     if (!o.force)
-                        throw Error(SB() << dev.at.str() << ": Device: " << d.type << " revision "
-                                         << hx(d.revision, 8) << " would replace " << p.path
-                                         << ", which beamctl esi import did not write: not replaced "
-                                            "(--force replaces it)");
+                        throw Error(SB()
+                                    << dev.at.str() << ": Device: " << d.type << " revision "
+                                    << hx(d.revision, 8) << " would replace " << p.path
+                                    << ", which beamctl esi import did not write: not replaced "
+                                       "(--force replaces it)");
                     p.replaces_hand_written = true;
                 }
-                std::string header = SB() << kEsiImportHeader << " from "
-                                          << fs::path(fd.file).filename().string() << ":" << dev.at.line
-                                          << "; a later import of the same device replaces it.\n"
-                                          << "# Remove these two lines before editing it by hand (the "
-                                             "import leaves such files alone).\n";
+                std::string header = SB()
+                                     << kEsiImportHeader << " from "
+                                     << fs::path(fd.file).filename().string() << ":" << dev.at.line
+                                     << "; a later import of the same device replaces it.\n"
+                                     << "# Remove these two lines before editing it by hand (the "
+                                        "import leaves such files alone).\n";
                 p.text = catalog_yaml(d, header, dev.init_cmds);
                 p.dev = dev;
                 plan.push_back(std::move(p));
@@ -319,7 +330,9 @@ int run_esi_import(const EsiImportOptions& o, std::ostream& out, std::ostream& e
         }
         if (printing) {
             for (const Planned& p : plan) {
-                std::string tmp = (fs::temp_directory_path() / ("beamctl_esi_" + std::to_string(::getpid()) + ".yaml")).string();
+                std::string tmp = (fs::temp_directory_path() /
+                                   ("beamctl_esi_" + std::to_string(::getpid()) + ".yaml"))
+                                      .string();
                 try {
                     std::error_code ec;
                     fs::remove(write_checked(tmp, p.text, p.dev.desc), ec);
@@ -339,7 +352,8 @@ int run_esi_import(const EsiImportOptions& o, std::ostream& out, std::ostream& e
             std::error_code ec;
             fs::create_directories(o.out, ec);
             if (ec) throw Error(SB() << o.out << ": cannot create: " << ec.message());
-            for (const Planned& p : plan) ready.emplace_back(write_checked(p.path, p.text, p.dev.desc), p.path);
+            for (const Planned& p : plan)
+                ready.emplace_back(write_checked(p.path, p.text, p.dev.desc), p.path);
         } catch (const Error& e) {
             for (auto& [tmp, path] : ready) {
                 std::error_code ec;
@@ -358,7 +372,8 @@ int run_esi_import(const EsiImportOptions& o, std::ostream& out, std::ostream& e
             }
             const DeviceDesc& d = plan[i].dev.desc;
             out << "wrote " << plan[i].path << " (" << d.type << " revision " << hx(d.revision, 8)
-                << (plan[i].replaces_hand_written ? ", replaced a file the import did not write" : "")
+                << (plan[i].replaces_hand_written ? ", replaced a file the import did not write"
+                                                  : "")
                 << ")\n";
         }
     }

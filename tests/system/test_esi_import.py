@@ -94,7 +94,7 @@ def test_bad_file_writes_nothing_and_exits_1(tmp_path):
     r = beamctl("esi", "import", bad, FIXTURES / "EL2008.xml", "--out", cat)
     assert r.returncode == 1
     assert r.stderr.splitlines() == [f"{bad}:{line}:{col}: DataType: unknown DataType 'USINT8' (BOOL/BIT, BIT2-BIT8, "
-                                     "SINT/INT/DINT/LINT, USINT/UINT/UDINT/ULINT, BYTE/WORD/DWORD, REAL/LREAL, "
+                                     "SINT/INT/DINT/LINT, USINT/UINT/UDINT/ULINT, BYTE/WORD/DWORD, BITARR8-32, REAL/LREAL, "
                                      "INT8-INT64, UINT8-UINT64, REAL32, REAL64)"], r.stderr
     assert sorted(p.name for p in cat.iterdir()) == ["EL2008.yaml"]  # the good file only
 

@@ -5,11 +5,11 @@
 // rules for file names, overwriting and exit status.
 #include "ethercat/esi_import.hpp"
 
+#include "../temp_dir.hpp"
 #include "core/error.hpp"
 #include "core/error_list.hpp"
 #include "ethercat/catalog.hpp"
 #include "ethercat/esi.hpp"
-#include "../temp_dir.hpp"
 
 #include <gtest/gtest.h>
 
@@ -128,14 +128,17 @@ std::string differences(const DeviceDesc& a, const DeviceDesc& b) {
         field(at + ".pdo", hex(a.pdo_assign[i].second), hex(b.pdo_assign[i].second));
     }
     field("oversampling.max", a.oversampling.max, b.oversampling.max);
-    field("oversampling.channels.size", a.oversampling.channels.size(), b.oversampling.channels.size());
-    for (size_t i = 0; i < std::min(a.oversampling.channels.size(), b.oversampling.channels.size()); ++i) {
+    field("oversampling.channels.size", a.oversampling.channels.size(),
+          b.oversampling.channels.size());
+    for (size_t i = 0; i < std::min(a.oversampling.channels.size(), b.oversampling.channels.size());
+         ++i) {
         const std::string at = "oversampling.channels[" + std::to_string(i) + "].";
         field(at + "pdo", hex(a.oversampling.channels[i].pdo), hex(b.oversampling.channels[i].pdo));
         field(at + "memmap", a.oversampling.channels[i].memmap, b.oversampling.channels[i].memmap);
     }
     // a field added to DeviceDesc later and missed above still fails here
-    if (d.str().empty() && !(a == b)) d << "descriptions differ in a field this test does not list\n";
+    if (d.str().empty() && !(a == b))
+        d << "descriptions differ in a field this test does not list\n";
     return d.str();
 }
 
@@ -204,8 +207,8 @@ TEST(EsiImportFixtures, EveryHandWrittenTerminalHasAFixture) {
     std::set<std::string> have;
     for (const fs::path& f : fixtures()) have.insert(f.stem().string());
     // at least these, and every base description (operating-mode variants are not ESI devices)
-    for (const char* t : {"EK1100", "EL1008", "EL2008", "EL3102", "EL3702", "EL4732", "EL5101",
-                          "EL7041", "EL7211"})
+    for (const char* t :
+         {"EK1100", "EL1008", "EL2008", "EL3102", "EL3702", "EL4732", "EL5101", "EL7041", "EL7211"})
         EXPECT_TRUE(have.count(t)) << t;
     Catalog all;
     all.load_dir(kCatalog.string());
@@ -264,7 +267,9 @@ TEST(EsiImportFixtures, OversamplingTerminalsBehaveLikeTheHandWrittenOnes) {
     EXPECT_EQ(el3702.desc.oversampling.channels[0].memmap, "analogInputArray01");
     EXPECT_EQ(el3702.desc.oversampling_factor(), 1u);
     for (unsigned n : {2u, 10u, 100u})
-        EXPECT_EQ(differences(el3702.desc.with_oversampling(n), hand_written("EL3702").with_oversampling(n)), "")
+        EXPECT_EQ(differences(el3702.desc.with_oversampling(n),
+                              hand_written("EL3702").with_oversampling(n)),
+                  "")
             << n;
     const EsiDevice el4732 = imported(kFixtures / "EL4732.xml");
     EXPECT_EQ(el4732.desc.memmaps().size(), 2u);
@@ -280,12 +285,14 @@ TEST(EsiImportFixtures, InitCmdsAreReadAndListedAsComments) {
     EXPECT_TRUE(el3102.init_cmds[1].complete_access);
     EXPECT_EQ(el3102.init_cmds[1].data, (std::vector<uint8_t>{0x02, 0x00, 0x00, 0x1A, 0x02, 0x1A}));
     const std::string text = catalog_yaml(el3102.desc, "", el3102.init_cmds);
-    EXPECT_NE(text.find("#   PS: {index: 0x8000, sub: 6, value: 1, size: 1}  (enable filter ch.1)\n"),
-              std::string::npos)
+    EXPECT_NE(
+        text.find("#   PS: {index: 0x8000, sub: 6, value: 1, size: 1}  (enable filter ch.1)\n"),
+        std::string::npos)
         << text;
-    EXPECT_NE(text.find("#   PS: 0x1c13:0x00 complete access, 6 bytes: 0x02 0x00 0x00 0x1a 0x02 0x1a  "
-                        "(SM 3 PDO assignment)\n"),
-              std::string::npos)
+    EXPECT_NE(
+        text.find("#   PS: 0x1c13:0x00 complete access, 6 bytes: 0x02 0x00 0x00 0x1a 0x02 0x1a  "
+                  "(SM 3 PDO assignment)\n"),
+        std::string::npos)
         << text;
     const EsiDevice el7041 = imported(kFixtures / "EL7041.xml");
     ASSERT_EQ(el7041.init_cmds.size(), 1u);
@@ -301,7 +308,8 @@ TEST(EsiImportNames, VendorNamesOrEcmcNamesFromTheCatalog) {
     // EL2008 as Beckhoff names it: "Output" in every channel.
     std::string text = read_text((kFixtures / "EL2008.xml").string());
     for (int ch = 1; ch <= 8; ++ch)
-        text = replaced(text, "<Name>binaryOutput0" + std::to_string(ch) + "</Name>", "<Name>Output</Name>");
+        text = replaced(text, "<Name>binaryOutput0" + std::to_string(ch) + "</Name>",
+                        "<Name>Output</Name>");
     TempDir dir;
     const std::string file = dir.write("EL2008.xml", text);
     DeviceDesc d = read_esi(file).at(0).desc;
@@ -328,9 +336,11 @@ TEST(EsiImportNames, UnknownTypeErrorSaysHowToImport) {
     Catalog c;
     c.load_dir(kCatalog.string());
     EXPECT_EQ(c.unknown_type_error("EL7014"),
-              "unknown device type 'EL7014'; close matches in the catalog: EL7041, EL3104, EL7211; to add a device, "
+              "unknown device type 'EL7014'; close matches in the catalog: EL7041, EL3104, EL7211; "
+              "to add a device, "
               "import its vendor's ESI file: beamctl esi import VENDOR.xml --out " +
-                  kCatalog.string() + " (BEAMCTL_CATALOG selects the catalog directory; docs/esi.md)");
+                  kCatalog.string() +
+                  " (BEAMCTL_CATALOG selects the catalog directory; docs/esi.md)");
     EXPECT_NE(Catalog().unknown_type_error("X").find("--out CATALOG_DIR"), std::string::npos);
 }
 
@@ -351,7 +361,8 @@ TEST(EsiImportEdges, HexAndDecimalForms) {
     TempDir dir;
     for (const char* form : {"#x1A00", "#X1a00", "6656", " #x1a00 "}) {
         SCOPED_TRACE(form);
-        std::string text = replaced(kTemplate, "<Index>#x1a00</Index>", std::string("<Index>") + form + "</Index>");
+        std::string text = replaced(kTemplate, "<Index>#x1a00</Index>",
+                                    std::string("<Index>") + form + "</Index>");
         EXPECT_NE(read_esi(dir.write("h.xml", text)).at(0).desc.find_pdo(0x1A00), nullptr);
     }
     std::string text = replaced(kTemplate, "<Index>#x1a00</Index>", "<Index>0x1A00</Index>");
@@ -366,7 +377,8 @@ TEST(EsiImportEdges, HexAndDecimalForms) {
     text = replaced(kTemplate, "RevisionNo=\"#x00100000\"", "RevisionNo=\"#x100000000\"");
     file = dir.write("r.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
-              loc_of(file, text, "<Type ") + ": Type: RevisionNo #x100000000 is out of range (maximum 4294967295)");
+              loc_of(file, text, "<Type ") +
+                  ": Type: RevisionNo #x100000000 is out of range (maximum 4294967295)");
 }
 
 TEST(EsiImportEdges, MissingProductCode) {
@@ -380,11 +392,12 @@ TEST(EsiImportEdges, MissingProductCode) {
 TEST(EsiImportEdges, IndexZeroEntriesArePadding) {
     TempDir dir;
     // a gap of 4 bits, written once bare and once with the subindex, name and type tools add
-    std::string text = replaced(kTemplate, "<DataType>USINT</DataType></Entry>",
-                                "<DataType>USINT</DataType></Entry>\n"
-                                "          <Entry><Index>0</Index><BitLen>4</BitLen></Entry>\n"
-                                "          <Entry><Index>#x0</Index><SubIndex>0</SubIndex><BitLen>4</BitLen>"
-                                "<Name>gap</Name><DataType>BIT4</DataType></Entry>");
+    std::string text =
+        replaced(kTemplate, "<DataType>USINT</DataType></Entry>",
+                 "<DataType>USINT</DataType></Entry>\n"
+                 "          <Entry><Index>0</Index><BitLen>4</BitLen></Entry>\n"
+                 "          <Entry><Index>#x0</Index><SubIndex>0</SubIndex><BitLen>4</BitLen>"
+                 "<Name>gap</Name><DataType>BIT4</DataType></Entry>");
     DeviceDesc d = read_esi(dir.write("pad.xml", text)).at(0).desc;
     ASSERT_EQ(d.tx_pdos[0].entries.size(), 3u);
     EXPECT_EQ(d.tx_pdos[0].entries[1], (PdoEntry{0, 0, 4, "", ""}));
@@ -399,43 +412,48 @@ TEST(EsiImportEdges, IndexZeroEntriesArePadding) {
 TEST(EsiImportEdges, PdoTwiceOrInTheWrongSm) {
     TempDir dir;
     // the same PDO index twice (a PDO in two SMs)
-    std::string text = replaced(kTemplate, "        <TxPdo Sm=\"1\">",
-                                "        <TxPdo Sm=\"1\"><Index>#x1a00</Index><Name>Again</Name></TxPdo>\n"
-                                "        <TxPdo Sm=\"1\">");
+    std::string text =
+        replaced(kTemplate, "        <TxPdo Sm=\"1\">",
+                 "        <TxPdo Sm=\"1\"><Index>#x1a00</Index><Name>Again</Name></TxPdo>\n"
+                 "        <TxPdo Sm=\"1\">");
     std::string file = dir.write("dup.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
               loc_of(file, text, "<TxPdo Sm=\"1\">\n") +
-                  ": TxPdo: PDO 0x1A00 is already defined at " + loc_of(file, text, "<TxPdo Sm=\"1\"><Index>") +
+                  ": TxPdo: PDO 0x1A00 is already defined at " +
+                  loc_of(file, text, "<TxPdo Sm=\"1\"><Index>") +
                   " (one PDO, one default Sm; AlternativeSmMapping for others)");
     // an RxPdo assigned to an Inputs SM
     text = replaced(kTemplate, "<RxPdo Sm=\"0\"", "<RxPdo Sm=\"1\"");
     file = dir.write("wrong.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
-              loc_of(file, text, "<RxPdo") +
-                  ": RxPdo: PDO 0x1600 is assigned to SM1, a Inputs sync manager; an RxPdo needs Outputs");
+              loc_of(file, text, "<RxPdo") + ": RxPdo: PDO 0x1600 is assigned to SM1, a Inputs "
+                                             "sync manager; an RxPdo needs Outputs");
     // an RxPdo with a TxPdo index
     text = replaced(kTemplate, "<Index>#x1600</Index>", "<Index>#x1a05</Index>");
     file = dir.write("range.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
-              loc_of(file, text, "<Index>#x1a05") + ": Index: 0x1A05 should be in 0x1600-0x17FF (RxPdo, outputs)");
+              loc_of(file, text, "<Index>#x1a05") +
+                  ": Index: 0x1A05 should be in 0x1600-0x17FF (RxPdo, outputs)");
     // a mandatory PDO that is not assigned
-    text = replaced(kTemplate, "<RxPdo Sm=\"0\" Fixed=\"1\" Mandatory=\"1\">", "<RxPdo Mandatory=\"true\">");
+    text = replaced(kTemplate, "<RxPdo Sm=\"0\" Fixed=\"1\" Mandatory=\"1\">",
+                    "<RxPdo Mandatory=\"true\">");
     file = dir.write("mand.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
-              loc_of(file, text, "<RxPdo") +
-                  ": RxPdo: mandatory PDO 0x1600 has no Sm attribute (the sync manager it is assigned to)");
+              loc_of(file, text, "<RxPdo") + ": RxPdo: mandatory PDO 0x1600 has no Sm attribute "
+                                             "(the sync manager it is assigned to)");
 }
 
 TEST(EsiImportEdges, ExcludedAndOptionalPdos) {
     TempDir dir;
     // an optional PDO (no Sm) that excludes the assigned one: listed, not assigned
-    const std::string optional =
-        "        <TxPdo>\n"
-        "          <Index>#x1a01</Index>\n"
-        "          <Name>In long</Name>\n"
-        "          <Exclude>#x1a00</Exclude>\n"
-        "          <Entry><Index>#x6000</Index><SubIndex>1</SubIndex><BitLen>16</BitLen><Name>in1long</Name><DataType>UINT</DataType></Entry>\n"
-        "        </TxPdo>\n";
+    const std::string optional = "        <TxPdo>\n"
+                                 "          <Index>#x1a01</Index>\n"
+                                 "          <Name>In long</Name>\n"
+                                 "          <Exclude>#x1a00</Exclude>\n"
+                                 "          "
+                                 "<Entry><Index>#x6000</Index><SubIndex>1</SubIndex><BitLen>16</"
+                                 "BitLen><Name>in1long</Name><DataType>UINT</DataType></Entry>\n"
+                                 "        </TxPdo>\n";
     std::string text = replaced(kTemplate, "      </Device>", optional + "      </Device>");
     DeviceDesc d = read_esi(dir.write("opt.xml", text)).at(0).desc;
     ASSERT_NE(d.find_pdo(0x1A01), nullptr);
@@ -443,9 +461,10 @@ TEST(EsiImportEdges, ExcludedAndOptionalPdos) {
     EXPECT_EQ(d.pdo_assign, (Assign{{0, 0x1600}, {1, 0x1A00}}));
     EXPECT_EQ(d.sm_bytes(1), 1u);
     const std::string yaml = catalog_yaml(d);
-    EXPECT_NE(yaml.find("  - {index: 0x1a01, name: In long, entries: [{index: 0x6000, sub: 1, bits: 16, "
-                        "name: in1long, datatype: UINT16}]}\n"),
-              std::string::npos)
+    EXPECT_NE(
+        yaml.find("  - {index: 0x1a01, name: In long, entries: [{index: 0x6000, sub: 1, bits: 16, "
+                  "name: in1long, datatype: UINT16}]}\n"),
+        std::string::npos)
         << yaml;
     // both assigned by default although one excludes the other
     text = replaced(text, "        <TxPdo>\n", "        <TxPdo Sm=\"1\">\n");
@@ -457,11 +476,12 @@ TEST(EsiImportEdges, ExcludedAndOptionalPdos) {
 
 TEST(EsiImportEdges, SeveralDevicesAndRevisionsInOneFile) {
     TempDir dir;
-    std::string rev2 = replaced(replaced(kTemplate, "</Devices>", "</Devices>"), "RevisionNo=\"#x00100000\"",
-                                "RevisionNo=\"#x00110000\"");
+    std::string rev2 = replaced(replaced(kTemplate, "</Devices>", "</Devices>"),
+                                "RevisionNo=\"#x00100000\"", "RevisionNo=\"#x00110000\"");
     // XD0001 in revisions 0x00100000 and 0x00110000, and XD0002
     size_t a = rev2.find("      <Device>"), b = rev2.find("    </Devices>");
-    std::string text = replaced(kTemplate, "    </Devices>", rev2.substr(a, b - a) + kSecondDevice + "    </Devices>");
+    std::string text = replaced(kTemplate, "    </Devices>",
+                                rev2.substr(a, b - a) + kSecondDevice + "    </Devices>");
     std::string file = dir.write("multi.xml", text);
     auto devs = read_esi(file);
     ASSERT_EQ(devs.size(), 3u);
@@ -473,9 +493,13 @@ TEST(EsiImportEdges, SeveralDevicesAndRevisionsInOneFile) {
     EsiImportOptions o{{file}, (dir.path / "cat").string(), false};
     std::ostringstream out, err;
     EXPECT_EQ(run_esi_import(o, out, err), 0) << err.str();
-    EXPECT_EQ(out.str(), "wrote " + o.out + "/XD0001_rev0x00100000.yaml (XD0001 revision 0x00100000)\n"
-                         "wrote " + o.out + "/XD0001_rev0x00110000.yaml (XD0001 revision 0x00110000)\n"
-                         "wrote " + o.out + "/XD0002.yaml (XD0002 revision 0x00110000)\n");
+    EXPECT_EQ(out.str(), "wrote " + o.out +
+                             "/XD0001_rev0x00100000.yaml (XD0001 revision 0x00100000)\n"
+                             "wrote " +
+                             o.out +
+                             "/XD0001_rev0x00110000.yaml (XD0001 revision 0x00110000)\n"
+                             "wrote " +
+                             o.out + "/XD0002.yaml (XD0002 revision 0x00110000)\n");
     Catalog c;
     c.load_dir(o.out);
     EXPECT_EQ(c.size(), 3u);
@@ -485,24 +509,32 @@ TEST(EsiImportEdges, SeveralDevicesAndRevisionsInOneFile) {
 
 TEST(EsiImportEdges, DataTypes) {
     TempDir dir;
-    std::string text = replaced(kTemplate, "<DataType>USINT</DataType>", "<DataType>FOO16</DataType>");
+    std::string text =
+        replaced(kTemplate, "<DataType>USINT</DataType>", "<DataType>FOO16</DataType>");
     std::string file = dir.write("dt.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
               loc_of(file, text, "<DataType>FOO16") +
                   ": DataType: unknown DataType 'FOO16' (BOOL/BIT, BIT2-BIT8, SINT/INT/DINT/LINT, "
-                  "USINT/UINT/UDINT/ULINT, BYTE/WORD/DWORD, REAL/LREAL, INT8-INT64, UINT8-UINT64, REAL32, REAL64)");
+                  "USINT/UINT/UDINT/ULINT, BYTE/WORD/DWORD, BITARR8-32, REAL/LREAL, INT8-INT64, "
+                  "UINT8-UINT64, REAL32, REAL64)");
     text = replaced(kTemplate, "<BitLen>8</BitLen>", "<BitLen>16</BitLen>");
     file = dir.write("bl.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
-              loc_of(file, text, "<BitLen>16</BitLen><Name>in1") + ": BitLen: BitLen 16 should be 8 for DataType USINT");
+              loc_of(file, text, "<BitLen>16</BitLen><Name>in1") +
+                  ": BitLen: BitLen 16 should be 8 for DataType USINT");
     text = replaced(kTemplate, "<DataType>USINT</DataType>", "");
     file = dir.write("nodt.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
               loc_of(file, text, "<Entry><Index>#x6000") +
                   ": Entry: entry 0x6000:1 has no <DataType> (only padding, Index 0, may omit it)");
-    // CoE names and IEC names alike
-    text = replaced(kTemplate, "<DataType>USINT</DataType>", "<DataType>UINT8</DataType>");
-    EXPECT_EQ(read_esi(dir.write("coe.xml", text)).at(0).desc.tx_pdos[0].entries[0].datatype, "UINT8");
+    // CoE names and IEC names alike; a bit array is read as an unsigned word of its width
+    for (const char* t : {"UINT8", "BYTE", "BITARR8"}) {
+        text = replaced(kTemplate, "<DataType>USINT</DataType>",
+                        std::string("<DataType>") + t + "</DataType>");
+        EXPECT_EQ(read_esi(dir.write("coe.xml", text)).at(0).desc.tx_pdos[0].entries[0].datatype,
+                  "UINT8")
+            << t;
+    }
 }
 
 TEST(EsiImportEdges, NotEsiOrNotXml) {
@@ -512,18 +544,22 @@ TEST(EsiImportEdges, NotEsiOrNotXml) {
               file + ":2:1: root element should be <EtherCATInfo>, got <EtherCATConfig>");
     std::string text = replaced(kTemplate, "</Name>\n        <Sm", "</Nme>\n        <Sm");
     file = dir.write("bad.xml", text);
-    EXPECT_EQ(error_of([&] { read_esi(file); }).substr(0, file.size() + 3), file + ":8:") << error_of([&] { read_esi(file); });
+    EXPECT_EQ(error_of([&] { read_esi(file); }).substr(0, file.size() + 3), file + ":8:")
+        << error_of([&] { read_esi(file); });
     EXPECT_NE(error_of([&] { read_esi(file); }).find(": XML error"), std::string::npos);
-    EXPECT_EQ(error_of([&] { read_esi(dir.file("none.xml")); }), dir.file("none.xml") + ": cannot open");
+    EXPECT_EQ(error_of([&] { read_esi(dir.file("none.xml")); }),
+              dir.file("none.xml") + ": cannot open");
     text = replaced(kTemplate, "  <Vendor><Id>#x00000002</Id><Name>Test</Name></Vendor>\n", "");
     file = dir.write("novendor.xml", text);
-    EXPECT_EQ(error_of([&] { read_esi(file); }), loc_of(file, text, "<EtherCATInfo") + ": EtherCATInfo: missing <Vendor>");
+    EXPECT_EQ(error_of([&] { read_esi(file); }),
+              loc_of(file, text, "<EtherCATInfo") + ": EtherCATInfo: missing <Vendor>");
 }
 
 TEST(EsiImportEdges, EveryBadDeviceIsReported) {
     TempDir dir;
-    std::string text = replaced(kTemplate, "    </Devices>",
-                                replaced(kSecondDevice, "<Type ProductCode=\"#x00023052\"", "<Type") + "    </Devices>");
+    std::string text = replaced(
+        kTemplate, "    </Devices>",
+        replaced(kSecondDevice, "<Type ProductCode=\"#x00023052\"", "<Type") + "    </Devices>");
     text = replaced(text, "<DataType>USINT</DataType>", "<DataType>USINTX</DataType>");
     std::string file = dir.write("two.xml", text);
     try {
@@ -531,35 +567,41 @@ TEST(EsiImportEdges, EveryBadDeviceIsReported) {
         FAIL() << "no error";
     } catch (const beamctl::MultiError& e) {
         ASSERT_EQ(e.errors().size(), 2u) << e.what();
-        EXPECT_TRUE(e.errors()[0].starts_with(loc_of(file, text, "<DataType>USINTX") + ": DataType: unknown DataType"));
-        EXPECT_EQ(e.errors()[1], loc_of(file, text, "<Type RevisionNo") + ": Type: missing attribute ProductCode");
+        EXPECT_TRUE(e.errors()[0].starts_with(loc_of(file, text, "<DataType>USINTX") +
+                                              ": DataType: unknown DataType"));
+        EXPECT_EQ(e.errors()[1],
+                  loc_of(file, text, "<Type RevisionNo") + ": Type: missing attribute ProductCode");
     }
 }
 
 TEST(EsiImportEdges, Oversampling) {
     TempDir dir;
-    std::string os = replaced(kTemplate, "<TxPdo Sm=\"1\">", "<TxPdo Sm=\"1\" OSFac=\"1\" OSMax=\"4\" OSIndexInc=\"16\">");
+    std::string os = replaced(kTemplate, "<TxPdo Sm=\"1\">",
+                              "<TxPdo Sm=\"1\" OSFac=\"1\" OSMax=\"4\" OSIndexInc=\"16\">");
     DeviceDesc d = read_esi(dir.write("os.xml", os)).at(0).desc;
     EXPECT_EQ(d.oversampling.max, 4);
     ASSERT_EQ(d.oversampling.channels.size(), 1u);
     EXPECT_EQ(d.oversampling.channels[0].memmap, "inArray1"); // ECMC's <signal>Array<channel>
-    EXPECT_EQ(d.tx_pdos[0].entries[0].name, "in1_1"); // the first sample
+    EXPECT_EQ(d.tx_pdos[0].entries[0].name, "in1_1");         // the first sample
     EXPECT_EQ(d.with_oversampling(4).sm_bytes(1), 4u);
 
     std::string text = replaced(os, "OSIndexInc=\"16\"", "OSIndexInc=\"1\"");
     std::string file = dir.write("inc.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
               loc_of(file, text, "<TxPdo") +
-                  ": TxPdo: OSIndexInc 1 is not supported (sample k's entry index is the first's + 16*(k-1): OSIndexInc 16)");
+                  ": TxPdo: OSIndexInc 1 is not supported (sample k's entry index is the first's + "
+                  "16*(k-1): OSIndexInc 16)");
     // a PDO where sample 3 goes that is something else
     const std::string other =
         "        <TxPdo><Index>#x1a02</Index><Name>Other</Name>"
-        "<Entry><Index>#x6100</Index><SubIndex>1</SubIndex><BitLen>8</BitLen><Name>other</Name><DataType>USINT</DataType></Entry></TxPdo>\n";
+        "<Entry><Index>#x6100</Index><SubIndex>1</SubIndex><BitLen>8</BitLen><Name>other</"
+        "Name><DataType>USINT</DataType></Entry></TxPdo>\n";
     text = replaced(os, "      </Device>", other + "      </Device>");
     file = dir.write("clash.xml", text);
     EXPECT_EQ(error_of([&] { read_esi(file); }),
               loc_of(file, text, "<TxPdo><Index>#x1a02") +
-                  ": TxPdo: PDO 0x1A02 is where sample 3 of oversampled PDO 0x1A00 goes (OSMax 4), but it is "
+                  ": TxPdo: PDO 0x1A02 is where sample 3 of oversampled PDO 0x1A00 goes (OSMax 4), "
+                  "but it is "
                   "not that sample (one entry 0x6020:1, UINT8)");
     // the repeated sample itself is dropped
     text = replaced(other, "#x6100", "#x6020");
@@ -574,17 +616,23 @@ TEST(EsiImportEdges, Oversampling) {
 TEST(EsiImportRun, WritesOneFilePerDeviceThatTheCatalogLoads) {
     TempDir dir;
     EsiImportOptions o;
-    for (const char* t : {"EL1008", "EL3702", "EL7211"}) o.files.push_back((kFixtures / (std::string(t) + ".xml")).string());
+    for (const char* t : {"EL1008", "EL3702", "EL7211"})
+        o.files.push_back((kFixtures / (std::string(t) + ".xml")).string());
     o.out = (dir.path / "catalog").string(); // created
     std::ostringstream out, err;
     ASSERT_EQ(run_esi_import(o, out, err), 0) << err.str();
     EXPECT_EQ(err.str(), "");
-    EXPECT_EQ(out.str(), "wrote " + o.out + "/EL1008.yaml (EL1008 revision 0x00120000)\n"
-                         "wrote " + o.out + "/EL3702.yaml (EL3702 revision 0x00030000)\n"
-                         "wrote " + o.out + "/EL7211.yaml (EL7211 revision 0x00180000)\n");
+    EXPECT_EQ(out.str(), "wrote " + o.out +
+                             "/EL1008.yaml (EL1008 revision 0x00120000)\n"
+                             "wrote " +
+                             o.out +
+                             "/EL3702.yaml (EL3702 revision 0x00030000)\n"
+                             "wrote " +
+                             o.out + "/EL7211.yaml (EL7211 revision 0x00180000)\n");
     Catalog c;
     c.load_dir(o.out);
-    for (const char* t : {"EL1008", "EL3702", "EL7211"}) EXPECT_EQ(differences(*c.find(t), hand_written(t)), "") << t;
+    for (const char* t : {"EL1008", "EL3702", "EL7211"})
+        EXPECT_EQ(differences(*c.find(t), hand_written(t)), "") << t;
     const std::string text = read_text(o.out + "/EL3702.yaml");
     EXPECT_TRUE(text.starts_with(std::string(kEsiImportHeader) + " from EL3702.xml:12;")) << text;
 
@@ -600,27 +648,35 @@ TEST(EsiImportRun, LeavesHandWrittenFilesAloneWithoutForce) {
     TempDir dir;
     fs::create_directories(dir.path / "cat");
     const std::string hw = read_text((kCatalog / "EL1008.yaml").string());
-    const std::string mine = dir.write("cat/my_el1008.yaml", hw); // same identity, another file name
-    const std::string el2008 = dir.write("cat/EL2008.yaml", "# mine\n" + read_text((kCatalog / "EL2008.yaml").string()));
+    const std::string mine =
+        dir.write("cat/my_el1008.yaml", hw); // same identity, another file name
+    const std::string el2008 =
+        dir.write("cat/EL2008.yaml", "# mine\n" + read_text((kCatalog / "EL2008.yaml").string()));
     EsiImportOptions o{{(kFixtures / "EL1008.xml").string(), (kFixtures / "EL2008.xml").string(),
                         (kFixtures / "EL5101.xml").string()},
-                       (dir.path / "cat").string(), false};
+                       (dir.path / "cat").string(),
+                       false};
     std::ostringstream out, err;
     EXPECT_EQ(run_esi_import(o, out, err), 1);
     EXPECT_EQ(err.str(),
-              (kFixtures / "EL1008.xml").string() + ":12:7: Device: EL1008 revision 0x00120000 would replace " + mine +
+              (kFixtures / "EL1008.xml").string() +
+                  ":12:7: Device: EL1008 revision 0x00120000 would replace " + mine +
                   ", which beamctl esi import did not write: not replaced (--force replaces it)\n" +
-                  (kFixtures / "EL2008.xml").string() + ":12:7: Device: EL2008 revision 0x00100000 would replace " +
-                  el2008 + ", which beamctl esi import did not write: not replaced (--force replaces it)\n");
-    EXPECT_EQ(out.str(), "wrote " + o.out + "/EL5101.yaml (EL5101 revision 0x03fd0000)\n"); // the good file
+                  (kFixtures / "EL2008.xml").string() +
+                  ":12:7: Device: EL2008 revision 0x00100000 would replace " + el2008 +
+                  ", which beamctl esi import did not write: not replaced (--force replaces it)\n");
+    EXPECT_EQ(out.str(),
+              "wrote " + o.out + "/EL5101.yaml (EL5101 revision 0x03fd0000)\n"); // the good file
     EXPECT_EQ(read_text(mine), hw);
     EXPECT_TRUE(read_text(el2008).starts_with("# mine\n"));
 
     o.force = true;
     std::ostringstream out2, err2;
     EXPECT_EQ(run_esi_import(o, out2, err2), 0) << err2.str();
-    EXPECT_NE(out2.str().find("wrote " + mine + " (EL1008 revision 0x00120000, replaced a file the import did not write)"),
-              std::string::npos)
+    EXPECT_NE(
+        out2.str().find("wrote " + mine +
+                        " (EL1008 revision 0x00120000, replaced a file the import did not write)"),
+        std::string::npos)
         << out2.str();
     EXPECT_TRUE(read_text(mine).starts_with(kEsiImportHeader));
     Catalog c;
@@ -630,37 +686,46 @@ TEST(EsiImportRun, LeavesHandWrittenFilesAloneWithoutForce) {
 
 TEST(EsiImportRun, ABadFileWritesNothingAndTheOthersStillImport) {
     TempDir dir;
-    std::string text = replaced(read_text((kFixtures / "EL3102.xml").string()), "<DataType>INT</DataType>",
-                                "<DataType>INT17</DataType>");
+    std::string text = replaced(read_text((kFixtures / "EL3102.xml").string()),
+                                "<DataType>INT</DataType>", "<DataType>INT17</DataType>");
     const std::string bad = dir.write("EL3102.xml", text);
-    EsiImportOptions o{{bad, (kFixtures / "EL4134.xml").string(), dir.file("missing.xml")}, (dir.path / "cat").string(),
+    EsiImportOptions o{{bad, (kFixtures / "EL4134.xml").string(), dir.file("missing.xml")},
+                       (dir.path / "cat").string(),
                        false};
     std::ostringstream out, err;
     EXPECT_EQ(run_esi_import(o, out, err), 1);
-    EXPECT_EQ(err.str(), loc_of(bad, text, "<DataType>INT17") +
-                             ": DataType: unknown DataType 'INT17' (BOOL/BIT, BIT2-BIT8, SINT/INT/DINT/LINT, "
-                             "USINT/UINT/UDINT/ULINT, BYTE/WORD/DWORD, REAL/LREAL, INT8-INT64, UINT8-UINT64, "
-                             "REAL32, REAL64)\n" +
-                             dir.file("missing.xml") + ": cannot open\n");
+    EXPECT_EQ(err.str(),
+              loc_of(bad, text, "<DataType>INT17") +
+                  ": DataType: unknown DataType 'INT17' (BOOL/BIT, BIT2-BIT8, SINT/INT/DINT/LINT, "
+                  "USINT/UINT/UDINT/ULINT, BYTE/WORD/DWORD, BITARR8-32, REAL/LREAL, INT8-INT64, "
+                  "UINT8-UINT64, "
+                  "REAL32, REAL64)\n" +
+                  dir.file("missing.xml") + ": cannot open\n");
     EXPECT_EQ(out.str(), "wrote " + o.out + "/EL4134.yaml (EL4134 revision 0x03f90000)\n");
     EXPECT_FALSE(fs::exists(o.out + "/EL3102.yaml"));
 
     // the same identity in two files: the second file writes nothing
-    EsiImportOptions twice{{(kFixtures / "EL4134.xml").string(), (kFixtures / "EL4134.xml").string()},
-                           (dir.path / "cat2").string(), false};
+    EsiImportOptions twice{
+        {(kFixtures / "EL4134.xml").string(), (kFixtures / "EL4134.xml").string()},
+        (dir.path / "cat2").string(),
+        false};
     std::ostringstream out2, err2;
     EXPECT_EQ(run_esi_import(twice, out2, err2), 1);
-    EXPECT_EQ(err2.str(), (kFixtures / "EL4134.xml").string() + ":12:7: Device: EL4134 revision 0x03f90000 is already "
-                          "imported from " + (kFixtures / "EL4134.xml").string() + ":12:7\n");
+    EXPECT_EQ(err2.str(), (kFixtures / "EL4134.xml").string() +
+                              ":12:7: Device: EL4134 revision 0x03f90000 is already "
+                              "imported from " +
+                              (kFixtures / "EL4134.xml").string() + ":12:7\n");
 }
 
 TEST(EsiImportRun, WithoutOutPrintsTheEntries) {
     EsiImportOptions o{{(kFixtures / "EL1008.xml").string()}, "", false};
     std::ostringstream out, err;
     EXPECT_EQ(run_esi_import(o, out, err), 0);
-    EXPECT_TRUE(out.str().starts_with(std::string(kEsiImportHeader) + " from EL1008.xml:12;")) << out.str();
+    EXPECT_TRUE(out.str().starts_with(std::string(kEsiImportHeader) + " from EL1008.xml:12;"))
+        << out.str();
     EXPECT_NE(out.str().find("\ntype: EL1008\n"), std::string::npos);
-    EXPECT_EQ(err.str(), "nothing written: give --out DIR (e.g. --out catalog/) to write these entries\n");
+    EXPECT_EQ(err.str(),
+              "nothing written: give --out DIR (e.g. --out catalog/) to write these entries\n");
     o.files.push_back((kFixtures / "EL2008.xml").string());
     std::ostringstream out2, err2;
     EXPECT_EQ(run_esi_import(o, out2, err2), 0);
