@@ -8,6 +8,7 @@
 //   plc check    compile PLC files and report every error
 //   rcp-sim  stand in for a rapid-control-prototyping machine
 //   ca-repeater  the Channel Access repeater (also when invoked as `caRepeater`, EPICS's name)
+//   esi import   turn vendor ESI XML into catalog entries (catalog/*.yaml)
 #include "ca/access_security.hpp"
 #include "ca/ca_link.hpp"
 #include "ca/repeater.hpp"
@@ -26,6 +27,7 @@
 #include "pv/sub_routines.hpp"
 #include "config/ioc_config.hpp"
 #include "ethercat/catalog.hpp"
+#include "ethercat/esi_import.hpp"
 #include "bridge/rcp/rcp_sim.hpp"
 #include "ioc/check.hpp"
 #include "ioc/ioc.hpp"
@@ -665,6 +667,16 @@ int main(int argc, char** argv) {
     repcmd->add_option("--port", repeater_port, "UDP port (default: EPICS_CA_REPEATER_PORT, else 5065)")
         ->check(CLI::Range(1, 65535));
 
+    ethercat::EsiImportOptions esio;
+    auto* esicmd = app.add_subcommand("esi", "EtherCAT Slave Information (vendor ESI XML) tools");
+    esicmd->require_subcommand(1);
+    auto* esiimport = esicmd->add_subcommand(
+        "import", "Write catalog entries (one YAML file per device and revision) from ESI XML files; "
+                  "without --out, print them (exit 1 on any error)");
+    esiimport->add_option("files", esio.files, "ESI XML files (EtherCATInfo)")->required();
+    esiimport->add_option("--out", esio.out, "Catalog directory to write to, e.g. catalog/ (created if missing)");
+    esiimport->add_flag("--force", esio.force, "Replace existing files that beamctl esi import did not write");
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::Success& e) { // --help, --version
@@ -694,6 +706,7 @@ int main(int argc, char** argv) {
             return run_softioc(soft);
         }
         if (*plccheck) return run_plc_check(plco);
+        if (*esiimport) return ethercat::run_esi_import(esio, std::cout, std::cerr);
         if (*axischeck) return ioc::run_axis_check(axis_file, axis_encoders, macro_options(axis_macros));
         if (*shellcmd) return pv::run_shell_client(shello);
         if (*rcpcmd) return bridge::rcp::run_rcp_sim(rcp_model, rcpo);

@@ -3,9 +3,8 @@
 #include "config/yaml_reader.hpp"
 #include "core/error.hpp"
 #include "core/error_list.hpp"
+#include "ethercat/esi.hpp"
 #include "ethercat/sii.hpp"
-
-#include <tinyxml2.h>
 
 #include <algorithm>
 #include <cctype>
@@ -18,6 +17,7 @@
 #include <optional>
 #include <set>
 #include <sstream>
+#include <tuple>
 
 namespace fs = std::filesystem;
 
@@ -34,39 +34,6 @@ std::string hex(uint32_t v, int digits = 4) {
 std::string identity_str(const DeviceDesc& d) {
     return SB() << d.type << " (vendor " << hex(d.vendor, 8) << ", product " << hex(d.product, 8)
                 << ", revision " << hex(d.revision, 8) << ")";
-}
-
-std::string read_file(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error(SB() << path << ": cannot open");
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-}
-
-std::optional<SmType> sm_type_from(const std::string& s) {
-    if (s == "MBoxOut") return SmType::MailboxOut;
-    if (s == "MBoxIn") return SmType::MailboxIn;
-    if (s == "Outputs") return SmType::Outputs;
-    if (s == "Inputs") return SmType::Inputs;
-    if (s == "Unused") return SmType::Unused;
-    return std::nullopt;
-}
-
-const char* sm_type_name(SmType t) {
-    switch (t) {
-    case SmType::MailboxOut:
-        return "MBoxOut";
-    case SmType::MailboxIn:
-        return "MBoxIn";
-    case SmType::Outputs:
-        return "Outputs";
-    case SmType::Inputs:
-        return "Inputs";
-    case SmType::Unused:
-        break;
-    }
-    return "Unused";
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -113,7 +80,7 @@ DeviceDesc parse_yaml_device(const config::YamlNode& root) {
         sm.default_size = uint_of<uint16_t>(n["size"], 0xFFFF);
         sm.control = uint_of<uint8_t>(n.required("control"), 0xFF);
         auto type = n.required("type").string();
-        std::optional<SmType> t = type ? sm_type_from(*type) : std::nullopt;
+        std::optional<SmType> t = type ? sm_type_from_name(*type) : std::nullopt;
         if (type && !t)
             n["type"].error(SB() << "'" << *type
                                  << "' should be one of MBoxOut, MBoxIn, Outputs, Inputs, Unused");
@@ -261,255 +228,6 @@ DeviceDesc parse_yaml_device(const config::YamlNode& root) {
     return d;
 }
 
-// ---------------------------------------------------------------------------------------------
-// ESI
-
-class EsiReader {
-public:
-    EsiReader(std::string file, const std::string& text)
-        : file_(std::move(file))
-        , text_(text) {
-        line_starts_.push_back(0);
-        for (size_t i = 0; i < text_.size(); ++i)
-            if (text_[i] == '\n') line_starts_.push_back(i + 1);
-    }
-
-    // file:line:col of an element: tinyxml2 gives the line; the column is where "<Name" starts.
-    std::string where(const tinyxml2::XMLElement* e) const {
-        int line = e->GetLineNum();
-        int col = 1;
-        if (line >= 1 && static_cast<size_t>(line) <= line_starts_.size()) {
-            size_t begin = line_starts_[line - 1];
-            size_t end =
-                static_cast<size_t>(line) < line_starts_.size() ? line_starts_[line] : text_.size();
-            std::string tag = std::string("<") + e->Name();
-            size_t pos = text_.find(tag, begin);
-            if (pos != std::string::npos && pos < end) col = static_cast<int>(pos - begin) + 1;
-        }
-        return SourceLoc{file_, line, col}.str();
-    }
-
-    [[noreturn]] void fail(const tinyxml2::XMLElement* e, const std::string& what) const {
-        throw Error(SB() << where(e) << ": " << e->Name() << ": " << what);
-    }
-
-    // ESI number: "#x1A00" hex, or decimal (optionally negative when `allow_negative`).
-    int64_t number(const tinyxml2::XMLElement* e, const char* what, const char* s,
-                   bool allow_negative = false) const {
-        std::string t = s ? s : "";
-        t.erase(0, t.find_first_not_of(" \t\r\n"));
-        t.erase(t.find_last_not_of(" \t\r\n") + 1);
-        bool neg = false;
-        std::string digits = t;
-        int base = 10;
-        if (digits.size() > 2 && digits[0] == '#' && (digits[1] == 'x' || digits[1] == 'X')) {
-            digits = digits.substr(2);
-            base = 16;
-        } else if (allow_negative && !digits.empty() && digits[0] == '-') {
-            neg = true;
-            digits = digits.substr(1);
-        }
-        if (digits.empty() || digits.size() > 16)
-            fail(e, SB() << what << " '" << t << "' is not a number");
-        int64_t v = 0;
-        for (char c : digits) {
-            c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-            int digit;
-            if (c >= '0' && c <= '9')
-                digit = c - '0';
-            else if (base == 16 && c >= 'a' && c <= 'f')
-                digit = c - 'a' + 10;
-            else
-                fail(e, SB() << what << " '" << t << "' is not a number");
-            v = v * base + digit;
-        }
-        return neg ? -v : v;
-    }
-
-    uint64_t unsigned_in(const tinyxml2::XMLElement* e, const char* what, const char* s,
-                         uint64_t max) const {
-        int64_t v = number(e, what, s);
-        if (v < 0 || static_cast<uint64_t>(v) > max)
-            fail(e, SB() << what << " " << s << " is out of range (maximum " << max << ")");
-        return static_cast<uint64_t>(v);
-    }
-
-    // Text of the required child element `name`.
-    const char* child_text(const tinyxml2::XMLElement* e, const char* name) const {
-        const tinyxml2::XMLElement* c = e->FirstChildElement(name);
-        if (!c) fail(e, SB() << "missing <" << name << ">");
-        const char* t = c->GetText();
-        return t ? t : "";
-    }
-
-private:
-    std::string file_;
-    const std::string& text_;
-    std::vector<size_t> line_starts_;
-};
-
-// First <Name> child, preferring LcId 1033 (English).
-std::string esi_name(const tinyxml2::XMLElement* e) {
-    const tinyxml2::XMLElement* first = nullptr;
-    for (auto* n = e->FirstChildElement("Name"); n; n = n->NextSiblingElement("Name")) {
-        if (!first) first = n;
-        const char* lcid = n->Attribute("LcId");
-        if (lcid && std::string(lcid) == "1033") return n->GetText() ? n->GetText() : "";
-    }
-    return first && first->GetText() ? first->GetText() : "";
-}
-
-std::string without_spaces(std::string s) {
-    s.erase(std::remove_if(s.begin(), s.end(), [](unsigned char c) { return std::isspace(c); }),
-            s.end());
-    return s;
-}
-
-// ESI (IEC 61131) type names -> the CoE names used in the catalog; unknown names pass through.
-std::string normalize_datatype(std::string t) {
-    static const std::map<std::string, std::string> kMap{
-        {"BIT", "BOOL"},    {"SINT", "INT8"},    {"INT", "INT16"},    {"DINT", "INT32"},
-        {"LINT", "INT64"},  {"USINT", "UINT8"},  {"BYTE", "UINT8"},   {"UINT", "UINT16"},
-        {"WORD", "UINT16"}, {"UDINT", "UINT32"}, {"DWORD", "UINT32"}, {"ULINT", "UINT64"},
-        {"REAL", "REAL32"}, {"LREAL", "REAL64"}, {"FLOAT", "REAL32"},
-    };
-    t = without_spaces(t);
-    if (auto it = kMap.find(t); it != kMap.end()) return it->second;
-    return t;
-}
-
-std::vector<DeviceDesc> parse_esi(const EsiReader& r, const tinyxml2::XMLDocument& doc) {
-    const tinyxml2::XMLElement* root = doc.RootElement();
-    if (!root || std::string(root->Name()) != "EtherCATInfo")
-        throw Error(SB() << (root ? r.where(root) : "") << ": root element should be "
-                         << "<EtherCATInfo>, got <" << (root ? root->Name() : "") << ">");
-    const tinyxml2::XMLElement* vendor_el = root->FirstChildElement("Vendor");
-    if (!vendor_el) r.fail(root, "missing <Vendor>");
-    uint32_t vendor = static_cast<uint32_t>(r.unsigned_in(
-        vendor_el->FirstChildElement("Id") ? vendor_el->FirstChildElement("Id") : vendor_el,
-        "Vendor Id", r.child_text(vendor_el, "Id"), 0xFFFFFFFF));
-    const tinyxml2::XMLElement* descs = root->FirstChildElement("Descriptions");
-    if (!descs) r.fail(root, "missing <Descriptions>");
-    const tinyxml2::XMLElement* devices = descs->FirstChildElement("Devices");
-    if (!devices) r.fail(descs, "missing <Devices>");
-
-    std::vector<DeviceDesc> out;
-    for (auto* dev = devices->FirstChildElement("Device"); dev;
-         dev = dev->NextSiblingElement("Device")) {
-        DeviceDesc d;
-        d.vendor = vendor;
-        const tinyxml2::XMLElement* type = dev->FirstChildElement("Type");
-        if (!type) r.fail(dev, "missing <Type>");
-        d.type = without_spaces(type->GetText() ? type->GetText() : "");
-        if (d.type.empty()) r.fail(type, "empty device type");
-        const char* pc = type->Attribute("ProductCode");
-        if (!pc) r.fail(type, "missing attribute ProductCode");
-        d.product = static_cast<uint32_t>(r.unsigned_in(type, "ProductCode", pc, 0xFFFFFFFF));
-        if (const char* rev = type->Attribute("RevisionNo"))
-            d.revision = static_cast<uint32_t>(r.unsigned_in(type, "RevisionNo", rev, 0xFFFFFFFF));
-        d.name = esi_name(dev);
-
-        for (auto* sm = dev->FirstChildElement("Sm"); sm; sm = sm->NextSiblingElement("Sm")) {
-            SyncManagerDesc s;
-            s.index = static_cast<uint8_t>(d.sms.size());
-            const char* start = sm->Attribute("StartAddress");
-            if (!start) r.fail(sm, "missing attribute StartAddress");
-            s.start = static_cast<uint16_t>(r.unsigned_in(sm, "StartAddress", start, 0xFFFF));
-            if (const char* v = sm->Attribute("ControlByte"))
-                s.control = static_cast<uint8_t>(r.unsigned_in(sm, "ControlByte", v, 0xFF));
-            if (const char* v = sm->Attribute("DefaultSize"))
-                s.default_size = static_cast<uint16_t>(r.unsigned_in(sm, "DefaultSize", v, 0xFFFF));
-            uint64_t enable = 1;
-            if (const char* v = sm->Attribute("Enable"))
-                enable = r.unsigned_in(sm, "Enable", v, 0xFF);
-            s.enable = enable & kSiiSmEnable;
-            s.is_virtual = enable & kSiiSmVirtual;
-            if (const char* v = sm->Attribute("Virtual"))
-                s.is_virtual = std::string(v) == "true" || std::string(v) == "1";
-            std::string text = without_spaces(sm->GetText() ? sm->GetText() : "");
-            if (text.empty())
-                s.type = SmType::Unused;
-            else if (auto t = sm_type_from(text))
-                s.type = *t;
-            else
-                r.fail(sm, SB() << "'" << text
-                                << "' should be MBoxOut, MBoxIn, Outputs or "
-                                   "Inputs");
-            d.sms.push_back(s);
-        }
-
-        std::vector<std::pair<uint8_t, uint16_t>> rx_assign, tx_assign;
-        for (bool rx : {true, false}) {
-            const char* tag = rx ? "RxPdo" : "TxPdo";
-            for (auto* pe = dev->FirstChildElement(tag); pe; pe = pe->NextSiblingElement(tag)) {
-                Pdo p;
-                p.index = static_cast<uint16_t>(r.unsigned_in(
-                    pe->FirstChildElement("Index") ? pe->FirstChildElement("Index") : pe,
-                    "PDO Index", r.child_text(pe, "Index"), 0xFFFF));
-                p.name = esi_name(pe);
-                if (const char* sm = pe->Attribute("Sm")) {
-                    uint64_t smi = r.unsigned_in(pe, "Sm", sm, 255);
-                    if (smi >= d.sms.size())
-                        r.fail(pe, SB() << "PDO " << hex(p.index) << " is assigned to SM" << smi
-                                        << " but the device has " << d.sms.size()
-                                        << " <Sm> elements");
-                    (rx ? rx_assign : tx_assign).emplace_back(static_cast<uint8_t>(smi), p.index);
-                }
-                const std::string pdo_name = without_spaces(p.name);
-                for (auto* en = pe->FirstChildElement("Entry"); en;
-                     en = en->NextSiblingElement("Entry")) {
-                    PdoEntry e;
-                    auto* idx = en->FirstChildElement("Index");
-                    e.index = static_cast<uint16_t>(r.unsigned_in(
-                        idx ? idx : en, "Entry Index", r.child_text(en, "Index"), 0xFFFF));
-                    auto* bl = en->FirstChildElement("BitLen");
-                    uint64_t bits =
-                        r.unsigned_in(bl ? bl : en, "BitLen", r.child_text(en, "BitLen"), 255);
-                    if (bits == 0) r.fail(bl ? bl : en, "BitLen 0 should be > 0");
-                    e.bits = static_cast<uint8_t>(bits);
-                    auto* sub = en->FirstChildElement("SubIndex");
-                    auto* dt = en->FirstChildElement("DataType");
-                    if (e.index != 0 && sub && dt) {
-                        e.sub = static_cast<uint8_t>(
-                            r.unsigned_in(sub, "SubIndex", sub->GetText(), 255));
-                        e.datatype = normalize_datatype(dt->GetText() ? dt->GetText() : "");
-                        std::string entry_name = without_spaces(esi_name(en));
-                        e.name = pdo_name.empty() ? entry_name : pdo_name + "." + entry_name;
-                    } else {
-                        e.index = 0; // entries without SubIndex or DataType are padding
-                    }
-                    p.entries.push_back(std::move(e));
-                }
-                (rx ? d.rx_pdos : d.tx_pdos).push_back(std::move(p));
-            }
-        }
-        d.pdo_assign = std::move(rx_assign);
-        d.pdo_assign.insert(d.pdo_assign.end(), tx_assign.begin(), tx_assign.end());
-
-        if (auto* mbx = dev->FirstChildElement("Mailbox")) d.coe = mbx->FirstChildElement("CoE");
-        if (auto* dc = dev->FirstChildElement("Dc")) {
-            for (auto* om = dc->FirstChildElement("OpMode"); om;
-                 om = om->NextSiblingElement("OpMode")) {
-                auto* aa = om->FirstChildElement("AssignActivate");
-                if (!aa) continue;
-                uint64_t v = r.unsigned_in(aa, "AssignActivate", aa->GetText(), 0xFFFF);
-                if (v != 0) {
-                    d.dc_assign_activate = static_cast<uint16_t>(v);
-                    break;
-                }
-            }
-        }
-        if (auto* el = dev->FirstChildElement("Electrical")) {
-            if (auto* cur = el->FirstChildElement("EBusCurrent")) {
-                int64_t ma = r.number(cur, "EBusCurrent", cur->GetText(), true);
-                d.ebus_current_ma = static_cast<uint16_t>(std::clamp<int64_t>(ma, 0, 0xFFFF));
-            }
-        }
-        out.push_back(std::move(d));
-    }
-    return out;
-}
-
 bool has_suffix(const std::string& s, std::initializer_list<const char*> suffixes) {
     std::string lower = s;
     std::transform(lower.begin(), lower.end(), lower.begin(),
@@ -527,6 +245,7 @@ bool has_suffix(const std::string& s, std::initializer_list<const char*> suffixe
 // ---------------------------------------------------------------------------------------------
 
 struct Catalog::Impl {
+    std::string dir; // the directory of the first load_dir, for messages
     struct Item {
         DeviceDesc desc;
         std::string source;
@@ -544,33 +263,69 @@ struct Catalog::Impl {
         return nullptr;
     }
 
-    // YAML device of the same product with ecmc names (same revision preferred, else highest).
-    const Item* names_for(const DeviceDesc& d) const {
-        const Item* best = nullptr;
-        for (const auto& it : items) {
-            if (it->from_esi || it->desc.vendor != d.vendor || it->desc.product != d.product)
-                continue;
-            if (it->desc.revision == d.revision) return it.get();
-            if (!best || it->desc.revision > best->desc.revision) best = it.get();
-        }
-        return best;
-    }
-
-    void add_esi(DeviceDesc d, const std::string& source) {
-        if (const Item* named = names_for(d)) {
-            std::map<uint32_t, std::string> names; // index << 8 | sub -> ecmc name
-            for (const auto* list : {&named->desc.rx_pdos, &named->desc.tx_pdos})
+    // Catalog::ecmc_names.
+    void apply_ecmc_names(DeviceDesc& d) const {
+        // YAML devices of the same product: the same revision first (its base description
+        // before its operating-mode variants), then the others, highest revision first.
+        std::vector<const Item*> named;
+        for (const auto& it : items)
+            if (!it->from_esi && it->desc.vendor == d.vendor && it->desc.product == d.product)
+                named.push_back(it.get());
+        if (named.empty()) return;
+        auto rank = [&](const Item* it) {
+            return std::make_tuple(it->desc.revision != d.revision, !it->desc.variant_of.empty(),
+                                   ~it->desc.revision);
+        };
+        std::stable_sort(named.begin(), named.end(),
+                         [&](const Item* a, const Item* b) { return rank(a) < rank(b); });
+        std::map<uint32_t, std::string> names; // index << 8 | sub -> ecmc name; the first wins
+        for (const Item* it : named)
+            for (const auto* list : {&it->desc.rx_pdos, &it->desc.tx_pdos})
                 for (const Pdo& p : *list)
                     for (const PdoEntry& e : p.entries)
                         if (e.index != 0) names.emplace(uint32_t{e.index} << 8 | e.sub, e.name);
+        std::set<std::string> used;
+        for (const auto* list : {&d.rx_pdos, &d.tx_pdos})
+            for (const Pdo& p : *list)
+                for (const PdoEntry& e : p.entries) used.insert(e.name);
+        // Entries of default-assigned PDOs first: one entry per name.
+        for (bool assigned_pass : {true, false})
             for (auto* list : {&d.rx_pdos, &d.tx_pdos})
-                for (Pdo& p : *list)
-                    for (PdoEntry& e : p.entries)
-                        if (e.index != 0)
-                            if (auto it = names.find(uint32_t{e.index} << 8 | e.sub);
-                                it != names.end())
-                                e.name = it->second;
+                for (Pdo& p : *list) {
+                    bool assigned = std::any_of(d.pdo_assign.begin(), d.pdo_assign.end(),
+                                                [&](const auto& a) { return a.second == p.index; });
+                    if (assigned != assigned_pass) continue;
+                    for (PdoEntry& e : p.entries) {
+                        if (e.index == 0) continue;
+                        auto it = names.find(uint32_t{e.index} << 8 | e.sub);
+                        if (it == names.end() || it->second == e.name || used.count(it->second)) continue;
+                        used.insert(it->second);
+                        e.name = it->second;
+                    }
+                }
+        // An oversampled channel's memory map: the YAML device's for the same PDO, else named
+        // after its first sample (esi_memmap_name).
+        for (auto& ch : d.oversampling.channels) {
+            Pdo* p = nullptr;
+            for (auto* list : {&d.rx_pdos, &d.tx_pdos})
+                for (Pdo& x : *list)
+                    if (x.index == ch.pdo) p = &x;
+            if (!p || p->entries.size() != 1) continue;
+            std::string& n = p->entries[0].name;
+            if (!(n.size() > 2 && n.compare(n.size() - 2, 2, "_1") == 0)) n += "_1";
+            ch.memmap = esi_memmap_name(n);
+            bool found = false;
+            for (const Item* it : named)
+                for (const auto& c : it->desc.oversampling.channels)
+                    if (!found && c.pdo == ch.pdo) {
+                        ch.memmap = c.memmap;
+                        found = true;
+                    }
         }
+    }
+
+    void add_esi(DeviceDesc d, const std::string& source) {
+        apply_ecmc_names(d);
         if (Item* old = find_identity(d.vendor, d.product, d.revision)) {
             old->desc = std::move(d);
             old->source = source;
@@ -615,13 +370,24 @@ void Catalog::load_yaml(const std::string& path) {
 }
 
 void Catalog::load_esi(const std::string& path) {
-    const std::string text = read_file(path);
-    tinyxml2::XMLDocument doc;
-    if (doc.Parse(text.data(), text.size()) != tinyxml2::XML_SUCCESS)
-        throw Error(SB() << SourceLoc{path, doc.ErrorLineNum(), 1}.str()
-                         << ": XML error: " << doc.ErrorStr());
-    EsiReader r(path, text);
-    for (DeviceDesc& d : parse_esi(r, doc)) impl_->add_esi(std::move(d), path);
+    std::vector<EsiDevice> devices = read_esi(path); // a bad file changes nothing
+    for (EsiDevice& d : devices) impl_->add_esi(std::move(d.desc), path);
+}
+
+void Catalog::ecmc_names(DeviceDesc& d) const {
+    impl_->apply_ecmc_names(d);
+}
+
+std::string Catalog::unknown_type_error(std::string_view type) const {
+    SB msg;
+    msg << "unknown device type '" << type << "'";
+    auto close = config::close_matches(type, types(), 5);
+    for (std::size_t i = 0; i < close.size(); ++i)
+        msg << (i ? ", " : "; close matches in the catalog: ") << close[i];
+    msg << "; to add a device, import its vendor's ESI file: beamctl esi import VENDOR.xml --out "
+        << (impl_->dir.empty() ? std::string("CATALOG_DIR") : impl_->dir)
+        << " (BEAMCTL_CATALOG selects the catalog directory; docs/esi.md)";
+    return msg;
 }
 
 void Catalog::load_dir(const std::string& dir) {
@@ -637,6 +403,7 @@ void Catalog::load_dir(const std::string& dir) {
             xml.push_back(p);
     }
     if (ec) throw Error(SB() << dir << ": cannot list: " << ec.message());
+    if (impl_->dir.empty()) impl_->dir = dir;
     std::sort(yaml.begin(), yaml.end());
     std::sort(xml.begin(), xml.end());
     ErrorList errors; // every bad file, each with all its errors

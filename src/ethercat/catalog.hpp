@@ -58,11 +58,20 @@ public:
     // file (file:line:col, the key and what is wrong), and a bad file changes nothing. Defining
     // an identity (vendor, product, revision) that another YAML file already defined is an error.
     void load_yaml(const std::string& path);
-    // EtherCATInfo XML; every Descriptions/Devices/Device. An ESI device replaces an earlier
-    // device of the same identity. Entry names are "<PdoName>.<EntryName>" without spaces,
-    // except where a YAML device of the same vendor and product supplies an ecmc name for the
-    // same index:sub.
+    // EtherCATInfo XML (ethercat/esi.hpp); every Descriptions/Devices/Device; a bad file changes
+    // nothing. An ESI device replaces an earlier device of the same identity. Entry names are
+    // the ESI entry name where that is an identifier used once in the device, else
+    // "<PdoName>_<EntryName>" of their letters, digits and '_'; then ecmc_names().
     void load_esi(const std::string& path);
+    // Gives d's entries the ecmc names that this catalog's YAML devices of the same vendor and
+    // product use for the same index:sub (the same revision first, then the highest), each name
+    // to one entry (default-assigned PDOs first); an oversampled channel's memory map follows
+    // its first sample's name (<memmap>_1).
+    void ecmc_names(DeviceDesc& d) const;
+    // "unknown device type 'X'; close matches in the catalog: ...; to add a device, import its
+    // vendor's ESI file: beamctl esi import VENDOR.xml --out DIR ...": the one message for a
+    // type this catalog lacks (IOC check and run, master, simulator).
+    std::string unknown_type_error(std::string_view type) const;
 
     // By type name ("EL7041"); the highest revision if several are loaded. nullptr if none.
     const DeviceDesc* find(std::string_view type) const;

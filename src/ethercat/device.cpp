@@ -6,6 +6,28 @@
 
 namespace beamctl::ethercat {
 
+const char* sm_type_name(SmType t) {
+    switch (t) {
+    case SmType::MailboxOut:
+        return "MBoxOut";
+    case SmType::MailboxIn:
+        return "MBoxIn";
+    case SmType::Outputs:
+        return "Outputs";
+    case SmType::Inputs:
+        return "Inputs";
+    case SmType::Unused:
+        break;
+    }
+    return "Unused";
+}
+
+std::optional<SmType> sm_type_from_name(std::string_view s) {
+    for (SmType t : {SmType::MailboxOut, SmType::MailboxIn, SmType::Outputs, SmType::Inputs, SmType::Unused})
+        if (s == sm_type_name(t)) return t;
+    return std::nullopt;
+}
+
 uint32_t Pdo::bit_size() const {
     uint32_t bits = 0;
     for (const PdoEntry& e : entries) bits += e.bits;

@@ -4,7 +4,9 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace beamctl::ethercat {
@@ -16,6 +18,7 @@ struct PdoEntry {
     uint8_t bits = 0;
     std::string name;     // ecmccfg name, e.g. "binaryInput01", "positionActual01" ("" for padding)
     std::string datatype; // "BOOL", "UINT16", "INT32", ... (ESI DataType)
+    bool operator==(const PdoEntry&) const = default;
 };
 
 struct Pdo {
@@ -23,9 +26,14 @@ struct Pdo {
     std::string name;
     std::vector<PdoEntry> entries;
     uint32_t bit_size() const;
+    bool operator==(const Pdo&) const = default;
 };
 
 enum class SmType : uint8_t { Unused = 0, MailboxOut = 1, MailboxIn = 2, Outputs = 3, Inputs = 4 };
+// The name of an SM type in catalog files and ESI: "MBoxOut", "MBoxIn", "Outputs", "Inputs", "Unused".
+const char* sm_type_name(SmType t);
+// The type of such a name; nullopt for another word.
+std::optional<SmType> sm_type_from_name(std::string_view s);
 
 struct SyncManagerDesc {
     uint8_t index = 0;
@@ -35,6 +43,7 @@ struct SyncManagerDesc {
     bool enable = true;
     SmType type = SmType::Unused;
     bool is_virtual = false;   // ESI Sm@Virtual: points at ESC registers (DC), not a buffer
+    bool operator==(const SyncManagerDesc&) const = default;
 };
 
 struct DeviceDesc {
@@ -61,9 +70,11 @@ struct DeviceDesc {
         struct Channel {
             uint16_t pdo = 0;       // its first sample PDO
             std::string memmap;     // ECMC's memory map name, "analogInputArray01"
+            bool operator==(const Channel&) const = default;
         };
         uint16_t max = 0;           // 0: the device does not oversample
         std::vector<Channel> channels;
+        bool operator==(const Oversampling&) const = default;
     } oversampling;
 
     // A run of equal entries read or written as one array: ECMC's memory map
@@ -87,6 +98,8 @@ struct DeviceDesc {
     std::vector<MemMap> memmaps() const;
     // The factor of this description: samples per channel (1 for a device that does not oversample).
     unsigned oversampling_factor() const;
+    // Every field equal (what a catalog file and the ESI it was imported from must agree on).
+    bool operator==(const DeviceDesc&) const = default;
 };
 
 } // namespace beamctl::ethercat

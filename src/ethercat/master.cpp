@@ -35,8 +35,8 @@ Master::Master(Link& link, int bus_id, std::vector<SlaveConfig> cfg, const Catal
         if (c.position < 0) throw Error(SB() << "ec" << bus_ << ": negative slave position " << c.position);
         const DeviceDesc* d = catalog_.find(c.type);
         if (!d)
-            throw Error(SB() << "ec" << bus_ << " position " << c.position << ": unknown device type '"
-                             << c.type << "' (not in the catalog)");
+            throw Error(SB() << "ec" << bus_ << " position " << c.position << ": "
+                             << catalog_.unknown_type_error(c.type));
         for (const StartupSdo& sdo : c.sdos) {
             std::string what = SB() << "ec" << bus_ << " position " << c.position
                                     << ": startup SDO " << object_name(sdo.index, sdo.sub);

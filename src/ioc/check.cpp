@@ -73,13 +73,8 @@ public:
                     continue;
                 }
                 types_ok = false;
-                SB msg;
-                msg << s.type_where << ": buses[" << b << "] position " << s.position
-                    << ": unknown device type '" << s.type << "'";
-                auto close = config::close_matches(s.type, catalog.types(), 5);
-                for (std::size_t i = 0; i < close.size(); ++i)
-                    msg << (i ? ", " : "; close matches in the catalog: ") << close[i];
-                errors_.add(msg);
+                errors_.add(SB() << s.type_where << ": buses[" << b << "] position " << s.position
+                                 << ": " << catalog.unknown_type_error(s.type));
             }
             if (bc.link.type != "sim" || bc.link.plant.empty()) continue;
             const std::string key = SB() << "buses[" << b << "].link.plant";

@@ -10,7 +10,8 @@ from epics import ca
 from conftest import (BEAMCTL, REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port,
                       require_binary, wait_for)
 
-SUBCOMMANDS = ["softioc", "db", "run", "check", "signals", "plc", "axis", "rcp-sim", "sim", "shell", "ca-repeater"]
+SUBCOMMANDS = ["softioc", "db", "run", "check", "signals", "plc", "axis", "rcp-sim", "sim", "shell", "ca-repeater",
+               "esi"]
 
 
 def beamctl(*args, cwd=None):
@@ -76,6 +77,10 @@ def test_unknown_nested_subcommand_and_surplus_argument():
     assert "beamctl plc: unknown subcommand 'frob'; subcommands: check" in err, err
     err = usage_error("check", "a.yaml", "b.yaml")
     assert "beamctl check: unexpected argument 'b.yaml'" in err, err
+    err = usage_error("esi", "imprt", "x.xml")
+    assert "beamctl esi: unknown subcommand 'imprt' (did you mean 'import'?); subcommands: import" in err, err
+    err = usage_error("esi", "import")
+    assert "beamctl esi import: files is required" in err, err
 
 
 def test_missing_subcommand_lists_them():

@@ -23,8 +23,8 @@ LocalBus make_local_bus(const config::BusConfig& bc, const Catalog& catalog, con
     std::vector<SlaveConfig> slaves;
     for (const auto& s : bc.slaves) {
         if (!catalog.find(s.type))
-            throw Error(SB() << config_path << ": bus " << bc.id << " position " << s.position << ": unknown device type '"
-                             << s.type << "'");
+            throw Error(SB() << config_path << ": bus " << bc.id << " position " << s.position << ": "
+                             << catalog.unknown_type_error(s.type));
         if (s.oversampling != 1) {
             try {
                 (void)catalog.find(s.type)->with_oversampling(s.oversampling);

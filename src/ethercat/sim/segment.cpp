@@ -16,7 +16,7 @@ void Segment::add_configured(const std::vector<std::pair<int, std::string>>& sla
         for (const auto& [pos, t] : slaves)
             if (pos == p) type = t;
         const DeviceDesc* d = catalog.find(type);
-        if (!d) throw Error(SB() << "position " << p << ": unknown device type '" << type << "'");
+        if (!d) throw Error(SB() << "position " << p << ": " << catalog.unknown_type_error(type));
         add(*d);
     }
 }

@@ -224,13 +224,7 @@ SimConfig SimConfig::parse(const std::string& text, const std::string& file, con
             auto pos = item.required("position").integer(between(0, 65534));
             auto type = item.required("type").string();
             if (type && !catalog.find(*type)) {
-                SB msg;
-                msg << "unknown device type '" << *type << "'";
-                auto close = config::close_matches(*type, catalog.types());
-                for (std::size_t i = 0; i < close.size(); ++i)
-                    msg << (i ? ", " : " (did you mean ") << close[i];
-                if (!close.empty()) msg << "?)";
-                item["type"].error(msg);
+                item["type"].error(catalog.unknown_type_error(*type));
                 type.reset();
             }
             if (pos && *pos != int64_t(c.slaves.size()))

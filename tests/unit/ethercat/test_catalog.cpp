@@ -595,8 +595,8 @@ TEST(CatalogEsi, LoadsDevicesSmsPdosAndDc) {
     EXPECT_EQ(el1008->revision, 0x00130000u);
     EXPECT_EQ(el1008->name, "EL1008 8Ch. Dig. Input 24V, 3ms");
     ASSERT_EQ(el1008->tx_pdos.size(), 2u);
-    EXPECT_EQ(el1008->tx_pdos[0].entries.at(0).name, "Channel1.Input");
-    EXPECT_EQ(el1008->tx_pdos[1].entries.at(0).name, "Channel2.Input");
+    EXPECT_EQ(el1008->tx_pdos[0].entries.at(0).name, "Channel1_Input");
+    EXPECT_EQ(el1008->tx_pdos[1].entries.at(0).name, "Channel2_Input");
     EXPECT_EQ(el1008->tx_pdos[1].entries.at(1).index, 0);
     EXPECT_EQ(el1008->tx_pdos[1].entries.at(1).bits, 6);
     EXPECT_EQ(el1008->tx_pdos[1].entries.at(1).name, "");
@@ -617,7 +617,7 @@ TEST(CatalogEsi, LoadsDevicesSmsPdosAndDc) {
     EXPECT_FALSE(xd->sms[4].enable);
     EXPECT_EQ(xd->sms[4].start, 0x0998);
     const PdoEntry& vel = xd->find_pdo(0x1600)->entries.at(1);
-    EXPECT_EQ(vel.name, "DRVControlword.Targetvelocity");
+    EXPECT_EQ(vel.name, "DRVControlword_Targetvelocity");
     EXPECT_EQ(vel.sub, 6);
     EXPECT_EQ(vel.datatype, "INT32");
     EXPECT_EQ(xd->find_pdo(0x1600)->entries.at(0).datatype, "UINT16");
