@@ -220,7 +220,8 @@ Scanner::Scanner(ScannerConfig cfg, const ethercat::Catalog& catalog, rt::Clock&
 Scanner::~Scanner() {
     for (auto& b : buses_) b->local.bus->stop_health();
     engine_->stop();
-    for (auto& [fd, c] : conns_) ::close(fd);
+    for (auto& [id, c] : conns_)
+        if (c->fd >= 0) ::close(c->fd);
     if (listen_fd_ >= 0) {
         ::close(listen_fd_);
         ::unlink(cfg_.socket.c_str());
@@ -628,10 +629,11 @@ proto::Message Scanner::attach(Conn& c, const proto::Attach& a, std::vector<int>
 }
 
 void Scanner::stop(const std::string& reason) {
-    for (auto& [fd, c] : conns_) {
+    for (auto& [id, c] : conns_) {
+        if (c->fd < 0) continue;
         std::vector<uint8_t> out;
         proto::encode(proto::Message{0, proto::Goodbye{reason}}, out);
-        (void)::send(fd, out.data(), out.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+        (void)::send(c->fd, out.data(), out.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
     }
     for (auto& b : buses_) b->local.bus->stop_health();
     for (auto& b : buses_) {

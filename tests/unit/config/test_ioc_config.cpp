@@ -126,7 +126,7 @@ TEST(IocConfig, EveryErrorOfTheFileInOnePass) {
         "/cfg/ioc.yaml:1:14: ioc.name: 'A B' should be a plain PV name part",
         "/cfg/ioc.yaml:2:19: engine.rate_hz should be from 1 to 20000, got 0",
         "/cfg/ioc.yaml:2:22: unknown key 'cpus' in engine (did you mean 'cpu'?)",
-        "/cfg/ioc.yaml:5:18: buses[0].link.type should be sim, udp or raw, got 'simm' (did you "
+        "/cfg/ioc.yaml:5:18: buses[0].link.type should be sim, udp, raw or scanner, got 'simm' (did you "
         "mean 'sim'?)",
         "/cfg/ioc.yaml:8:20: buses[0].slaves[1].position: 1 is used twice",
         "/cfg/ioc.yaml:9:66: buses[0].slaves[2].sdo[0].value should be from 0 to 65535, got 70000",
