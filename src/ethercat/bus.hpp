@@ -28,7 +28,7 @@ struct BusSnapshot {
     std::vector<uint32_t> changes;     // per watch (Bus::watch): cycles in which the entry changed
     // A bus run by a scanner (scanner::ClientBackend): attached now, the scanner's last cycle
     // seen, its cycles this IOC never saw (ring drops and time detached), ring drops alone, attaches.
-    bool scanner_attached = false;
+    bool scanner_bus = false, scanner_attached = false;
     uint64_t scanner_cycle = 0, scanner_missed = 0, scanner_drops = 0, scanner_attaches = 0;
 };
 

@@ -48,8 +48,8 @@ public:
     }
     bool read(double& v) override {
         const ethercat::BusSnapshot& s = bus_.looked();
-        alarm_ = pv::kStatLink;
-        if (!s.link_up || !s.wkc_ok) return false; // no fresh data: LINK/INVALID
+        alarm_ = s.scanner_bus && !s.scanner_attached ? pv::kStatComm : pv::kStatLink;
+        if (!s.link_up || !s.wkc_ok) return false; // no fresh data: LINK/INVALID (COMM/INVALID: no scanner)
         if (!slave_ok(s)) { // its slave is missing, lost or not in OP: COMM/INVALID (as ECMC)
             alarm_ = pv::kStatComm;
             return false;

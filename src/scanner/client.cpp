@@ -570,6 +570,7 @@ void ClientBackend::fill(ethercat::BusSnapshot& s, ethercat::CycleStatus last) n
     s.responding = session_.load(std::memory_order_relaxed) ? t.responding : -1;
     s.link_up = last != ethercat::CycleStatus::FrameLost && last != ethercat::CycleStatus::LinkError;
     s.wkc_ok = last == ethercat::CycleStatus::Ok;
+    s.scanner_bus = true;
     s.scanner_attached = session_.load(std::memory_order_relaxed) != nullptr;
     s.scanner_cycle = last_cycle_.load(std::memory_order_relaxed);
     s.scanner_missed = gaps_.load(std::memory_order_relaxed);

@@ -289,6 +289,17 @@ class RunServer(IocServer):
         return [str(BEAMCTL), "run", self.config]
 
 
+class ScannerServer(IocServer):
+    """One `beamctl scanner SCANNER.yaml` process (same life cycle as IocServer; no CA port)."""
+
+    def __init__(self, workdir, config):
+        super().__init__(workdir, [], 0, name="scanner")
+        self.config = str(config)
+
+    def argv(self):
+        return [str(BEAMCTL), "scanner", self.config]
+
+
 class IocFactory:
     def __init__(self, tmp_path, prefix):
         self.tmp_path = Path(tmp_path)
