@@ -485,9 +485,15 @@ bool ClientBackend::wait(uint64_t deadline_ns, uint64_t& tick_ns) noexcept {
             }
             return false;
         }
+        // The tick's time is when the scanner published the cycle: the engine's wake-up latency
+        // figures then measure bus cycle -> this IOC's cycle.
+        auto tick_time = [&] {
+            uint64_t p = s->ring->peek_publish_ns();
+            return p ? p : now_ns();
+        };
         const uint32_t t = s->ring->tick();
         if (s->ring->pending()) {
-            tick_ns = now_ns();
+            tick_ns = tick_time();
             return true;
         }
         s->out->set_waiting(true);
@@ -498,7 +504,7 @@ bool ClientBackend::wait(uint64_t deadline_ns, uint64_t& tick_ns) noexcept {
         }
         s->out->set_waiting(false);
         if (s->ring->pending()) {
-            tick_ns = now_ns();
+            tick_ns = tick_time();
             return true;
         }
         if (now_ns() >= deadline_ns) return false;

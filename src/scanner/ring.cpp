@@ -81,6 +81,17 @@ uint64_t RingReader::instance() const noexcept { return h_->instance; }
 
 bool RingReader::pending() const noexcept { return atomic(h_->head).load(std::memory_order_acquire) > next_; }
 
+uint64_t RingReader::peek_publish_ns() const noexcept {
+    const uint64_t head = atomic(h_->head).load(std::memory_order_acquire);
+    if (next_ >= head) return 0;
+    const uint64_t k = head - next_ > depth_ ? head - depth_ : next_;
+    const SlotHeader* s = reinterpret_cast<const SlotHeader*>(mem_ + sizeof(RingHeader) + std::size_t(k & (depth_ - 1)) * stride_);
+    const uint64_t s1 = atomic(s->seq).load(std::memory_order_acquire);
+    const uint64_t t = s->publish_ns;
+    std::atomic_thread_fence(std::memory_order_acquire);
+    return s1 == 2 * k + 2 && atomic(s->seq).load(std::memory_order_relaxed) == s1 ? t : 0;
+}
+
 uint32_t RingReader::tick() const noexcept {
     return std::atomic_ref<uint32_t>(const_cast<uint32_t&>(h_->tick)).load(std::memory_order_seq_cst);
 }

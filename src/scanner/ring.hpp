@@ -91,6 +91,9 @@ public:
     uint64_t instance() const noexcept;
     // Whether a cycle newer than the last one read has been published (acquire).
     bool pending() const noexcept;
+    // When the next cycle to read was published [ns, CLOCK_MONOTONIC]; 0 if none or it is being
+    // overwritten (a hint for latency figures, not data).
+    uint64_t peek_publish_ns() const noexcept;
     // The futex word to sleep on (futex_wait_until with its current value, read before pending()).
     const uint32_t* tick_word() const noexcept { return &h_->tick; }
     uint32_t tick() const noexcept;

@@ -10,8 +10,8 @@ from epics import ca
 from conftest import (BEAMCTL, REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port,
                       require_binary, wait_for)
 
-SUBCOMMANDS = ["softioc", "db", "run", "check", "signals", "plc", "axis", "rcp-sim", "sim", "shell", "ca-repeater",
-               "esi"]
+SUBCOMMANDS = ["softioc", "db", "run", "scanner", "check", "signals", "plc", "axis", "rcp-sim", "sim", "shell",
+               "ca-repeater", "esi"]
 
 
 def beamctl(*args, cwd=None):
@@ -216,3 +216,18 @@ def test_plc_check_with_ioc_include_directories_for_another_file(tmp_path):
     (tmp_path / "first" / "helper.plc_inc").write_text("static.count := nosuchthing;\n")
     r = beamctl("plc", "check", "-I", tmp_path / "first", "--ioc", tmp_path / "ioc.yaml", other)
     assert r.returncode == 1 and "nosuchthing" in r.stderr, r.stderr
+
+
+def test_scanner_usage_and_errors(tmp_path):
+    r = beamctl("scanner")
+    assert r.returncode == 1 and "the scanner configuration file is required" in r.stderr, r.stderr
+    bad = tmp_path / "s.yaml"
+    bad.write_text("scanner: {socket: s.sock}\nbuses:\n  - {id: 0, slaves: [{position: 0, type: EK1100}]}\n")
+    r = beamctl("scanner", bad)
+    assert r.returncode == 1, r.stderr
+    assert f"{bad}:3:22: buses[0].slaves[0]: missing required key 'name'" in r.stderr, r.stderr
+    r = beamctl("scanner", "status", tmp_path / "nothing.sock")
+    assert r.returncode == 1, r.stderr
+    assert "nothing.sock: No such file or directory (is `beamctl scanner` running?)" in r.stderr, r.stderr
+    err = usage_error("scanner", "status")
+    assert "socket" in err, err
