@@ -94,6 +94,7 @@ struct Scanner::RtClient {
     std::atomic<int> state{Active};
     std::atomic<uint64_t> commits{0}, late{0}; // late: a commit answering an older cycle than the last one published before it
     std::atomic<uint64_t> out_lat_max_ns{0};   // commit -> merged into the frame
+    std::array<std::atomic<uint32_t>, kOutLatencyBins> out_lat_us{}; // its histogram, 1 µs bins (last: beyond)
 };
 
 struct Scanner::BusRt {
@@ -171,8 +172,9 @@ struct Scanner::GatherStage : rt::Stage {
             cl->claims.apply(img, cl->scratch.data());
             cl->commits.fetch_add(1, std::memory_order_relaxed);
             if (cycle + 1 < c.cycle) cl->late.fetch_add(1, std::memory_order_relaxed);
-            if (now > commit_ns && now - commit_ns > cl->out_lat_max_ns.load(std::memory_order_relaxed))
-                cl->out_lat_max_ns.store(now - commit_ns, std::memory_order_relaxed);
+            const uint64_t lat = now > commit_ns ? now - commit_ns : 0;
+            if (lat > cl->out_lat_max_ns.load(std::memory_order_relaxed)) cl->out_lat_max_ns.store(lat, std::memory_order_relaxed);
+            cl->out_lat_us[std::min<uint64_t>(lat / 1000, kOutLatencyBins - 1)].fetch_add(1, std::memory_order_relaxed);
         }
     }
 };
@@ -362,6 +364,21 @@ std::size_t Scanner::clients() const {
     for (const auto& b : buses_)
         for (const auto& s : b->slots) n += s.load() != nullptr;
     return n;
+}
+
+std::vector<Scanner::ClientFigures> Scanner::client_figures() const {
+    std::vector<ClientFigures> out;
+    for (const auto& [id, c] : conns_) {
+        if (!c->rt) continue;
+        ClientFigures f;
+        f.name = c->ioc;
+        f.commits = c->rt->commits.load();
+        f.late = c->rt->late.load();
+        f.out_latency_max_ns = c->rt->out_lat_max_ns.load();
+        for (std::size_t i = 0; i < kOutLatencyBins; ++i) f.out_latency_us[i] = c->rt->out_lat_us[i].load();
+        out.push_back(f);
+    }
+    return out;
 }
 
 proto::Status Scanner::status() const {

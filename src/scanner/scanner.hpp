@@ -47,6 +47,7 @@ struct ScannerConfig {
 };
 
 constexpr std::size_t kMaxClients = 64;
+constexpr std::size_t kOutLatencyBins = 1000; // output latency histogram: 1 µs bins, the last one 999 µs and beyond
 
 class Scanner {
 public:
@@ -79,6 +80,14 @@ public:
     std::size_t clients() const;
     uint64_t instance() const { return instance_; }
     proto::Status status() const;
+    // Per attached client (loop thread): commits merged, late ones, and the time from a commit to
+    // its merge into the frame (the send follows in the same cycle).
+    struct ClientFigures {
+        std::string name;
+        uint64_t commits = 0, late = 0, out_latency_max_ns = 0;
+        std::array<uint64_t, kOutLatencyBins> out_latency_us{};
+    };
+    std::vector<ClientFigures> client_figures() const;
 
 private:
     struct RtClient;
