@@ -8,7 +8,9 @@
 //   scanner CPU per client per cycle: the fanout + gather stage time per cycle, divided by N.
 // Reference, same run: the same minimal IOC on a local master (in-process segment): its wake-up
 // latency (cycle start minus its scheduled time), which is what an IOC on its own bus pays.
-// Usage: bench_scanner_latency [SECONDS_PER_POINT=2] [RATES=1000,5000,10000] [CLIENTS=1,3,8]
+// Each point runs with the scanner's gather window 0 (client outputs go in the next cycle's frame)
+// and 0.5 (the scanner waits up to half a cycle for the clients' answers to this cycle).
+// Usage: bench_scanner_latency [SECONDS_PER_POINT=2] [RATES=1000,5000,10000] [CLIENTS=1,3,8] [WINDOWS=0,0.5]
 #include "core/event_loop.hpp"
 #include "core/log.hpp"
 #include "ethercat/catalog.hpp"
@@ -89,12 +91,12 @@ Pct percentiles_hist(const std::array<uint64_t, scanner::kOutLatencyBins>& h) {
     return p;
 }
 
-std::vector<int> list_of(const char* s, std::vector<int> def) {
+std::vector<double> list_of(const char* s, std::vector<double> def) {
     if (!s) return def;
-    std::vector<int> v;
+    std::vector<double> v;
     std::stringstream ss(s);
     std::string t;
-    while (std::getline(ss, t, ',')) v.push_back(std::atoi(t.c_str()));
+    while (std::getline(ss, t, ',')) v.push_back(std::atof(t.c_str()));
     return v;
 }
 
@@ -125,19 +127,24 @@ Pct local_reference(const ethercat::Catalog& cat, const std::string& dir, int ra
 int main(int argc, char** argv) {
     log::configure("warn");
     const double secs = argc > 1 ? std::atof(argv[1]) : 2.0;
-    const std::vector<int> rates = list_of(argc > 2 ? argv[2] : nullptr, {1000, 5000, 10000});
-    const std::vector<int> counts = list_of(argc > 3 ? argv[3] : nullptr, {1, 3, 8});
+    const std::vector<double> rates = list_of(argc > 2 ? argv[2] : nullptr, {1000, 5000, 10000});
+    const std::vector<double> counts = list_of(argc > 3 ? argv[3] : nullptr, {1, 3, 8});
+    const std::vector<double> windows = list_of(argc > 4 ? argv[4] : nullptr, {0, 0.5});
     const ethercat::Catalog& cat = ethercat::Catalog::builtin();
     char tmpl[] = "/tmp/beamctl_scanner_bench_XXXXXX";
     const std::string dir = ::mkdtemp(tmpl);
     std::printf("bus scanner latency, %.1f s per point, %u CPUs; [us] p50 / p99 / max\n", secs, std::thread::hardware_concurrency());
-    std::printf("%6s %7s | %-26s | %-26s | %-26s | %s\n", "rate", "clients", "A: bus -> client cycle", "B: output -> frame",
+    std::printf("%6s %7s %6s | %-26s | %-26s | %-26s | %s\n", "rate", "clients", "window", "A: bus -> client cycle", "B: output -> frame",
                 "local master wake-up (ref)", "scanner CPU/client/cycle");
-    for (int rate : rates) {
+    for (double rate_d : rates) {
+        const int rate = int(rate_d);
         Pct ref = local_reference(cat, dir, rate, secs);
-        for (int n : counts) {
+        for (double n_d : counts)
+        for (double window : windows) {
+            const int n = int(n_d);
             std::string path = dir + "/scanner.yaml";
-            std::ofstream(path) << "scanner: {socket: " << dir << "/s.sock, depth: 1024}\nengine: {rate_hz: " << rate
+            std::ofstream(path) << "scanner: {socket: " << dir << "/s.sock, depth: 1024, gather_window: " << window
+                                << "}\nengine: {rate_hz: " << rate
                                 << "}\nbuses:\n  - id: 0\n    link: {type: sim}" << kChain;
             rt::MonotonicClock clock;
             scanner::Scanner sc(scanner::ScannerConfig::load(path), cat, clock);
@@ -196,8 +203,13 @@ int main(int argc, char** argv) {
                 if (s.name == "fanout" || s.name == "gather") stage_ns += double(s.total_ns);
             const double cycles = double(es.latency_samples ? es.latency_samples : 1);
             Pct pa = percentiles(a), pb = percentiles_hist(hist);
-            std::printf("%6d %7d | %7.1f / %7.1f / %8.1f | %7.1f / %7.1f / %8.1f | %7.1f / %7.1f / %8.1f | %.2f us\n", rate, n, pa.p50,
-                        pa.p99, pa.max, pb.p50, pb.p99, pb.max, ref.p50, ref.p99, ref.max, stage_ns / cycles / 1000.0 / n);
+            char cpu[32] = "(gather waits)"; // with a window the gather stage's time is mostly waiting
+            if (window == 0) std::snprintf(cpu, sizeof cpu, "%.2f us", stage_ns / cycles / 1000.0 / n);
+            uint64_t missed = 0;
+            for (const auto& f : figs) missed += f.missed_window;
+            std::printf("%6d %7d %6.2f | %7.1f / %7.1f / %8.1f | %7.1f / %7.1f / %8.1f | %7.1f / %7.1f / %8.1f | %s%s\n", rate, n,
+                        window, pa.p50, pa.p99, pa.max, pb.p50, pb.p99, pb.max, ref.p50, ref.p99, ref.max, cpu,
+                        missed ? (" (window missed " + std::to_string(missed) + "x)").c_str() : "");
             std::fflush(stdout);
             cs.clear();
             loop.stop();

@@ -1,6 +1,7 @@
 #include "scanner/outputs.hpp"
 
 #include "core/error.hpp"
+#include "scanner/shm.hpp"
 
 #include <atomic>
 #include <cstring>
@@ -37,6 +38,8 @@ void OutWriter::commit(uint64_t cycle, uint64_t now_ns, const uint8_t* data) noe
     h_->cycle = cycle;
     h_->commit_ns = now_ns;
     atomic(h_->seq).store(s + 1, std::memory_order_release);
+    atomic32(h_->commits).fetch_add(1, std::memory_order_seq_cst);
+    if (atomic32(h_->scanner_waiting).load(std::memory_order_seq_cst)) futex_wake(&h_->commits);
 }
 
 void OutWriter::set_waiting(bool w) noexcept { atomic32(h_->waiting).store(w ? 1 : 0, std::memory_order_seq_cst); }
@@ -67,6 +70,27 @@ bool OutReader::take(uint8_t* dst, uint64_t& cycle, uint64_t& commit_ns) noexcep
 void OutWriter::report_drops(uint64_t n) noexcept { atomic(h_->drops).store(n, std::memory_order_relaxed); }
 
 uint64_t OutReader::drops() const noexcept { return atomic(h_->drops).load(std::memory_order_relaxed); }
+
+bool OutReader::wait_answer(uint64_t cycle, uint64_t deadline_ns) noexcept {
+    auto answered = [&] {
+        const uint64_t s1 = atomic(h_->seq).load(std::memory_order_acquire);
+        const uint64_t c = atomic(const_cast<OutHeader*>(h_)->cycle).load(std::memory_order_relaxed);
+        return !(s1 & 1) && s1 != 0 && c >= cycle;
+    };
+    auto* hw = const_cast<OutHeader*>(h_);
+    for (;;) {
+        if (answered()) return true;
+        const uint32_t w = atomic32(h_->commits).load(std::memory_order_seq_cst);
+        atomic32(hw->scanner_waiting).store(1, std::memory_order_seq_cst);
+        bool ok = answered();
+        if (!ok && !futex_wait_until(&h_->commits, w, deadline_ns)) {
+            atomic32(hw->scanner_waiting).store(0, std::memory_order_relaxed);
+            return answered();
+        }
+        atomic32(hw->scanner_waiting).store(0, std::memory_order_relaxed);
+        if (ok) return true;
+    }
+}
 
 bool OutReader::waiting() const noexcept { return atomic32(h_->waiting).load(std::memory_order_seq_cst) != 0; }
 

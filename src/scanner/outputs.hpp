@@ -27,7 +27,9 @@ struct OutHeader {
     uint64_t cycle;      // the bus cycle whose inputs the committed outputs answer
     uint64_t commit_ns;  // when the client committed them (CLOCK_MONOTONIC) [ns]
     uint64_t drops;      // cycles the client's ring lost, as the client reports them (for `status`)
-    uint64_t reserved2[2];
+    uint32_t commits;    // futex word: +1 after every commit (the scanner may sleep on it)
+    uint32_t scanner_waiting; // the scanner is asleep on `commits`: the client wakes it (atomic)
+    uint64_t reserved2;
 };
 static_assert(sizeof(OutHeader) == 64);
 constexpr uint32_t kOutMagic = 0x4F534342; // "BCSO" in memory order
@@ -39,7 +41,8 @@ void init_out_block(void* mem, uint32_t data_bytes) noexcept;
 class OutWriter {
 public:
     OutWriter(void* mem, std::size_t bytes); // throws Error for a block that is not one
-    void commit(uint64_t cycle, uint64_t now_ns, const uint8_t* data) noexcept; // data_bytes() of them
+    // data_bytes() of them; wakes the scanner if it waits for this commit (one system call then).
+    void commit(uint64_t cycle, uint64_t now_ns, const uint8_t* data) noexcept;
     void set_waiting(bool w) noexcept;
     void report_drops(uint64_t n) noexcept;
     uint32_t data_bytes() const noexcept { return n_; }
@@ -58,6 +61,9 @@ public:
     bool take(uint8_t* dst, uint64_t& cycle, uint64_t& commit_ns) noexcept;
     bool waiting() const noexcept;
     uint64_t drops() const noexcept; // what the client reports (not trusted for anything else)
+    // The scanner waiting for this client's answer to `cycle`, until `deadline_ns`
+    // (CLOCK_MONOTONIC): true once its newest complete commit answers `cycle` (or a later one).
+    bool wait_answer(uint64_t cycle, uint64_t deadline_ns) noexcept;
     uint64_t torn() const noexcept { return torn_; }
     uint64_t taken() const noexcept { return taken_; }
 

@@ -56,7 +56,8 @@ ScannerConfig ScannerConfig::parse(const std::string& text, const std::string& p
         rd.take_errors(errors);
         return c;
     }
-    if (config::YamlNode n = root.required("scanner", " ({socket: PATH})"); n.keys({"name", "socket", "max_clients", "depth"}) && n) {
+    if (config::YamlNode n = root.required("scanner", " ({socket: PATH})"); n.keys({"name", "socket", "max_clients", "depth", "gather_window"}) && n) {
+        c.gather_window = n["gather_window"].number(config::between(0, 0.9)).value_or(0);
         c.name = n["name"].string().value_or(c.name);
         if (auto s = n.required("socket", " (the path of the socket IOCs attach through)").string()) {
             std::filesystem::path p(*s);
@@ -93,6 +94,7 @@ struct Scanner::RtClient {
     bool zero_on_detach = true;
     std::atomic<int> state{Active};
     std::atomic<uint64_t> commits{0}, late{0}; // late: a commit answering an older cycle than the last one published before it
+    std::atomic<uint64_t> missed_window{0};    // cycles whose gather window closed without its answer
     std::atomic<uint64_t> out_lat_max_ns{0};   // commit -> merged into the frame
     std::array<std::atomic<uint32_t>, kOutLatencyBins> out_lat_us{}; // its histogram, 1 µs bins (last: beyond)
 };
@@ -151,10 +153,20 @@ struct Scanner::FanoutStage : rt::Stage {
 struct Scanner::GatherStage : rt::Stage {
     BusRt& b;
     rt::Clock& clock;
-    GatherStage(BusRt& bus, rt::Clock& c) : b(bus), clock(c) {}
+    double window; // fraction of the period to wait for the clients' answers (0: none)
+    GatherStage(BusRt& bus, rt::Clock& c, double w) : b(bus), clock(c), window(w) {}
     const char* name() const noexcept override { return "gather"; }
     void run(const rt::CycleInfo& c) noexcept override {
         uint8_t* img = b.local.bus->master().image();
+        if (window > 0) { // every client's answer to this cycle, until the window closes
+            const uint64_t deadline = c.t_ns + uint64_t(window * double(c.period_ns));
+            for (auto& slot : b.slots) {
+                RtClient* cl = slot.load(std::memory_order_acquire);
+                if (cl && cl->state.load(std::memory_order_acquire) == RtClient::Active &&
+                    !cl->out->wait_answer(c.cycle, deadline))
+                    cl->missed_window.fetch_add(1, std::memory_order_relaxed);
+            }
+        }
         const uint64_t now = clock.now_ns();
         for (auto& slot : b.slots) {
             RtClient* cl = slot.load(std::memory_order_acquire);
@@ -243,7 +255,7 @@ void Scanner::start_virtual() {
         b.outputs_bytes = m.outputs_size();
         b.slot_buf.assign(slot_data_bytes(m.image_size(), m.slaves().size()), 0);
         b.fanout = std::make_unique<FanoutStage>(b, clock_);
-        b.gather = std::make_unique<GatherStage>(b, clock_);
+        b.gather = std::make_unique<GatherStage>(b, clock_, cfg_.gather_window);
         engine_->add_stage(rt::StageOrder::Axes, *b.fanout);
         engine_->add_stage(rt::StageOrder::Triggers, *b.gather);
         LOG_INFO(lg, "ec" << b.cfg.id << ": " << m.slaves().size() << " slave(s), image " << m.image_size() << " bytes ("
@@ -374,6 +386,7 @@ std::vector<Scanner::ClientFigures> Scanner::client_figures() const {
         f.name = c->ioc;
         f.commits = c->rt->commits.load();
         f.late = c->rt->late.load();
+        f.missed_window = c->rt->missed_window.load();
         f.out_latency_max_ns = c->rt->out_lat_max_ns.load();
         for (std::size_t i = 0; i < kOutLatencyBins; ++i) f.out_latency_us[i] = c->rt->out_lat_us[i].load();
         out.push_back(f);

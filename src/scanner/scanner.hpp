@@ -3,8 +3,9 @@
 //
 // RT thread (one engine, every bus on its cycle), per bus and cycle:
 //   bus receive -> Fanout (the image, counters and slave states into every attached client's
-//   ring; wake the clients asleep on it) -> Gather (each client's newest output commit, only its
-//   claimed bits, merged into the image) -> bus send -> publish.
+//   ring; wake the clients asleep on it) -> Gather (with a gather window, first wait for each
+//   client's answer to this cycle until the window closes; then each client's newest output
+//   commit, only its claimed bits, merged into the image) -> bus send -> publish.
 // The RT thread never waits for a client: a slow client loses its own oldest cycles (counted on
 // its side), a torn commit waits for the next cycle, a client gone has its claimed outputs set to
 // zero (or held) by the gather stage before its memory is released.
@@ -39,6 +40,10 @@ struct ScannerConfig {
     int cpu = -1, priority = 80;
     unsigned max_clients = 16;   // attached at once
     unsigned default_depth = 64; // cycles in a client's ring unless it asks otherwise
+    // How long, as a fraction of the cycle, the scanner waits for every client's outputs answering
+    // this cycle's inputs before it sends the frame (0: it sends at once and client outputs reach
+    // the bus one cycle later; 0.5: at most half a cycle, then the frame goes with what came).
+    double gather_window = 0;
     std::vector<config::BusConfig> buses;
 
     // Reads and checks SCANNER.yaml; every error at once (file:line:col). Throws MultiError.
@@ -84,7 +89,7 @@ public:
     // its merge into the frame (the send follows in the same cycle).
     struct ClientFigures {
         std::string name;
-        uint64_t commits = 0, late = 0, out_latency_max_ns = 0;
+        uint64_t commits = 0, late = 0, missed_window = 0, out_latency_max_ns = 0;
         std::array<uint64_t, kOutLatencyBins> out_latency_us{};
     };
     std::vector<ClientFigures> client_figures() const;

@@ -164,3 +164,28 @@ TEST(ScannerOutputs, ByteMergeCopiesOnlyTheMaskedBits) {
     EXPECT_EQ(std::memcmp(dst, cleared, 6), 0);
     EXPECT_TRUE(ByteMerge(std::vector<uint8_t>(4, 0)).empty());
 }
+
+TEST(ScannerOutputs, TheScannerWaitsForAnAnswerUntilItsDeadline) {
+    SharedMemory m = SharedMemory::create("answer", out_block_bytes(8), true);
+    init_out_block(m.data(), 8);
+    OutWriter w(m.data(), m.size());
+    OutReader r(m.data(), 8);
+    uint8_t d[8] = {};
+    // No answer: false at the deadline.
+    uint64_t t0 = mono_ns();
+    EXPECT_FALSE(r.wait_answer(5, t0 + 5'000'000));
+    EXPECT_GE(mono_ns() - t0, 4'000'000u);
+    // An answer to an older cycle is not one.
+    w.commit(4, 0, d);
+    EXPECT_FALSE(r.wait_answer(5, mono_ns() + 2'000'000));
+    // The client answers from another thread while the scanner sleeps: woken, true, well before the deadline.
+    std::thread t([&] {
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        w.commit(5, 0, d);
+    });
+    t0 = mono_ns();
+    EXPECT_TRUE(r.wait_answer(5, t0 + 10'000'000'000ull));
+    EXPECT_LT(mono_ns() - t0, 5'000'000'000ull);
+    t.join();
+    EXPECT_TRUE(r.wait_answer(5, 0)) << "already answered: no wait";
+}
