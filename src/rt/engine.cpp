@@ -137,7 +137,9 @@ void Engine::start() {
     std::string setup;
     if (cfg_.lock_memory) {
         if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) setup += "memory locked";
-        else setup += SB() << "mlockall refused (" << std::strerror(errno) << ")";
+        else
+            setup += SB() << "mlockall refused (" << std::strerror(errno)
+                          << "): memory may page; grant CAP_IPC_LOCK or raise the memlock limit (LimitMEMLOCK=infinity)";
     }
     thread_ = std::thread([this] { thread_main(); });
     // Scheduling policy and affinity are set on the new thread from here.
@@ -145,7 +147,8 @@ void Engine::start() {
     sp.sched_priority = cfg_.priority;
     int r = pthread_setschedparam(thread_.native_handle(), SCHED_FIFO, &sp);
     setup += r == 0 ? std::string(SB() << ", SCHED_FIFO " << cfg_.priority)
-                    : std::string(SB() << ", SCHED_FIFO refused (" << std::strerror(r) << "): normal scheduling");
+                    : std::string(SB() << ", SCHED_FIFO refused (" << std::strerror(r)
+                                       << "): normal scheduling; grant CAP_SYS_NICE or an RT priority limit (LimitRTPRIO=" << cfg_.priority << ")");
     if (cfg_.cpu >= 0) {
         cpu_set_t set;
         CPU_ZERO(&set);
