@@ -234,3 +234,69 @@ def test_scanner_restart_invalid_then_reattached(bus):
     # B's outputs are its own again: its put comes back through the wires
     assert epics.caput(bus.pv("B", "m0s006-BO03"), 1, wait=True, timeout=5)
     assert wait_for(lambda: get(bus.pv("C", "m0s007-BI07")) == 1)
+
+
+SCANNER_RAW = """
+scanner: {{name: veth-scanner, socket: {socket}}}
+engine: {{rate_hz: 1000}}
+buses:
+  - id: 0
+    link: {{type: raw, iface: {iface}}}
+    slaves:
+      - {{position: 0, type: EK1100, name: COUPLER}}
+      - {{position: 1, type: EL2008, name: OUT}}
+      - {{position: 2, type: EL1008, name: IN}}
+"""
+
+IOC_RAW = """
+ioc: {{name: {name}, prefix: "{prefix}"}}
+buses:
+  - id: 0
+    link: {{type: scanner, socket: {socket}, slaves: [{slaves}], claims: {claims}}}
+"""
+
+
+def test_over_veth_two_iocs_share_a_raw_bus(require_netns, tmp_path):
+    """The scanner on `link: {type: raw}` to `beamctl sim --iface` in a network namespace (the
+    dio.yaml segment: EL2008 outputs 1-4 wired to EL1008 inputs 1-4): IOC W writes the outputs, IOC
+    R only reads; W's output comes back to R through the wire and the scanner's frame on the veth."""
+    from test_veth import SimServer, VethPair
+    require_binary()
+    net = VethPair()
+    sim = scn = None
+    iocs, ports, prefixes = [], [], []
+    try:
+        why = net.up()
+        if why:
+            pytest.skip(f"cannot create a network namespace and veth pair here ({why}); "
+                        "this test needs root or CAP_SYS_ADMIN + CAP_NET_ADMIN + CAP_NET_RAW")
+        sim = SimServer(tmp_path, net.ns, net.segment_end).start()
+        socket = str(tmp_path / "s.sock")
+        (tmp_path / "scanner.yaml").write_text(SCANNER_RAW.format(socket=socket, iface=net.master_end))
+        scn = ScannerServer(tmp_path, tmp_path / "scanner.yaml").start()
+        for k, slaves, claims in (("w", "OUT", "all"), ("r", "OUT, IN", "none")):
+            p = new_prefix()
+            prefixes.append(p)
+            cfg = tmp_path / f"ioc_{k}.yaml"
+            cfg.write_text(IOC_RAW.format(name=p.rstrip(":"), prefix=p, socket=socket, slaves=slaves, claims=claims))
+            ports.append(acquire_port())
+            iocs.append(RunServer(tmp_path, cfg, ports[-1]).start())
+        w, r = prefixes
+        assert wait_for(lambda: get(r + "m0-Stat-OK") == 1 and get(w + "m0-Stat-OK") == 1, timeout=15)
+        assert get(r + "m0-SlvRsp") == 3
+        assert get(r + "m0s002-BI02") == 0
+        assert epics.caput(w + "m0s001-BO02", 1, wait=True, timeout=5)
+        assert wait_for(lambda: get(r + "m0s002-BI02") == 1, timeout=5), "W's output over the veth, back to R"
+        assert get(r + "m0s001-BO02") == 1  # R sees W's output as sent
+        assert epics.caput(w + "m0s001-BO02", 0, wait=True, timeout=5)
+        assert wait_for(lambda: get(r + "m0s002-BI02") == 0, timeout=5)
+    finally:
+        for srv in iocs + [scn, sim]:
+            if srv is not None:
+                srv.stop()
+                srv.kill()
+        for p in prefixes:
+            forget_pvs(p)
+        for port in ports:
+            release_port(port)
+        net.down()
