@@ -20,6 +20,7 @@
 #include "pv/db_file.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <deque>
 #include <cinttypes>
 #include <csignal>
@@ -351,6 +352,50 @@ bool Ioc::sim_fault(const std::vector<std::string>& argv, std::ostream& os) {
         return true;
     }
     throw Error(SB() << "no bus " << argv[1]);
+}
+
+bool Ioc::sdo_command(const std::vector<std::string>& argv, std::ostream& os) {
+    const char* usage = "usage: sdo BUS POSITION INDEX SUB [VALUE SIZE] (numbers decimal or 0x hex; SIZE 1, 2, 4 or 8 bytes)";
+    if (argv.size() != 5 && argv.size() != 7) throw Error(usage);
+    auto num = [&](const std::string& t, uint64_t max, const char* what) {
+        char* end = nullptr;
+        errno = 0;
+        unsigned long long v = std::strtoull(t.c_str(), &end, 0);
+        if (t.empty() || *end || errno || v > max || t[0] == '-')
+            throw Error(SB() << "sdo: " << what << " '" << t << "' should be a number from 0 to " << max << "; " << usage);
+        return uint64_t(v);
+    };
+    const uint64_t bus_id = num(argv[1], 15, "BUS"), pos = num(argv[2], 65535, "POSITION");
+    const uint16_t index = uint16_t(num(argv[3], 0xFFFF, "INDEX"));
+    const uint8_t sub = uint8_t(num(argv[4], 0xFF, "SUB"));
+    for (auto& b : buses_) {
+        if (uint64_t(b.bus->id()) != bus_id) continue;
+        char obj[16];
+        std::snprintf(obj, sizeof obj, "0x%04X:%02X", index, sub);
+        if (argv.size() == 7) {
+            const uint64_t size = num(argv[6], 8, "SIZE");
+            if (size != 1 && size != 2 && size != 4 && size != 8) throw Error(SB() << "sdo: SIZE " << size << " should be 1, 2, 4 or 8");
+            const uint64_t value = num(argv[5], size == 8 ? UINT64_MAX : (uint64_t(1) << (8 * size)) - 1, "VALUE");
+            std::vector<uint8_t> data(size);
+            for (uint64_t k = 0; k < size; ++k) data[k] = uint8_t(value >> (8 * k));
+            b.bus->sdo_write(int(pos), index, sub, data);
+            LOG_INFO(lg, "ec" << bus_id << " s" << pos << ": SDO " << obj << " written: " << value << " (" << size << " bytes), from the shell");
+            os << "ec" << bus_id << " s" << pos << " " << obj << " := " << value << " (" << size << " bytes)\n";
+            return true;
+        }
+        std::vector<uint8_t> data = b.bus->sdo_read(int(pos), index, sub);
+        uint64_t v = 0;
+        for (std::size_t k = 0; k < data.size() && k < 8; ++k) v |= uint64_t(data[k]) << (8 * k);
+        os << "ec" << bus_id << " s" << pos << " " << obj << " = " << v << " (" << data.size() << " bytes:";
+        for (uint8_t x : data) {
+            char h[4];
+            std::snprintf(h, sizeof h, " %02x", x);
+            os << h;
+        }
+        os << ")\n";
+        return true;
+    }
+    throw Error(SB() << "no bus " << bus_id);
 }
 
 void Ioc::declare_bus_signals() {
@@ -785,6 +830,9 @@ int Ioc::run() {
     shell_hooks.commands["ethercat"] = {
         "ethercat [BUS]                         slaves: state, data valid, times lost and configured, last error",
         [this](const std::vector<std::string>& argv, std::ostream& os) { return ethercat_report(argv, os); }};
+    shell_hooks.commands["sdo"] = {
+        "sdo BUS POSITION INDEX SUB [VALUE SIZE]  read (or write) a CoE object of a slave, through its master or scanner",
+        [this](const std::vector<std::string>& argv, std::ostream& os) { return sdo_command(argv, os); }};
     shell_hooks.commands["sim"] = {
         "sim BUS FAULT ...                      inject a fault into a simulated segment (docs/ethercat.md)",
         [this](const std::vector<std::string>& argv, std::ostream& os) { return sim_fault(argv, os); }};

@@ -96,6 +96,9 @@ private:
     // Shell commands (IOC loop): `ethercat [BUS]`, `sim BUS FAULT ...`.
     bool ethercat_report(const std::vector<std::string>& argv, std::ostream& os);
     bool sim_fault(const std::vector<std::string>& argv, std::ostream& os);
+    // `sdo BUS POSITION INDEX SUB [VALUE SIZE]`: a CoE object read or written through the bus (its
+    // master, or the scanner it is attached to).
+    bool sdo_command(const std::vector<std::string>& argv, std::ostream& os);
     void make_bus_pvs(BusRt& b, const config::BusConfig& bc);
     std::map<std::string, std::string, std::less<>> entry_pvs_; // entry PV name -> its signal
 

@@ -166,6 +166,28 @@ def test_an_axis_moves_on_the_shared_bus(bus):
     assert abs(get(bus.pv("B", "StageB.RBV")) - b0) < 0.01
 
 
+def shell(bus, k, command):
+    r = subprocess.run([str(BEAMCTL), "shell", bus.p[k].rstrip(":"), "-c", command], capture_output=True, text=True,
+                       timeout=60)
+    return r.returncode, r.stdout + r.stderr
+
+
+def test_sdo_through_the_scanner(bus):
+    # IOC A owns M1's outputs: it may write its CoE objects; the others may read any slave's.
+    rc, out = shell(bus, "A", "sdo 0 3 0x8010 1 1200 2")
+    assert rc == 0 and "ec0 s3 0x8010:01 := 1200 (2 bytes)" in out, out
+    rc, out = shell(bus, "C", "sdo 0 3 0x8010 1")
+    assert rc == 0 and "ec0 s3 0x8010:01 = 1200 (2 bytes: b0 04)" in out, out
+    rc, out = shell(bus, "B", "sdo 0 3 0x8010 1")
+    assert rc == 0 and "ec0 s3 0x8010:01 = 1200 (2 bytes: b0 04)" in out, out
+    rc, out = shell(bus, "B", "sdo 0 3 0x8010 1 900 2")
+    assert rc != 0 and "SDO writes only to a slave whose outputs this client claimed" in out, out
+    rc, out = shell(bus, "A", "sdo 0 3 0x7777 1")
+    assert rc != 0 and "0x7777:01 aborted: 0x06020000 object does not exist" in out, out
+    rc, out = shell(bus, "A", "sdo 0 3 0x8010")
+    assert rc != 0 and "usage: sdo BUS POSITION INDEX SUB [VALUE SIZE]" in out, out
+
+
 def counters(bus, k):
     return {n: get(bus.pv(k, "m0-" + n)) for n in ("ScnCycle", "ScnMissed", "ScnDrops", "ScnAttaches")}
 
