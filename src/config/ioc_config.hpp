@@ -51,6 +51,7 @@ struct LinkConfig {
     bool claim_all = true;
     std::vector<std::pair<std::string, std::string>> claims;
     double tick_timeout_s = 0.1;     // no tick for this long: the cycle runs on its own, without bus data
+    double resolve_timeout_s = 30;   // link.slaves: how long the IOC waits at start for the scanner to name them
     std::string where;                // file:line:col of the link
 };
 

@@ -248,7 +248,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     for (auto& bc : cfg_.buses) // a scanner link naming only link.slaves: the scanner says what they are
         if (bc.link.type == "scanner" && !bc.link.attach.empty()) {
             try {
-                for (const auto& c : scanner::ClientBackend::resolve(bc.link.socket, bc.id, bc.link.attach, 30)) {
+                for (const auto& c : scanner::ClientBackend::resolve(bc.link.socket, bc.id, bc.link.attach, bc.link.resolve_timeout_s)) {
                     config::SlaveEntry se;
                     se.position = c.position;
                     se.type = c.type;
@@ -258,7 +258,9 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
                     bc.slaves.push_back(se);
                 }
             } catch (const Error& e) {
-                throw Error(SB() << bc.link.attach_where << ": " << e.what());
+                throw Error(SB() << bc.link.attach_where << ": " << e.what()
+                                 << "; link.slaves are named by the scanner when the IOC starts: start the scanner first, or "
+                                    "list the slaves with their types in the bus's slaves:");
             }
         }
     for (auto& bc : cfg_.buses) // the master keeps its slaves in position order; so do the PVs

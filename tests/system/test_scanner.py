@@ -322,3 +322,26 @@ def test_over_veth_two_iocs_share_a_raw_bus(require_netns, tmp_path):
         for port in ports:
             release_port(port)
         net.down()
+
+
+def test_check_takes_scanner_files_and_scanner_iocs(tmp_path):
+    require_binary()
+
+    def check(path):
+        return subprocess.run([str(BEAMCTL), "check", str(path)], capture_output=True, text=True, timeout=60)
+
+    r = check(EXAMPLE / "scanner.yaml")
+    assert r.returncode == 0 and "scanner.yaml: OK (a scanner file, 1 bus(es))" in r.stdout, r.stdout + r.stderr
+    r = check(EXAMPLE / "ioc_a.yaml")  # slaves listed with their types: checked without the scanner
+    assert r.returncode == 0 and "OK (140 PVs, 1 bus(es))" in r.stdout, r.stdout + r.stderr
+    bad = tmp_path / "scanner.yaml"
+    bad.write_text((EXAMPLE / "scanner.yaml").read_text().replace("type: EL3104", "type: EL3999"))
+    shutil.copy(EXAMPLE / "plant.yaml", tmp_path / "plant.yaml")
+    r = check(bad)
+    assert r.returncode == 1 and "bus 0 position 10: unknown device type 'EL3999'" in r.stderr, r.stderr
+    # an IOC naming its slaves only through the scanner cannot be checked without it, and says why
+    ioc = tmp_path / "ioc.yaml"
+    ioc.write_text(IOC_C.format(name="CHK", prefix="CHK:", socket=tmp_path / "none.sock"))
+    r = check(ioc)
+    assert r.returncode == 1, r.stdout
+    assert "link.slaves are named by the scanner when the IOC starts: start the scanner first" in r.stderr, r.stderr
