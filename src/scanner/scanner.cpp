@@ -493,54 +493,57 @@ std::vector<Scanner::Reply> Scanner::handle(int conn, const proto::Message& m, p
         reply(proto::Ok{});
         return out;
     }
-    if (const auto* r = std::get_if<proto::SdoRead>(&m.body)) {
-        BusRt* b = find_bus(r->bus);
-        if (!b) return refuse(proto::ErrorCode::UnknownBus, SB() << "no bus " << r->bus), out;
-        if (find_slave(*b, r->position) < 0)
-            return refuse(proto::ErrorCode::UnknownSlave, SB() << "ec" << r->bus << ": no slave at position " << r->position), out;
+    // The bus and slave an acyclic request names (nullptr: refused, the reply is in `out`).
+    auto target = [&](uint16_t bus, uint16_t position, int& index) -> BusRt* {
+        BusRt* b = find_bus(bus);
+        if (!b) return refuse(proto::ErrorCode::UnknownBus, SB() << "no bus " << bus), nullptr;
+        index = find_slave(*b, position);
+        if (index < 0) return refuse(proto::ErrorCode::UnknownSlave, SB() << "ec" << bus << ": no slave at position " << position), nullptr;
+        return b;
+    };
+    // An SDO transfer through the master: its answer, or the slave's abort code, or what failed.
+    auto sdo = [&](auto&& transfer) {
         try {
-            reply(proto::SdoData{b->local.bus->sdo_read(r->position, r->index, r->sub)});
+            transfer();
         } catch (const ethercat::SdoAbort& e) {
             out.push_back(Reply{error_reply(m.request_id, proto::ErrorCode::SdoAbort, e.what(), e.code()), {}});
         } catch (const Error& e) {
             refuse(proto::ErrorCode::Timeout, e.what());
         }
+    };
+    int slave = -1;
+    if (const auto* r = std::get_if<proto::SdoRead>(&m.body)) {
+        if (BusRt* b = target(r->bus, r->position, slave))
+            sdo([&] { reply(proto::SdoData{b->local.bus->sdo_read(r->position, r->index, r->sub)}); });
         return out;
     }
     if (const auto* w = std::get_if<proto::SdoWrite>(&m.body)) {
-        BusRt* b = find_bus(w->bus);
-        if (!b) return refuse(proto::ErrorCode::UnknownBus, SB() << "no bus " << w->bus), out;
-        if (find_slave(*b, w->position) < 0)
-            return refuse(proto::ErrorCode::UnknownSlave, SB() << "ec" << w->bus << ": no slave at position " << w->position), out;
-        bool mine = false; // writes only to the slaves this client attached
+        BusRt* b = target(w->bus, w->position, slave);
+        if (!b) return out;
+        bool mine = false; // writes only to the slaves whose outputs this client claimed
         if (c.rt && c.bus >= 0 && buses_[std::size_t(c.bus)].get() == b)
             for (const auto& e : c.claims) mine = mine || e.position == w->position;
         if (!mine)
             return refuse(proto::ErrorCode::Denied, SB() << "ec" << w->bus << " s" << w->position
                                                          << ": SDO writes only to a slave whose outputs this client claimed"), out;
-        try {
+        sdo([&] {
             b->local.bus->sdo_write(w->position, w->index, w->sub, w->data);
             reply(proto::Ok{});
-        } catch (const ethercat::SdoAbort& e) {
-            out.push_back(Reply{error_reply(m.request_id, proto::ErrorCode::SdoAbort, e.what(), e.code()), {}});
-        } catch (const Error& e) {
-            refuse(proto::ErrorCode::Timeout, e.what());
-        }
+        });
         return out;
     }
     if (const auto* q = std::get_if<proto::AlInfoRequest>(&m.body)) {
-        BusRt* b = find_bus(q->bus);
-        if (!b) return refuse(proto::ErrorCode::UnknownBus, SB() << "no bus " << q->bus), out;
-        int i = find_slave(*b, q->position);
-        if (i < 0) return refuse(proto::ErrorCode::UnknownSlave, SB() << "ec" << q->bus << ": no slave at position " << q->position), out;
+        BusRt* b = target(q->bus, q->position, slave);
+        if (!b) return out;
+        const std::size_t i = std::size_t(slave);
         ethercat::Master& mm = b->local.bus->master();
-        ethercat::SlaveHealth h = mm.slave_health(std::size_t(i));
+        ethercat::SlaveHealth h = mm.slave_health(i);
         proto::AlInfo al;
-        al.al_state = mm.slave_al_status(std::size_t(i));
-        al.status_code = mm.slaves()[std::size_t(i)].al_status_code;
+        al.al_state = mm.slave_al_status(i);
+        al.status_code = mm.slaves()[i].al_status_code;
         al.slave_state = uint8_t(h.state);
         al.lost = h.lost, al.reconfigured = h.reconfigured, al.refused = h.refused, al.error_id = h.error_id;
-        al.last_error = mm.slave_last_error(std::size_t(i));
+        al.last_error = mm.slave_last_error(i);
         reply(al);
         return out;
     }

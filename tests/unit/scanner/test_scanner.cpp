@@ -139,7 +139,9 @@ TEST(Scanner, EveryCycleInOrderWithTheImageAndStatus) {
     uint64_t prev = 0;
     for (int i = 0; i < 5; ++i) {
         ASSERT_EQ(a.ring->read(s, data.data()), RingReader::Result::Cycle);
-        if (i) EXPECT_EQ(s.cycle, prev + 1);
+        if (i) {
+            EXPECT_EQ(s.cycle, prev + 1);
+        }
         prev = s.cycle;
         EXPECT_EQ(s.flags, kLinkUp | kWkcOk);
     }
