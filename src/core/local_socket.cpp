@@ -49,32 +49,36 @@ bool has_group(pid_t pid, gid_t gid) {
 }
 } // namespace
 
-SocketGroup socket_group() {
+SocketGroup socket_group_named(const std::string& v, const std::string& what) {
     SocketGroup g;
-    g.gid = ::getegid();
-    const char* env = std::getenv("BEAMCTL_SOCKET_GROUP");
-    if (env && *env) {
-        std::string v = env;
-        if (group* gr = ::getgrnam(v.c_str())) {
-            g.gid = gr->gr_gid;
-        } else {
-            char* end = nullptr;
-            long n = std::strtol(v.c_str(), &end, 10);
-            if (!end || *end || n < 0)
-                throw Error(SB() << "BEAMCTL_SOCKET_GROUP=" << v << ": no such group on this system");
-            g.gid = gid_t(n);
-        }
+    if (group* gr = ::getgrnam(v.c_str())) {
+        g.gid = gr->gr_gid;
+    } else {
+        char* end = nullptr;
+        long n = std::strtol(v.c_str(), &end, 10);
+        if (v.empty() || !end || *end || n < 0) throw Error(SB() << what << "=" << v << ": no such group on this system");
+        g.gid = gid_t(n);
     }
     group* gr = ::getgrgid(g.gid);
     g.name = gr ? std::string(gr->gr_name) : std::to_string(g.gid);
     return g;
 }
 
-int listen_local(const std::string& path, const std::string& what, int backlog, bool nonblocking) {
+SocketGroup socket_group() {
+    const char* env = std::getenv("BEAMCTL_SOCKET_GROUP");
+    if (env && *env) return socket_group_named(env, "BEAMCTL_SOCKET_GROUP");
+    SocketGroup g;
+    g.gid = ::getegid();
+    group* gr = ::getgrgid(g.gid);
+    g.name = gr ? std::string(gr->gr_name) : std::to_string(g.gid);
+    return g;
+}
+
+int listen_local(const std::string& path, const std::string& what, int backlog, bool nonblocking, const SocketGroup* with) {
     sockaddr_un a;
     if (!address(path, a))
         throw Error(SB() << what << " '" << path << "': the path must be 1.." << sizeof a.sun_path - 1 << " characters");
-    SocketGroup group = socket_group();
+    SocketGroup group = with ? *with : socket_group();
     struct stat st {};
     if (::lstat(path.c_str(), &st) == 0) {
         if (!S_ISSOCK(st.st_mode)) throw Error(SB() << what << " " << path << ": the path exists and is not a socket");

@@ -23,10 +23,13 @@ struct SocketGroup {
 // The socket group: BEAMCTL_SOCKET_GROUP (a group name or number), else the effective gid.
 // Throws Error naming the variable for a group the system does not know.
 SocketGroup socket_group();
+// A group by name or number (a configuration's choice); `what` names the setting in the error.
+SocketGroup socket_group_named(const std::string& name_or_gid, const std::string& what);
 
-// Creates, binds (mode 0660, the socket group) and listens on a UNIX stream socket at `path`.
-// `what` names it in errors ("shell socket"). Throws Error.
-int listen_local(const std::string& path, const std::string& what, int backlog, bool nonblocking);
+// Creates, binds (mode 0660, the socket group, or `group` when given) and listens on a UNIX stream
+// socket at `path`. `what` names it in errors ("shell socket"). Throws Error.
+int listen_local(const std::string& path, const std::string& what, int backlog, bool nonblocking,
+                 const SocketGroup* group = nullptr);
 
 // The process at the other end of an accepted connection.
 struct Peer {

@@ -56,7 +56,15 @@ ScannerConfig ScannerConfig::parse(const std::string& text, const std::string& p
         rd.take_errors(errors);
         return c;
     }
-    if (config::YamlNode n = root.required("scanner", " ({socket: PATH})"); n.keys({"name", "socket", "max_clients", "depth", "gather_window"}) && n) {
+    if (config::YamlNode n = root.required("scanner", " ({socket: PATH})"); n.keys({"name", "socket", "socket_group", "max_clients", "depth", "gather_window"}) && n) {
+        if (auto g = n["socket_group"].string()) {
+            try {
+                (void)core::socket_group_named(*g, "socket_group");
+                c.socket_group = *g;
+            } catch (const Error&) {
+                n["socket_group"].error(SB() << "'" << *g << "' is no group on this system");
+            }
+        }
         c.gather_window = n["gather_window"].number(config::between(0, 0.9)).value_or(0);
         c.name = n["name"].string().value_or(c.name);
         if (auto s = n.required("socket", " (the path of the socket IOCs attach through)").string()) {
@@ -267,7 +275,8 @@ void Scanner::start() {
     start_virtual();
     engine_->start();
     for (auto& b : buses_) b->local.bus->start_health();
-    listen_fd_ = core::listen_local(cfg_.socket, "scanner socket", 32, true);
+    group_ = cfg_.socket_group.empty() ? core::socket_group() : core::socket_group_named(cfg_.socket_group, "socket_group");
+    listen_fd_ = core::listen_local(cfg_.socket, "scanner socket", 32, true, &group_);
     LOG_INFO(lg, cfg_.name << ": " << buses_.size() << " bus(es) cycling at " << cfg_.rate_hz << " Hz; IOCs attach at "
                            << cfg_.socket);
 }
@@ -281,7 +290,7 @@ void Scanner::accept_one(EventLoop& loop) {
         int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
         if (fd < 0) return;
         core::Peer peer;
-        if (!core::peer_allowed(fd, core::socket_group(), peer)) {
+        if (!core::peer_allowed(fd, group_, peer)) {
             LOG_WARN(lg, "connection from pid " << peer.pid << " (uid " << peer.uid << ") refused: not this user, root or the socket group");
             ::close(fd);
             continue;

@@ -19,6 +19,7 @@
 
 #include "config/ioc_config.hpp"
 #include "core/event_loop.hpp"
+#include "core/local_socket.hpp"
 #include "ethercat/sim/local_bus.hpp"
 #include "rt/engine.hpp"
 #include "scanner/protocol.hpp"
@@ -36,6 +37,7 @@ struct ScannerConfig {
     std::string path;       // the file
     std::string name = "scanner";
     std::string socket;     // resolved path
+    std::string socket_group; // the socket's group (name or gid); "" = BEAMCTL_SOCKET_GROUP, else the process's
     double rate_hz = 1000;
     int cpu = -1, priority = 80;
     unsigned max_clients = 16;   // attached at once
@@ -113,6 +115,7 @@ private:
     std::vector<std::unique_ptr<BusRt>> buses_;
     uint64_t instance_ = 0;
     int listen_fd_ = -1;
+    core::SocketGroup group_; // who may attach: this user, root, members of this group
     std::map<int, std::unique_ptr<Conn>> conns_;
     int next_conn_ = 1;
     uint32_t next_client_id_ = 1;

@@ -345,3 +345,27 @@ def test_check_takes_scanner_files_and_scanner_iocs(tmp_path):
     r = check(ioc)
     assert r.returncode == 1, r.stdout
     assert "link.slaves are named by the scanner when the IOC starts: start the scanner first" in r.stderr, r.stderr
+
+
+def test_the_socket_belongs_to_the_files_group(tmp_path):
+    require_binary()
+    import grp
+    import stat
+    group = grp.getgrgid(1).gr_name  # a group every Debian system has (daemon)
+    cfg = (EXAMPLE / "scanner.yaml").read_text()
+    cfg = re.sub(r"socket: [^\s,}]+", f"socket: {tmp_path}/s.sock\n  socket_group: {group}", cfg, count=1)
+    (tmp_path / "scanner.yaml").write_text(cfg)
+    shutil.copy(EXAMPLE / "plant.yaml", tmp_path / "plant.yaml")
+    srv = ScannerServer(tmp_path, tmp_path / "scanner.yaml").start()
+    try:
+        st = os.stat(tmp_path / "s.sock")
+        assert stat.S_ISSOCK(st.st_mode) and stat.S_IMODE(st.st_mode) == 0o660 and st.st_gid == 1, oct(st.st_mode)
+        # a second scanner on the same socket is refused, naming it
+        r = subprocess.run([str(BEAMCTL), "scanner", str(tmp_path / "scanner.yaml")], capture_output=True, text=True, timeout=30)
+        assert r.returncode == 1 and f"scanner socket {tmp_path}/s.sock: in use by another running process" in r.stderr, r.stderr
+    finally:
+        srv.stop()
+        srv.kill()
+    (tmp_path / "bad.yaml").write_text(cfg.replace(f"socket_group: {group}", "socket_group: no-such-group-xyz"))
+    r = subprocess.run([str(BEAMCTL), "scanner", str(tmp_path / "bad.yaml")], capture_output=True, text=True, timeout=30)
+    assert r.returncode == 1 and "scanner.socket_group: 'no-such-group-xyz' is no group on this system" in r.stderr, r.stderr
