@@ -168,11 +168,11 @@ int main(int argc, char** argv) {
                 if (i < 8) cc.claims = {{"OUT", entry}};
                 C& c = cs[std::size_t(i)];
                 c.bus = std::make_unique<ethercat::Bus>(0, std::make_unique<scanner::ClientBackend>(cc));
-                c.bus->bring_up();
                 rt::EngineConfig ec;
                 ec.rate_hz = rate;
                 c.eng = std::make_unique<rt::Engine>(ec, clock);
-                c.bus->add_stages(*c.eng);
+                c.bus->add_stages(*c.eng); // the engine's period first: bring-up checks it against the scanner's
+                c.bus->bring_up();
                 char in[32];
                 std::snprintf(in, sizeof in, "ec0.s1.binaryInput%02d", i % 8 + 1);
                 c.st = std::make_unique<CopyStage>(c.bus->bind(in), c.bus->bind(std::string("ec0.s2.") + entry), clock,

@@ -245,6 +245,13 @@ void ClientBackend::attach_once() {
     h.ioc = cfg_.ioc;
     h.pid = uint32_t(::getpid());
     const proto::Welcome w = expect<proto::Welcome>(ch_.call(h, 5), "Hello");
+    // The IOC's cycle is the scanner's: axes and PLCs compute with this IOC's period, so the two must agree.
+    for (const auto& b : w.buses)
+        if (b.id == bus_ && b.cycle_ns != period_ns_) {
+            ch_.close();
+            throw Refused(SB() << "the scanner cycles bus " << bus_ << " at " << 1e9 / double(b.cycle_ns) << " Hz, this IOC's engine at "
+                               << 1e9 / double(period_ns_) << " Hz: set engine.rate_hz to " << 1e9 / double(b.cycle_ns));
+        }
     const proto::Chain chain = expect<proto::Chain>(ch_.call(proto::Describe{uint16_t(bus_)}, 5), "Describe");
     proto::Attach a;
     a.bus = uint16_t(bus_);

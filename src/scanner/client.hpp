@@ -1,7 +1,8 @@
 // An IOC's bus run by a bus scanner: the BusBackend behind ethercat::Bus for `link: {type:
 // scanner}` (docs/scanner.md). The IOC above it works as on a bus of its own.
 //
-// At bring-up it connects to the scanner's socket (waiting for it up to a time-out), says Hello,
+// At bring-up (after add_stages: the engine's period must be the scanner's cycle, else it is
+// refused naming both rates) it connects to the scanner's socket (waiting for it up to a time-out), says Hello,
 // reads the chain, attaches its slaves with its claims, and maps the two memories that come with
 // Attached: its cycle ring (read-only) and its output block. The image has the scanner master's
 // layout, so signals bind to the same offsets; the IOC's own word ec<b>.masterstatus follows it.

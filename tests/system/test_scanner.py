@@ -369,3 +369,24 @@ def test_the_socket_belongs_to_the_files_group(tmp_path):
     (tmp_path / "bad.yaml").write_text(cfg.replace(f"socket_group: {group}", "socket_group: no-such-group-xyz"))
     r = subprocess.run([str(BEAMCTL), "scanner", str(tmp_path / "bad.yaml")], capture_output=True, text=True, timeout=30)
     assert r.returncode == 1 and "scanner.socket_group: 'no-such-group-xyz' is no group on this system" in r.stderr, r.stderr
+
+
+def test_an_ioc_at_another_rate_is_refused(tmp_path):
+    require_binary()
+    cfg = (EXAMPLE / "scanner.yaml").read_text()
+    cfg = re.sub(r"socket: [^\s,}]+", f"socket: {tmp_path}/s.sock", cfg)
+    (tmp_path / "scanner.yaml").write_text(cfg)
+    shutil.copy(EXAMPLE / "plant.yaml", tmp_path / "plant.yaml")
+    (tmp_path / "ioc.yaml").write_text(IOC_C.format(name="RATE", prefix="RATE:", socket=f"{tmp_path}/s.sock")
+                                       .replace("engine: {rate_hz: 1000}", "engine: {rate_hz: 500}"))
+    srv = ScannerServer(tmp_path, tmp_path / "scanner.yaml").start()
+    port = acquire_port()
+    try:
+        r = subprocess.run([str(BEAMCTL), "run", str(tmp_path / "ioc.yaml"), "--ca-port", str(port), "--shell-socket", "none"],
+                           capture_output=True, text=True, timeout=60)
+        assert r.returncode == 1, r.stdout + r.stderr
+        assert "the scanner cycles bus 0 at 1000 Hz, this IOC's engine at 500 Hz: set engine.rate_hz to 1000" in r.stderr, r.stderr
+    finally:
+        release_port(port)
+        srv.stop()
+        srv.kill()
