@@ -223,7 +223,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -356,6 +356,82 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             e.desc = d["desc"].string().value_or(SB() << "ds" << e.id);
             cfg.storages.push_back(std::move(e));
         }
+    }
+    {
+        std::set<int> ids;
+        const auto list = root["pcomp"].list();
+        for (std::size_t i = 0; i < list.size(); ++i) {
+            const YamlNode& d = list[i];
+            if (!d.keys({"id", "input", "output", "start", "step", "width", "pulses", "pre_start", "relative", "dir", "enable",
+                         "egu", "desc"}))
+                continue;
+            PcompEntry e;
+            e.where = d.where();
+            e.id = int_of(d["id"], int(i) + 1, 1, 32);
+            if (!ids.insert(e.id).second) d.error(SB() << "pcomp id " << e.id << " used twice");
+            e.input = d.required("input", " (an engine signal such as ax1.enc.actpos, or time)").string().value_or("");
+            e.input_where = d["input"].where();
+            e.output = d["output"].string().value_or("");
+            e.output_where = d["output"].where();
+            e.start = d["start"].number().value_or(0);
+            e.step = d["step"].number().value_or(0);
+            e.width = d["width"].number().value_or(0);
+            e.pre_start = d["pre_start"].number(at_least(0)).value_or(0);
+            e.pulses = uint32_t(d["pulses"].unsigned_integer(0x7FFFFFFF).value_or(0));
+            e.relative = d["relative"].boolean().value_or(false);
+            if (auto dir = d["dir"].one_of({"positive", "negative", "either"})) e.dir = *dir == "positive" ? 0 : *dir == "negative" ? 1 : 2;
+            e.enable = d["enable"].boolean().value_or(false);
+            e.egu = d["egu"].string().value_or(e.input == "time" ? "s" : "");
+            e.desc = d["desc"].string().value_or(SB() << "pcomp" << e.id << " on " << e.input);
+            cfg.pcomp.push_back(std::move(e));
+        }
+    }
+    if (YamlNode c = root["capture"]; c && c.keys({"trigger", "gate", "fields", "ring_rows", "last_rows", "file_path", "file_name", "flush_s"})) {
+        CaptureEntry e;
+        e.where = c.where();
+        if (YamlNode t = c["trigger"]; t && t.is_list()) {
+            e.triggers.clear();
+            for (const YamlNode& ti : t.list())
+                if (auto v = ti.string()) e.triggers.push_back(*v);
+            if (e.triggers.empty()) t.error("should name at least one trigger (pcomp<n>, cycle or a signal)");
+        } else if (t) {
+            e.triggers = {t.string().value_or("cycle")};
+        }
+        e.trigger_where = c["trigger"].present() ? c["trigger"].where() : e.where;
+        e.gate = c["gate"].string().value_or("");
+        e.gate_where = c["gate"].where();
+        std::set<std::string> names;
+        for (const YamlNode& f : c.required("fields", " (a list of {signal, name, units, modes})").list()) {
+            if (!f.keys({"signal", "name", "units", "modes"})) continue;
+            CaptureField cf;
+            cf.where = f.where();
+            cf.signal = f.required("signal").string().value_or("");
+            std::string def = cf.signal;
+            for (char& ch : def)
+                if (ch == '.') ch = '_';
+            cf.name = f["name"].string().value_or(def);
+            if (cf.name.empty() || cf.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_") != std::string::npos)
+                f["name"].error(SB() << "'" << cf.name << "' should be letters, digits and '_' (a column of the file and a PV name part)");
+            cf.units = f["units"].string().value_or("");
+            if (YamlNode m = f["modes"]) {
+                cf.modes.clear();
+                for (const YamlNode& mi : m.list())
+                    if (auto v = mi.one_of({"value", "diff", "sum", "min", "max"})) cf.modes.push_back(*v);
+                if (cf.modes.empty()) m.error("should name at least one of value, diff, sum, min, max");
+            }
+            for (const std::string& mode : cf.modes) {
+                std::string col = mode == "value" ? cf.name : cf.name + "_" + mode;
+                if (!names.insert(col).second) f.error(SB() << "column '" << col << "' is captured twice");
+            }
+            e.fields.push_back(std::move(cf));
+        }
+        e.ring_rows = std::size_t(c["ring_rows"].unsigned_integer(1u << 26).value_or(e.ring_rows));
+        if (e.ring_rows < 16) c["ring_rows"].error("should be at least 16 rows");
+        e.last_rows = std::size_t(c["last_rows"].unsigned_integer(1000000).value_or(e.last_rows));
+        e.file_path = c["file_path"].string().value_or(e.file_path);
+        e.file_name = c["file_name"].string().value_or(e.file_name);
+        e.flush_s = c["flush_s"].number(between(0.01, 3600)).value_or(e.flush_s);
+        cfg.capture = std::move(e);
     }
     {
         std::set<int> ids;

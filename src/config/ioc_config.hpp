@@ -187,6 +187,48 @@ struct PvtEntry {
     std::string where;
 };
 
+// A position-compare block (docs/flyscan.md; PandA's PCOMP): `pcomp: [{id, input, start, step,
+// width, pulses, pre_start, relative, dir, enable, output, egu, desc}]`; PVs $(P)PCOMP<id>:*.
+struct PcompEntry {
+    int id = 1;                 // pcomp<id>, 1..32
+    std::string input;          // INP: an engine signal ("ax1.enc.actpos", "ec0.s3.positionActual01") or
+                                // "time": the engine clock [s] (a time-based pulse train)
+    std::string output;         // an output bit driven with OUT in the same cycle ("": none)
+    double start = 0, step = 0, width = 0, pre_start = 0;
+    uint32_t pulses = 0;        // 0: unlimited
+    bool relative = false;
+    int dir = 0;                // 0 positive, 1 negative, 2 either
+    bool enable = false;        // ENABLE at start
+    std::string egu;            // units of INP (default: "s" for time, else none)
+    std::string desc;
+    std::string where, input_where, output_where;
+};
+
+// A captured value (docs/flyscan.md; PandA's PCAP fields): `{signal, name, units, modes}`.
+struct CaptureField {
+    std::string signal;            // an engine signal, "time" or "pcomp<n>.out"
+    std::string name;              // column name (default: the signal with '.' -> '_')
+    std::string units;
+    std::vector<std::string> modes = {"value"}; // value, diff, sum, min, max
+    std::string where;
+};
+
+// The capture (PandA's PCAP): `capture: {trigger, gate, fields, ring_rows, last_rows, file_path,
+// file_name, flush_s}`; PVs $(P)PCAP:*.
+struct CaptureEntry {
+    // What captures a row: "pcomp<n>" (its OUT rising edge), "cycle" (every cycle), or a signal
+    // (rising to nonzero); a list captures a row when any of them does.
+    std::vector<std::string> triggers = {"cycle"};
+    std::string gate;              // a signal: accumulate while nonzero ("": always)
+    std::vector<CaptureField> fields;
+    std::size_t ring_rows = 1 << 16; // rows between the cycle and the writer thread
+    std::size_t last_rows = 1000;    // rows served as live waveforms
+    std::string file_path = "/tmp";  // FILE_PATH at start
+    std::string file_name = "capture_%04d.h5"; // FILE_NAME at start; %d (%0Nd): the capture number
+    double flush_s = 1.0;            // [s] SWMR flush period
+    std::string where, trigger_where, gate_where;
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -209,6 +251,8 @@ struct IocConfig {
     std::string acf_where;           // file:line:col of `acf`
     std::optional<AutosaveEntry> autosave;
     std::optional<PvtEntry> pvt;
+    std::vector<PcompEntry> pcomp;
+    std::optional<CaptureEntry> capture;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

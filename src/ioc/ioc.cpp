@@ -299,6 +299,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     storages_ = std::make_unique<IocStorages>(cfg_, db_);
     memmaps_ = std::make_unique<IocMemMaps>(cfg_, catalog_, db_);
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
+    flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
@@ -687,6 +688,7 @@ void Ioc::bring_up() {
     for (auto& b : buses_) buses.push_back(b.bus.get());
     memmaps_->bind(registry_, buses);
     plcs_->bind(*engine_, axes_->group(), std::move(bus_ok), storages_->storages(), memmaps_->memmaps());
+    flyscan_->bind(*engine_, axes_->group());
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
@@ -718,6 +720,7 @@ void Ioc::publish() {
     pvt_->publish();
     plcs_->publish();
     storages_->publish();
+    flyscan_->publish();
     engine_stats_ = engine_->stats(); // read by the engine items' device support
     for (auto& b : buses_) b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
     memmaps_->publish(EventLoop::now_s());
@@ -905,6 +908,12 @@ void Ioc::shutdown(LoopSignals* signals) {
             return true;
         };
         if (!wait_until(disabled, 2.0)) LOG_WARN(lg, "stopping: some drives still enabled after 2 s");
+    }
+    // A running capture ends and its file is completed while the cycle still runs.
+    if (flyscan_->capture() && engine_->running()) {
+        flyscan_->stop();
+        if (!wait_until([&] { return !flyscan_->writer()->status().busy; }, 5.0))
+            LOG_WARN(lg, "stopping: the capture file was still being written after 5 s");
     }
     // SAFEOP while the cycle still runs (the requests ride in it), after the health thread that
     // would take the slaves back to OP has stopped.

@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdlib>
 #include <new>
+#include <thread>
 
 // Every form of global operator new/delete is replaced (plain, array, nothrow, aligned), all on
 // malloc/aligned_alloc/free, so allocation and deallocation always match (ASan checks that).
@@ -11,9 +12,16 @@
 namespace {
 std::atomic<bool> g_on{false};
 std::atomic<long> g_count{0};
+std::atomic<bool> g_one_thread{false};
+std::thread::id g_thread; // written before g_on is set
+
+bool counted() {
+    if (!g_on.load(std::memory_order_relaxed)) return false;
+    return !g_one_thread.load(std::memory_order_relaxed) || std::this_thread::get_id() == g_thread;
+}
 
 void* allocate(std::size_t n, std::size_t align, bool nothrow) {
-    if (g_on.load(std::memory_order_relaxed)) g_count.fetch_add(1, std::memory_order_relaxed);
+    if (counted()) g_count.fetch_add(1, std::memory_order_relaxed);
     if (n == 0) n = 1;
     void* p = nullptr;
     if (align <= alignof(std::max_align_t)) {
@@ -28,8 +36,12 @@ void* allocate(std::size_t n, std::size_t align, bool nothrow) {
 } // namespace
 
 namespace beamctl::test {
-void count_allocations(bool on) {
-    if (on) g_count = 0;
+void count_allocations(bool on, bool this_thread_only) {
+    if (on) {
+        g_count = 0;
+        g_thread = std::this_thread::get_id();
+        g_one_thread = this_thread_only;
+    }
     g_on = on;
 }
 long allocations() { return g_count.load(); }

@@ -3,6 +3,7 @@
 #pragma once
 
 namespace beamctl::test {
-void count_allocations(bool on);
+// this_thread_only: count only the calling thread's (the cycle's, while a writer thread works).
+void count_allocations(bool on, bool this_thread_only = false);
 long allocations(); // since the last count_allocations(true)
 } // namespace beamctl::test

@@ -1,0 +1,516 @@
+#include "ioc/flyscan.hpp"
+
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "ioc/pv_util.hpp"
+#include "motion/axis_variables.hpp"
+#include "pv/db_file.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+namespace beamctl::ioc {
+namespace {
+
+log::Logger lg("flyscan");
+
+std::string at(const std::string& where) { return where.empty() ? std::string("the IOC file") : where; }
+
+// "capture_%04d.h5" with the capture number; a name without a %d conversion is used as it is.
+std::string format_name(const std::string& tmpl, uint64_t n) {
+    auto pct = tmpl.find('%');
+    if (pct == std::string::npos) return tmpl;
+    auto d = tmpl.find('d', pct);
+    if (d == std::string::npos || tmpl.find_first_not_of("0123456789", pct + 1) != d) return tmpl;
+    char buf[512];
+    std::snprintf(buf, sizeof buf, "%s%0*llu%s", tmpl.substr(0, pct).c_str(),
+                  d > pct + 1 ? std::atoi(tmpl.substr(pct + 1, d - pct - 1).c_str()) : 1, static_cast<unsigned long long>(n),
+                  tmpl.substr(d + 1).c_str());
+    return buf;
+}
+
+std::string join(const std::vector<std::string>& v) {
+    std::string s;
+    for (const std::string& x : v) s += (s.empty() ? "" : ", ") + x;
+    return s;
+}
+
+} // namespace
+
+double ValueSource::read(uint64_t t_ns) const noexcept {
+    switch (kind) {
+    case Kind::None: return 0;
+    case Kind::Time: return double(t_ns) * 1e-9;
+    case Kind::Cell: return *cell;
+    case Kind::Integer: return double(entry.get());
+    case Kind::Float32: {
+        uint32_t raw = uint32_t(entry.get_raw());
+        float f;
+        std::memcpy(&f, &raw, sizeof f);
+        return f;
+    }
+    case Kind::Float64: {
+        uint64_t raw = entry.get_raw();
+        double d;
+        std::memcpy(&d, &raw, sizeof d);
+        return d;
+    }
+    case Kind::PcompOut: return pcomp->out() ? 1 : 0;
+    case Kind::PcompActive: return pcomp->active() ? 1 : 0;
+    case Kind::PcompProduced: return double(pcomp->produced());
+    case Kind::PcompRose: return pcomp->rose() ? 1 : 0;
+    }
+    return 0;
+}
+
+// The Triggers stage: the blocks in id order, then the capture.
+class IocFlyScan::Stage : public rt::Stage {
+public:
+    explicit Stage(IocFlyScan& f) : f_(f), in_(f.fields_.size()) {}
+    const char* name() const noexcept override { return "flyscan"; }
+    void run(const rt::CycleInfo& c) noexcept override {
+        for (auto& bp : f_.blocks_) {
+            Block& b = *bp;
+            Block::Cmd cmd;
+            while (b.cmds.pop(cmd)) {
+                b.pc.params = cmd.params;
+                b.enable = cmd.enable;
+                b.inp = cmd.inp;
+            }
+            const double x = b.inp.read(c.t_ns);
+            const bool out = b.pc.step(b.enable, x);
+            b.out.set(out ? 1 : 0); // unbound: nothing
+            b.st_out.store(out, std::memory_order_relaxed);
+            b.st_active.store(b.pc.active(), std::memory_order_relaxed);
+            b.st_produced.store(b.pc.produced(), std::memory_order_relaxed);
+            b.st_health.store(uint32_t(b.pc.health()), std::memory_order_relaxed);
+            b.st_state.store(uint32_t(b.pc.state()), std::memory_order_relaxed);
+            b.st_posn.store(x, std::memory_order_relaxed);
+        }
+        if (!f_.capture_) return;
+        for (std::size_t i = 0; i < in_.size(); ++i) in_[i] = f_.fields_[i].read(c.t_ns);
+        bool trigger = false;
+        uint64_t t = c.t_ns;
+        for (Trigger& tr : f_.triggers_) {
+            if (tr.cycle) {
+                trigger = true;
+            } else if (tr.block >= 0) {
+                const daq::Pcomp& pc = f_.blocks_[std::size_t(tr.block)]->pc;
+                if (pc.rose()) {
+                    // the edge's interpolated time, between the previous cycle's sample and this one's
+                    uint64_t edge = c.t_ns - uint64_t(std::llround((1.0 - pc.edge_fraction()) * double(c.period_ns)));
+                    t = trigger ? std::min(t, edge) : edge;
+                    trigger = true;
+                }
+            } else {
+                const bool level = tr.sig.read(c.t_ns) != 0;
+                trigger = trigger || (level && !tr.level);
+                tr.level = level;
+            }
+        }
+        const bool gate = f_.gate_.kind == ValueSource::Kind::None || f_.gate_.read(c.t_ns) != 0;
+        f_.capture_->sample(c.cycle, c.t_ns, in_.data(), gate, trigger, t);
+    }
+
+private:
+    IocFlyScan& f_;
+    std::vector<double> in_;
+};
+
+IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db) : cfg_(cfg), reg_(reg), db_(db) {
+    pv::DbFile f;
+    auto text = [](const std::string& name, const char* nelm) {
+        return record("waveform", name, {{"FTVL", "CHAR"}, {"NELM", nelm}});
+    };
+    for (const config::PcompEntry& e : cfg.pcomp) {
+        auto b = std::make_unique<Block>();
+        b->cfg = e;
+        b->enable = false;
+        b->pc.params = daq::PcompParams{e.pre_start, e.start, e.width, e.step, e.pulses, e.relative, daq::PcompDir(e.dir)};
+        b->want.params = b->pc.params;
+        b->want.enable = e.enable;
+        std::string owner = SB() << "pcomp" << e.id;
+        for (const char* item : {"out", "active", "produced"}) {
+            registry::Signal s;
+            s.name = owner + "." + item;
+            s.type = "LREAL";
+            s.direction = registry::Direction::Input;
+            s.owner_kind = registry::OwnerKind::Engine;
+            s.owner = owner;
+            s.pv = SB() << cfg.prefix << "PCOMP" << e.id << ":" << (std::string(item) == "out" ? "OUT" : std::string(item) == "active" ? "ACTIVE" : "PRODUCED");
+            reg.declare(std::move(s));
+        }
+        std::string p = SB() << cfg.prefix << "PCOMP" << e.id << ":";
+        auto num = [](double v) { return std::string(SB() << v); };
+        std::string egu = e.egu.substr(0, 15);
+        f.records.push_back(record("bo", p + "ENABLE", {{"DESC", e.desc.substr(0, 40)}, {"ZNAM", "0"}, {"ONAM", "1"}, {"VAL", e.enable ? "1" : "0"}}));
+        f.records.push_back(record("stringout", p + "INP", {{"DESC", "engine signal compared"}, {"VAL", e.input.substr(0, 39)}}));
+        for (auto [name, v] : {std::pair<const char*, double>{"PRE_START", e.pre_start}, {"START", e.start}, {"WIDTH", e.width}, {"STEP", e.step}})
+            f.records.push_back(record("ao", p + name, {{"VAL", num(v)}, {"PREC", "4"}, {"EGU", egu}}));
+        f.records.push_back(record("longout", p + "PULSES", {{"VAL", std::to_string(e.pulses)}, {"DRVL", "0"}, {"DRVH", "2147483647"}, {"DESC", "0: unlimited"}}));
+        f.records.push_back(record("bo", p + "RELATIVE", {{"ZNAM", "Absolute"}, {"ONAM", "Relative"}, {"VAL", e.relative ? "1" : "0"}}));
+        f.records.push_back(record("mbbo", p + "DIR", {{"ZRST", "Positive"}, {"ONST", "Negative"}, {"TWST", "Either"}, {"VAL", std::to_string(e.dir)}}));
+        f.records.push_back(record("bi", p + "ACTIVE", {{"ZNAM", "0"}, {"ONAM", "1"}}));
+        f.records.push_back(record("bi", p + "OUT", {{"ZNAM", "0"}, {"ONAM", "1"}}));
+        f.records.push_back(record("longin", p + "PRODUCED", {{"DESC", "pulses since enable"}}));
+        f.records.push_back(record("mbbi", p + "HEALTH", {{"ZRST", "OK"}, {"ONST", "Jumped more than STEP"}, {"TWST", "Cannot guess DIR"},
+                                                          {"ONSV", "MAJOR"}, {"TWSV", "MAJOR"}}));
+        f.records.push_back(record("mbbi", p + "STATE", {{"ZRST", "WAIT_ENABLE"}, {"ONST", "WAIT_DIR"}, {"TWST", "WAIT_PRE_START"},
+                                                         {"THST", "WAIT_RISING"}, {"FRST", "WAIT_FALLING"}}));
+        f.records.push_back(record("ai", p + "POSN", {{"DESC", "INP now"}, {"PREC", "4"}, {"EGU", egu}}));
+        blocks_.push_back(std::move(b));
+    }
+    if (cfg.capture) {
+        const config::CaptureEntry& c = *cfg.capture;
+        std::string p = cfg.prefix + "PCAP:";
+        f.records.push_back(record("bo", p + "ARM", {{"ZNAM", "0"}, {"ONAM", "1"}, {"DESC", "1: start a capture"}}));
+        f.records.push_back(record("bo", p + "DISARM", {{"ZNAM", "0"}, {"ONAM", "1"}, {"DESC", "1: end the capture"}}));
+        f.records.push_back(record("bi", p + "ACTIVE", {{"ZNAM", "0"}, {"ONAM", "1"}}));
+        f.records.push_back(text(p + "FILE_PATH", "256"));
+        f.records.push_back(text(p + "FILE_NAME", "256"));
+        f.records.push_back(text(p + "FULL_FILE_NAME", "512"));
+        f.records.push_back(text(p + "STATUS", "256"));
+        f.records.push_back(record("bi", p + "ERROR", {{"ZNAM", "OK"}, {"ONAM", "Error"}, {"OSV", "MAJOR"}}));
+        f.records.push_back(record("longin", p + "CAPTURE", {{"DESC", "number of the last capture"}}));
+        f.records.push_back(record("longin", p + "ROWS_CAPTURED", {{"DESC", "rows the cycle captured"}}));
+        f.records.push_back(record("longin", p + "ROWS_WRITTEN", {{"DESC", "rows in the file"}}));
+        f.records.push_back(record("longin", p + "ROWS_DROPPED", {{"DESC", "rows lost: ring full"}, {"HIGH", "1"}, {"HSV", "MAJOR"}}));
+        f.records.push_back(record("longin", p + "FILES", {{"DESC", "files completed"}}));
+        std::string nelm = std::to_string(std::max<std::size_t>(c.last_rows, 1));
+        f.records.push_back(record("waveform", p + "LAST:CYCLE", {{"FTVL", "DOUBLE"}, {"NELM", nelm}, {"DESC", "cycles of the last rows"}}));
+        for (const config::CaptureField& cf : c.fields)
+            for (const std::string& m : cf.modes) {
+                std::string col = m == "value" ? cf.name : cf.name + "_" + m;
+                columns_.push_back(col);
+                f.records.push_back(record("waveform", p + "LAST:" + col,
+                                           {{"FTVL", "DOUBLE"}, {"NELM", nelm}, {"EGU", cf.units.substr(0, 15)}, {"PREC", "6"}}));
+            }
+    }
+    db_.load(f);
+    auto find = [&](const std::string& name) {
+        pv::Record* r = db_.find(name);
+        if (!r) throw Error(SB() << "flyscan: no record " << name);
+        return r;
+    };
+    for (auto& bp : blocks_) {
+        Block& b = *bp;
+        std::string p = SB() << cfg.prefix << "PCOMP" << b.cfg.id << ":";
+        b.enable_r = find(p + "ENABLE");
+        b.inp_r = find(p + "INP");
+        b.pre_start = find(p + "PRE_START");
+        b.start = find(p + "START");
+        b.width = find(p + "WIDTH");
+        b.step = find(p + "STEP");
+        b.pulses = find(p + "PULSES");
+        b.relative = find(p + "RELATIVE");
+        b.dir = find(p + "DIR");
+        b.active = find(p + "ACTIVE");
+        b.out_r = find(p + "OUT");
+        b.produced = find(p + "PRODUCED");
+        b.health = find(p + "HEALTH");
+        b.state = find(p + "STATE");
+        b.posn = find(p + "POSN");
+        for (pv::Record* r : {b.active, b.out_r, b.produced, b.health, b.state, b.posn}) r->val_read_only = true;
+        Block* self = &b;
+        auto param = [this, self](pv::Record& r, const pv::FieldDesc& fd) {
+            if (std::string_view(fd.name) != "VAL") return pv::PutStatus::Ok;
+            double v = get_value(r);
+            Block& k = *self;
+            daq::PcompParams& q = k.want.params;
+            if (&r == k.enable_r) k.want.enable = v != 0;
+            else if (&r == k.pre_start) {
+                if (v < 0) {
+                    LOG_WARN(lg, r.name() << ": " << v << " refused: PRE_START must be >= 0");
+                    return pv::PutStatus::Failed;
+                }
+                q.pre_start = v;
+            } else if (&r == k.start) q.start = v;
+            else if (&r == k.width) q.width = v;
+            else if (&r == k.step) q.step = v;
+            else if (&r == k.pulses) q.pulses = uint32_t(std::max(0.0, v));
+            else if (&r == k.relative) q.relative = v != 0;
+            else if (&r == k.dir) {
+                if (v < 0 || v > 2) return pv::PutStatus::Failed;
+                q.dir = daq::PcompDir(int(v));
+            }
+            return send(k) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
+        };
+        for (pv::Record* r : {b.enable_r, b.pre_start, b.start, b.width, b.step, b.pulses, b.relative, b.dir}) r->put_hook = param;
+        b.inp_r->put_hook = [this, self](pv::Record& r, const pv::FieldDesc& fd) {
+            if (std::string_view(fd.name) != "VAL") return pv::PutStatus::Ok;
+            char buf[pv::kStringSize] = {};
+            pv::Elements e = r.elements(fd);
+            pv::get_element(r, fd, e, 0, pv::Prim::String, buf);
+            std::string why;
+            ValueSource src = resolve(buf, why);
+            if (src.kind == ValueSource::Kind::None) {
+                LOG_WARN(lg, r.name() << ": '" << buf << "' refused: " << why);
+                return pv::PutStatus::Failed;
+            }
+            if (self->want.enable || self->pc.active()) {
+                LOG_WARN(lg, r.name() << ": '" << buf << "' refused: disable the block first");
+                return pv::PutStatus::Failed;
+            }
+            self->want.inp = src;
+            return send(*self) ? pv::PutStatus::Ok : pv::PutStatus::Failed;
+        };
+    }
+    if (cfg.capture) {
+        std::string p = cfg.prefix + "PCAP:";
+        arm_ = find(p + "ARM");
+        disarm_ = find(p + "DISARM");
+        cap_active_ = find(p + "ACTIVE");
+        file_path_ = find(p + "FILE_PATH");
+        file_name_ = find(p + "FILE_NAME");
+        full_name_ = find(p + "FULL_FILE_NAME");
+        status_ = find(p + "STATUS");
+        error_ = find(p + "ERROR");
+        capture_no_ = find(p + "CAPTURE");
+        rows_captured_ = find(p + "ROWS_CAPTURED");
+        rows_written_ = find(p + "ROWS_WRITTEN");
+        rows_dropped_ = find(p + "ROWS_DROPPED");
+        files_ = find(p + "FILES");
+        last_cycle_ = find(p + "LAST:CYCLE");
+        for (const std::string& col : columns_) last_.push_back(find(p + "LAST:" + col));
+        for (pv::Record* r : {cap_active_, full_name_, status_, error_, capture_no_, rows_captured_, rows_written_, rows_dropped_, files_, last_cycle_})
+            r->val_read_only = true;
+        for (pv::Record* r : last_) r->val_read_only = true;
+        arm_->put_hook = [this](pv::Record& r, const pv::FieldDesc& fd) {
+            if (std::string_view(fd.name) != "VAL" || get_value(r) == 0) return pv::PutStatus::Ok;
+            return arm() ? pv::PutStatus::Ok : pv::PutStatus::Failed;
+        };
+        disarm_->put_hook = [this](pv::Record& r, const pv::FieldDesc& fd) {
+            if (std::string_view(fd.name) != "VAL" || get_value(r) == 0) return pv::PutStatus::Ok;
+            stop();
+            return pv::PutStatus::Ok;
+        };
+    }
+}
+
+IocFlyScan::~IocFlyScan() = default;
+
+bool IocFlyScan::send(Block& b) {
+    if (b.cmds.push(b.want)) return true;
+    LOG_WARN(lg, "pcomp" << b.cfg.id << ": refused, the cycle has not taken the last changes yet");
+    return false;
+}
+
+ValueSource IocFlyScan::resolve(const std::string& name, std::string& why) const {
+    ValueSource v;
+    if (name == "time") {
+        v.kind = ValueSource::Kind::Time;
+        return v;
+    }
+    for (std::size_t i = 0; i < blocks_.size(); ++i) {
+        std::string p = SB() << "pcomp" << blocks_[i]->cfg.id << ".";
+        if (name.rfind(p, 0) != 0) continue;
+        std::string item = name.substr(p.size());
+        v.pcomp = &blocks_[i]->pc;
+        if (item == "out") v.kind = ValueSource::Kind::PcompOut;
+        else if (item == "active") v.kind = ValueSource::Kind::PcompActive;
+        else if (item == "produced") v.kind = ValueSource::Kind::PcompProduced;
+        else if (item == "rose") v.kind = ValueSource::Kind::PcompRose;
+        else why = SB() << "'" << name << "': a block has out, active, produced and rose";
+        return v;
+    }
+    int bit = -1;
+    const registry::Signal* s = reg_.find_with_bit(name, bit);
+    if (!s) {
+        why = SB() << "no signal '" << name << "' in this IOC (`beamctl signals` lists them; or time)";
+        return v;
+    }
+    if (s->loop_only) {
+        why = SB() << "'" << name << "' is a value of the IOC loop, not of the cycle";
+        return v;
+    }
+    if (s->owner_kind == registry::OwnerKind::Axis) {
+        int id = 0;
+        char rest[128] = {};
+        if (std::sscanf(name.c_str(), "ax%d.%127s", &id, rest) == 2 && axes_) {
+            if (const motion::AxisVariableInfo* info = motion::find_axis_variable(rest))
+                for (std::size_t i = 0; i < axes_->size(); ++i)
+                    if (axes_->axis(i).params().id == id) {
+                        v.kind = ValueSource::Kind::Cell;
+                        v.cell = motion::axis_variable(axes_->axis(i).variables(), *info);
+                        return v;
+                    }
+        }
+        why = SB() << "'" << name << "' is an axis item the cycle does not hold as a variable (ax<n>.enc.actpos, ax<n>.traj.setpos, ...)";
+        return v;
+    }
+    if (s->owner_kind == registry::OwnerKind::Bus) {
+        v.entry = reg_.bind(name, why);
+        if (!v.entry.bound()) return v;
+        v.kind = bit < 0 && s->type == "REAL" ? ValueSource::Kind::Float32
+                 : bit < 0 && s->type == "LREAL" ? ValueSource::Kind::Float64
+                                                 : ValueSource::Kind::Integer;
+        return v;
+    }
+    why = SB() << "'" << name << "' is a signal of " << s->owner << "; position compare and capture read bus entries, axis variables, pcomp<n>.* and time";
+    return v;
+}
+
+void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes) {
+    if (!enabled()) return;
+    axes_ = axes;
+    for (auto& bp : blocks_) {
+        Block& b = *bp;
+        std::string why;
+        b.inp = resolve(b.cfg.input, why);
+        if (b.inp.kind == ValueSource::Kind::None) throw Error(SB() << at(b.cfg.input_where) << ": pcomp" << b.cfg.id << " input: " << why);
+        b.want.inp = b.inp;
+        b.enable = false; // the configured ENABLE is a rising edge in the first cycle
+        if (!b.cfg.output.empty()) {
+            std::string owner = SB() << "pcomp" << b.cfg.id;
+            int bit = -1;
+            const registry::Signal* s = reg_.find_with_bit(b.cfg.output, bit);
+            if (!s || s->owner_kind != registry::OwnerKind::Bus || s->direction != registry::Direction::Output)
+                throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: '" << b.cfg.output
+                                 << "' is not an output entry of a bus (ec<m>.s<k>.<entry>[.<bit>])");
+            if (!reg_.claim(s->name, owner, why)) throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << why);
+            b.out = reg_.bind(b.cfg.output, why);
+            if (!b.out.bound()) throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << why);
+        }
+        b.cmds.push(b.want);
+    }
+    if (cfg_.capture) {
+        const config::CaptureEntry& c = *cfg_.capture;
+        std::vector<daq::Capture::Column> cols;
+        std::vector<daq::NexusColumn> ncols;
+        for (const config::CaptureField& cf : c.fields) {
+            std::string why;
+            ValueSource v = resolve(cf.signal, why);
+            if (v.kind == ValueSource::Kind::None) throw Error(SB() << at(cf.where) << ": capture field: " << why);
+            fields_.push_back(v);
+            for (const std::string& m : cf.modes) {
+                daq::CaptureMode mode = daq::CaptureMode::Value;
+                daq::parse_capture_mode(m, mode);
+                cols.push_back({fields_.size() - 1, mode});
+                ncols.push_back({m == "value" ? cf.name : cf.name + "_" + m, cf.units, cf.signal, daq::to_string(mode)});
+            }
+        }
+        for (const std::string& name : c.triggers) {
+            Trigger tr;
+            if (name == "cycle") {
+                tr.cycle = true;
+            } else {
+                for (std::size_t i = 0; i < blocks_.size(); ++i)
+                    if (name == std::string(SB() << "pcomp" << blocks_[i]->cfg.id)) tr.block = int(i);
+                if (tr.block < 0) {
+                    std::string why;
+                    tr.sig = resolve(name, why);
+                    if (tr.sig.kind == ValueSource::Kind::None)
+                        throw Error(SB() << at(c.trigger_where) << ": capture trigger: " << why << " (or pcomp<n>, cycle)");
+                }
+            }
+            triggers_.push_back(tr);
+        }
+        if (!c.gate.empty()) {
+            std::string why;
+            gate_ = resolve(c.gate, why);
+            if (gate_.kind == ValueSource::Kind::None) throw Error(SB() << at(c.gate_where) << ": capture gate: " << why);
+        }
+        capture_ = std::make_unique<daq::Capture>(fields_.size(), std::move(cols), c.ring_rows);
+        daq::CaptureWriter::Options o;
+        o.columns = std::move(ncols);
+        o.nexus.title = SB() << cfg_.name << " capture";
+        o.nexus.attributes = {{"ioc", cfg_.name}, {"trigger", join(c.triggers)}, {"gate", c.gate.empty() ? "always" : c.gate},
+                              {"engine_rate_hz", std::string(SB() << cfg_.rate_hz)}};
+        o.flush_s = c.flush_s;
+        o.last_rows = std::max<std::size_t>(c.last_rows, 1);
+        scratch_.reserve(o.last_rows);
+        o.log = [](bool error, const std::string& m) {
+            if (error) LOG_ERR(lg, m);
+            else LOG_INFO(lg, m);
+        };
+        writer_ = std::make_unique<daq::CaptureWriter>(*capture_, std::move(o));
+        if (text(file_path_).empty()) set_text(file_path_, c.file_path);
+        if (text(file_name_).empty()) set_text(file_name_, c.file_name);
+    }
+    stage_ = std::make_unique<Stage>(*this);
+    engine.add_stage(rt::StageOrder::Triggers, *stage_);
+}
+
+std::string IocFlyScan::next_file() const {
+    if (!cfg_.capture) return "";
+    std::string dir = text(file_path_), name = text(file_name_);
+    if (dir.empty()) dir = cfg_.capture->file_path;
+    if (name.empty()) name = cfg_.capture->file_name;
+    uint64_t n = (writer_ ? writer_->status().capture : 0) + 1;
+    name = format_name(name, n);
+    if (!dir.empty() && dir.back() != '/') dir += '/';
+    return dir + name;
+}
+
+bool IocFlyScan::arm() {
+    if (!writer_) return false;
+    std::string path = next_file();
+    if (!writer_->start(path)) {
+        LOG_WARN(lg, "PCAP:ARM refused: a capture is running (" << writer_->status().file << ")");
+        return false;
+    }
+    set_text(full_name_, path);
+    return true;
+}
+
+void IocFlyScan::stop() {
+    if (writer_ && writer_->status().busy) writer_->stop();
+}
+
+void IocFlyScan::set_text(pv::Record* r, const std::string& t) {
+    std::vector<double> c(t.begin(), t.begin() + std::min<std::size_t>(t.size(), 511));
+    c.push_back(0);
+    set_array(db_, *r, c.data(), uint32_t(c.size()));
+}
+
+std::string IocFlyScan::text(pv::Record* r) const {
+    const pv::FieldDesc* f = r->type().find("VAL");
+    pv::Elements e = r->elements(*f);
+    std::string s;
+    for (uint32_t i = 0; i < e.count; ++i) {
+        double v = 0;
+        pv::get_element(*r, *f, e, i, pv::Prim::Double, &v);
+        if (v == 0) break;
+        s += char(int(v));
+    }
+    return s;
+}
+
+void IocFlyScan::publish() {
+    auto set = [&](pv::Record* r, double v) {
+        if (r && (r->udf || get_value(*r) != v)) set_value(db_, *r, v, false);
+    };
+    for (auto& bp : blocks_) {
+        Block& b = *bp;
+        set(b.active, b.st_active.load(std::memory_order_relaxed));
+        set(b.out_r, b.st_out.load(std::memory_order_relaxed));
+        set(b.produced, b.st_produced.load(std::memory_order_relaxed));
+        set(b.health, b.st_health.load(std::memory_order_relaxed));
+        set(b.state, b.st_state.load(std::memory_order_relaxed));
+        set(b.posn, b.st_posn.load(std::memory_order_relaxed));
+        // a block that ended by itself (PULSES reached, an error) is re-armed by a new ENABLE edge
+    }
+    if (!writer_) return;
+    daq::CaptureWriter::Status s = writer_->status();
+    set(cap_active_, s.busy ? 1 : 0);
+    set(capture_no_, clamp_long(s.capture));
+    set(rows_captured_, clamp_long(s.capture && capture_->capture() == s.capture ? capture_->pushed() : 0));
+    set(rows_dropped_, clamp_long(s.dropped));
+    if (s.version == status_version_) return;
+    status_version_ = s.version;
+    set(rows_written_, clamp_long(s.rows));
+    set(files_, clamp_long(s.files));
+    set(error_, s.error ? 1 : 0);
+    set_text(status_, s.message);
+    writer_->last_cycles(scratch_);
+    set_array(db_, *last_cycle_, scratch_.data(), uint32_t(scratch_.size()));
+    for (std::size_t c = 0; c < last_.size(); ++c) {
+        writer_->last_rows(c, scratch_);
+        set_array(db_, *last_[c], scratch_.data(), uint32_t(scratch_.size()));
+    }
+}
+
+} // namespace beamctl::ioc

@@ -1,0 +1,125 @@
+// Fly scans in an IOC (docs/flyscan.md): the position-compare blocks of `pcomp:` (daq::Pcomp, PandA's
+// PCOMP) and the capture of `capture:` (daq::Capture and its writer thread, PandA's PCAP), run in
+// the Triggers stage of the cycle (after the axes and PLCs, before bus send: a block's OUT leaves
+// on its output bit in the same cycle's frame) and served with PandA's field names:
+//   $(P)PCOMP<n>:ENABLE, INP (the engine signal compared, a put rebinds it), PRE_START, START,
+//     WIDTH, STEP, PULSES, RELATIVE, DIR, ACTIVE, OUT, PRODUCED, HEALTH, STATE, POSN (INP now)
+//   $(P)PCAP:ARM, DISARM, ACTIVE, FILE_PATH, FILE_NAME (where the next file goes), FULL_FILE_NAME,
+//     CAPTURE (number of the last capture), ROWS_CAPTURED, ROWS_WRITTEN, ROWS_DROPPED, FILES,
+//     STATUS (text), ERROR, LAST:<column> and LAST:CYCLE (the last rows, for live plots)
+// Signals: pcomp<n>.out, .active, .produced (records and capture fields read them); capture fields
+// and triggers also take pcomp<n>.rose (1 in the cycle OUT rose).
+// Threading: construction and bind() before the cycle starts; the stage on the RT thread; puts,
+// publish() and stop() on the IOC loop; the capture's HDF5 writing on its own writer thread.
+#pragma once
+
+#include "config/ioc_config.hpp"
+#include "core/spsc_queue.hpp"
+#include "daq/capture.hpp"
+#include "daq/capture_writer.hpp"
+#include "daq/pcomp.hpp"
+#include "motion/axis_group.hpp"
+#include "pv/database.hpp"
+#include "registry/registry.hpp"
+#include "rt/engine.hpp"
+
+#include <atomic>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace beamctl::ioc {
+
+// An engine value read as a double in the cycle: an axis variable, a process-data entry (integer
+// or REAL/LREAL), the engine clock [s], or a position-compare block's output.
+struct ValueSource {
+    enum class Kind : uint8_t { None, Time, Cell, Integer, Float32, Float64, PcompOut, PcompActive, PcompProduced, PcompRose } kind = Kind::None;
+    const double* cell = nullptr;
+    registry::BoundSignal entry;
+    const daq::Pcomp* pcomp = nullptr;
+    double read(uint64_t t_ns) const noexcept;
+};
+
+class IocFlyScan {
+public:
+    // Declares the blocks' signals and makes their records (loaded into `db`).
+    IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db);
+    ~IocFlyScan();
+    IocFlyScan(const IocFlyScan&) = delete;
+    IocFlyScan& operator=(const IocFlyScan&) = delete;
+
+    bool enabled() const { return !blocks_.empty() || cfg_.capture.has_value(); }
+    // Bring-up: binds inputs, outputs, capture fields; adds the stage. Throws Error (file:line:col).
+    void bind(rt::Engine& engine, motion::AxisGroup* axes);
+    // IOC loop: the blocks' and the capture's state into the PVs.
+    void publish();
+    // Clean stop: ends a running capture (its file is completed).
+    void stop();
+
+    // Tests: the blocks and the capture.
+    std::size_t blocks() const { return blocks_.size(); }
+    const daq::Pcomp& pcomp(std::size_t i) const { return blocks_.at(i)->pc; }
+    daq::Capture* capture() { return capture_.get(); }
+    daq::CaptureWriter* writer() { return writer_.get(); }
+    // The path the next ARM writes (FILE_PATH/FILE_NAME with the capture number).
+    std::string next_file() const;
+
+private:
+    struct Block {
+        config::PcompEntry cfg;
+        daq::Pcomp pc;
+        ValueSource inp;
+        registry::BoundSignal out;
+        bool enable = false;
+        // IOC loop -> RT: the whole wanted state (parameters, enable, input) after each put
+        struct Cmd {
+            daq::PcompParams params;
+            bool enable = false;
+            ValueSource inp;
+        };
+        Cmd want;
+        SpscQueue<Cmd> cmds{64};
+        // RT -> IOC loop
+        std::atomic<uint32_t> st_out{0}, st_active{0}, st_produced{0}, st_health{0}, st_state{0};
+        std::atomic<double> st_posn{0};
+        pv::Record *enable_r = nullptr, *inp_r = nullptr, *pre_start = nullptr, *start = nullptr, *width = nullptr, *step = nullptr,
+                   *pulses = nullptr, *relative = nullptr, *dir = nullptr, *active = nullptr, *out_r = nullptr, *produced = nullptr,
+                   *health = nullptr, *state = nullptr, *posn = nullptr;
+    };
+    class Stage;
+    ValueSource resolve(const std::string& name, std::string& why) const;
+    bool send(Block& b);
+    bool arm();
+    void set_text(pv::Record* r, const std::string& text);
+    std::string text(pv::Record* r) const;
+
+    config::IocConfig cfg_;
+    registry::Registry& reg_;
+    pv::Database& db_;
+    motion::AxisGroup* axes_ = nullptr;
+    std::vector<std::unique_ptr<Block>> blocks_;
+    // capture
+    std::unique_ptr<daq::Capture> capture_;
+    std::unique_ptr<daq::CaptureWriter> writer_;
+    std::vector<ValueSource> fields_;
+    ValueSource gate_;
+    // What captures a row: a block's rising OUT (its edge time stamps the row), every cycle, or
+    // a signal's rising edge; any of them.
+    struct Trigger {
+        int block = -1;  // index in blocks_
+        bool cycle = false;
+        ValueSource sig; // else
+        bool level = false; // RT: the signal's last level
+    };
+    std::vector<Trigger> triggers_;
+    std::vector<std::string> columns_;
+    pv::Record *arm_ = nullptr, *disarm_ = nullptr, *cap_active_ = nullptr, *file_path_ = nullptr, *file_name_ = nullptr,
+               *full_name_ = nullptr, *capture_no_ = nullptr, *rows_captured_ = nullptr, *rows_written_ = nullptr,
+               *rows_dropped_ = nullptr, *files_ = nullptr, *status_ = nullptr, *error_ = nullptr, *last_cycle_ = nullptr;
+    std::vector<pv::Record*> last_;
+    uint64_t status_version_ = ~uint64_t(0);
+    std::vector<double> scratch_;
+    std::unique_ptr<Stage> stage_;
+};
+
+} // namespace beamctl::ioc

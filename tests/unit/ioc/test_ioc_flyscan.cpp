@@ -1,0 +1,263 @@
+// The fly-scan example (examples/flyscan/ioc.yaml, seed 000 "Position Compare") in virtual time:
+// the log-spiral arc axis at constant velocity, a distance-based and a time-based PCOMP block
+// driving EL2808 outputs, and the capture writing a row per trigger into an HDF5/NeXus file.
+#include "../temp_dir.hpp"
+#include "../alloc_counter.hpp"
+#include "core/error.hpp"
+#include "pv/convert.hpp"
+#include "virtual_ioc.hpp"
+
+#include <gtest/gtest.h>
+#include <hdf5.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <thread>
+
+using namespace beamctl;
+using beamctl::test::TempDir;
+using beamctl::test::VirtualIoc;
+
+namespace {
+
+const std::string kSource = BEAMCTL_SOURCE_DIR;
+
+struct FlyIoc : VirtualIoc {
+    explicit FlyIoc(const std::string& path) : VirtualIoc(path) {}
+    pv::PutStatus put(const std::string& name, double v) {
+        pv::Address a;
+        if (!ioc->database().resolve(name, a)) throw std::runtime_error("no PV " + name);
+        return ioc->database().put(a, pv::Prim::Double, &v, 1);
+    }
+    pv::PutStatus put_text(const std::string& name, const std::string& s) {
+        pv::Address a;
+        if (!ioc->database().resolve(name, a)) throw std::runtime_error("no PV " + name);
+        std::vector<char> c(s.begin(), s.end());
+        c.push_back(0);
+        return ioc->database().put(a, pv::Prim::Char, c.data(), uint32_t(c.size()));
+    }
+    double get(const std::string& name, uint32_t i = 0) {
+        pv::Record* r = ioc->database().find(name);
+        if (!r) throw std::runtime_error("no record " + name);
+        const pv::FieldDesc* f = r->type().find("VAL");
+        pv::Elements e = r->elements(*f);
+        double x = 0;
+        pv::get_element(*r, *f, e, i, pv::Prim::Double, &x);
+        return x;
+    }
+    std::string text(const std::string& name) {
+        std::string s;
+        for (uint32_t i = 0; i < 512; ++i) {
+            char c = char(get(name, i));
+            if (!c) break;
+            s += c;
+        }
+        return s;
+    }
+    // Cycles with the IOC loop's publish every 10 (as the running IOC's publisher).
+    void run(int n) {
+        for (int k = 0; k < n; k += 10) {
+            cycles(std::min(10, n - k));
+            ioc->publish();
+        }
+    }
+    // The writer thread works in wall-clock time: cycle on until `done` (at most 10 s).
+    template <typename F> bool run_until(F done) {
+        auto end = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+        while (!done()) {
+            if (std::chrono::steady_clock::now() > end) return false;
+            run(10);
+            std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+        return true;
+    }
+};
+
+std::vector<double> read_dataset(const std::string& file, const std::string& name) {
+    hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    if (f < 0) throw std::runtime_error("cannot open " + file);
+    hid_t d = H5Dopen2(f, ("/entry/data/" + name).c_str(), H5P_DEFAULT);
+    std::vector<double> v;
+    if (d >= 0) {
+        hid_t s = H5Dget_space(d);
+        hsize_t n = 0;
+        H5Sget_simple_extent_dims(s, &n, nullptr);
+        v.resize(n);
+        if (n) H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+        H5Sclose(s);
+        H5Dclose(d);
+    }
+    H5Fclose(f);
+    return v;
+}
+
+TEST(IocFlyScan, SpiralExampleFiresAtEveryPointAndWritesTheFile) {
+    FlyIoc v(kSource + "/examples/flyscan/ioc.yaml");
+    TempDir dir;
+    ASSERT_EQ(v.put_text("FLY:PCAP:FILE_PATH", dir.path.string()), pv::PutStatus::Ok);
+    ASSERT_EQ(v.put_text("FLY:PCAP:FILE_NAME", "spiral_%03d.h5"), pv::PutStatus::Ok);
+    v.run(200);
+    ASSERT_EQ(v.put("FLY:PCAP:ARM", 1), pv::PutStatus::Ok);
+    ASSERT_TRUE(v.run_until([&] { return v.ioc->flyscan().capture()->armed(); })) << v.text("FLY:PCAP:STATUS");
+    v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 39});
+    std::string why;
+    registry::BoundSignal do1 = v.ioc->signals().bind("ec0.s3.binaryOutput01", why), do2 = v.ioc->signals().bind("ec0.s3.binaryOutput02", why);
+    ASSERT_TRUE(do1.bound()) << why;
+    const daq::Pcomp& distance = v.ioc->flyscan().pcomp(0);
+    const daq::Pcomp& timed = v.ioc->flyscan().pcomp(1);
+    motion::Axis& arc = v.axis("SpiralL");
+    std::vector<double> rise_pos;
+    std::vector<uint64_t> timed_rises;
+    std::set<uint64_t> trigger_cycles; // a row per cycle in which either block rose
+    ASSERT_EQ(v.put("FLY:PCOMP1:ENABLE", 1), pv::PutStatus::Ok);
+    ASSERT_EQ(v.put("FLY:PCOMP2:ENABLE", 1), pv::PutStatus::Ok);
+    double prev_pos = arc.status().act_pos;
+    uint64_t cycle = 0;
+    bool moving = true;
+    for (int k = 0; k < 60000 && (moving || k < 100); ++k) {
+        v.cycles(1);
+        ++cycle;
+        if (k % 10 == 0) v.ioc->publish();
+        const double pos = arc.variables().enc.actpos;
+        // the block's OUT is on the EL2808's output bit in the frame of the same cycle
+        ASSERT_EQ(do1.get() != 0, distance.out()) << "cycle " << k;
+        ASSERT_EQ(do2.get() != 0, timed.out()) << "cycle " << k;
+        if (distance.rose()) {
+            double ideal = 0.8 * double(rise_pos.size() + 1);
+            EXPECT_GE(pos, ideal - 1e-9) << "pulse " << rise_pos.size() + 1;
+            EXPECT_LE(pos - ideal, pos - prev_pos + 1e-9) << "pulse " << rise_pos.size() + 1 << ": more than one cycle late";
+            EXPECT_NEAR(distance.edge_position(), ideal, 1e-9);
+            rise_pos.push_back(pos);
+        }
+        if (timed.rose()) timed_rises.push_back(cycle);
+        if (timed.rose() || distance.rose()) trigger_cycles.insert(cycle);
+        prev_pos = pos;
+        moving = arc.status().busy;
+    }
+    EXPECT_NEAR(arc.status().act_pos, 39, 0.01);
+    ASSERT_EQ(rise_pos.size(), 48u); // 0.8 .. 38.4 mm
+    EXPECT_EQ(distance.health(), daq::PcompHealth::Ok);
+    ASSERT_GE(timed_rises.size(), 30u);
+    for (std::size_t i = 1; i < timed_rises.size(); ++i) EXPECT_EQ(timed_rises[i] - timed_rises[i - 1], 1200u) << i;
+    v.run(20);
+    EXPECT_EQ(v.get("FLY:PCOMP1:PRODUCED"), 48);
+    EXPECT_EQ(v.get("FLY:PCOMP1:HEALTH"), 0);
+    EXPECT_EQ(timed_rises.front(), 1u); // the first pulse at enable (relative, START 0)
+    const uint64_t rows = trigger_cycles.size();
+    EXPECT_EQ(v.ioc->flyscan().capture()->pushed(), rows);
+
+    ASSERT_EQ(v.put("FLY:PCAP:DISARM", 1), pv::PutStatus::Ok);
+    ASSERT_TRUE(v.run_until([&] { return !v.ioc->flyscan().writer()->status().busy; }));
+    v.run(10);
+    const std::string file = (dir.path / "spiral_001.h5").string();
+    EXPECT_EQ(v.text("FLY:PCAP:FULL_FILE_NAME"), file);
+    EXPECT_EQ(v.get("FLY:PCAP:ROWS_WRITTEN"), double(rows));
+    EXPECT_EQ(v.get("FLY:PCAP:ROWS_DROPPED"), 0);
+    EXPECT_EQ(v.get("FLY:PCAP:FILES"), 1);
+    EXPECT_EQ(v.get("FLY:PCAP:ERROR"), 0) << v.text("FLY:PCAP:STATUS");
+    EXPECT_EQ(v.get("FLY:PCAP:ACTIVE"), 0);
+    // the file: one row per trigger, the arc at each distance trigger as the cycle saw it
+    std::vector<double> arc_col = read_dataset(file, "arc"), dt = read_dataset(file, "distance_trigger"),
+                        tt = read_dataset(file, "time_trigger"), out1 = read_dataset(file, "distance_out");
+    ASSERT_EQ(arc_col.size(), rows);
+    std::vector<double> from_file;
+    for (std::size_t i = 0; i < rows; ++i)
+        if (dt[i] == 1) from_file.push_back(arc_col[i]);
+    ASSERT_EQ(from_file.size(), rise_pos.size());
+    for (std::size_t i = 0; i < from_file.size(); ++i) EXPECT_DOUBLE_EQ(from_file[i], rise_pos[i]) << i;
+    std::size_t timed_rows = 0;
+    for (double x : tt) timed_rows += x == 1;
+    for (std::size_t i = 0; i < rows; ++i) EXPECT_TRUE(dt[i] == 0 || out1[i] == 1) << i; // a rise: OUT is high
+    ASSERT_GE(rows, 48 + timed_rises.size() - 2); // at most a couple of coincidences
+    EXPECT_EQ(timed_rows, timed_rises.size());
+    // the last rows as waveforms for live plots
+    EXPECT_DOUBLE_EQ(v.get("FLY:PCAP:LAST:arc", 0), arc_col[0]);
+}
+
+// The row of a distance trigger is stamped with the crossing's interpolated time, between the
+// previous cycle and the cycle that saw it.
+TEST(IocFlyScan, DistanceRowsCarryTheInterpolatedCrossingTime) {
+    FlyIoc v(kSource + "/examples/flyscan/ioc.yaml");
+    TempDir dir;
+    v.put_text("FLY:PCAP:FILE_PATH", dir.path.string());
+    v.run(200);
+    v.put("FLY:PCAP:ARM", 1);
+    ASSERT_TRUE(v.run_until([&] { return v.ioc->flyscan().capture()->armed(); }));
+    v.put("FLY:PCOMP1:ENABLE", 1);
+    v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 5});
+    v.run(8000);
+    v.put("FLY:PCAP:DISARM", 1);
+    ASSERT_TRUE(v.run_until([&] { return !v.ioc->flyscan().writer()->status().busy; }));
+    std::string file = v.ioc->flyscan().writer()->status().file;
+    std::vector<double> ts = read_dataset(file, "timestamp_ns"), cyc = read_dataset(file, "cycle"), t = read_dataset(file, "t");
+    ASSERT_EQ(ts.size(), 6u); // 0.8 .. 4.8 mm
+    for (std::size_t i = 0; i < ts.size(); ++i) {
+        const double cycle_t_ns = t[i] * 1e9; // the engine clock at the cycle that saw it
+        EXPECT_LE(ts[i], cycle_t_ns + 1);
+        EXPECT_GT(ts[i], cycle_t_ns - 1e6 - 1) << i;
+    }
+}
+
+TEST(IocFlyScan, ConfigurationErrorsNameWhatAndWhere) {
+    TempDir dir;
+    std::string base = std::string("ioc: {name: T}\nengine: {rate_hz: 1000}\nbuses:\n  - id: 0\n    link: {type: sim}\n    slaves:\n") +
+                       "      - {position: 0, type: EK1100}\n      - {position: 1, type: EL1008}\n      - {position: 2, type: EL2808}\n";
+    auto fails = [&](const std::string& extra, const std::string& what) {
+        std::string path = dir.write("bad.yaml", base + extra);
+        try {
+            rt::VirtualClock clock;
+            ioc::Ioc ioc(config::IocConfig::load(path), clock);
+            ioc.bring_up();
+            ADD_FAILURE() << "no error for: " << extra;
+        } catch (const std::exception& e) {
+            EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+            EXPECT_NE(std::string(e.what()).find("bad.yaml:"), std::string::npos) << e.what();
+        }
+    };
+    fails("pcomp:\n  - {id: 1, input: ax9.enc.actpos}\n", "no signal 'ax9.enc.actpos'");
+    fails("pcomp:\n  - {id: 1, input: time, output: ec0.s1.binaryInput01}\n", "is not an output entry");
+    fails("pcomp:\n  - {id: 1, input: time, dir: sideways}\n", "sideways");
+    fails("capture:\n  fields: [{signal: nothing.here}]\n", "no signal 'nothing.here'");
+    fails("capture:\n  trigger: pcomp7\n  fields: [{signal: time}]\n", "capture trigger");
+    fails("capture:\n  fields: [{signal: time, modes: [mean]}]\n", "mean");
+    fails("pcomp:\n  - {id: 1, input: time, output: ec0.s2.binaryOutput01}\n  - {id: 2, input: time, output: ec0.s2.binaryOutput01}\n",
+          "pcomp1");
+}
+
+// An ARM into a directory that does not exist: refused with the reason, nothing armed.
+TEST(IocFlyScan, AnUnwritableFileIsAnErrorNotACapture) {
+    FlyIoc v(kSource + "/examples/flyscan/ioc.yaml");
+    v.put_text("FLY:PCAP:FILE_PATH", "/nonexistent/dir");
+    v.run(20);
+    v.put("FLY:PCAP:ARM", 1);
+    ASSERT_TRUE(v.run_until([&] { return !v.ioc->flyscan().writer()->status().busy; }));
+    v.run(10);
+    EXPECT_FALSE(v.ioc->flyscan().capture()->armed());
+    EXPECT_EQ(v.get("FLY:PCAP:ERROR"), 1);
+    EXPECT_NE(v.text("FLY:PCAP:STATUS").find("/nonexistent/dir"), std::string::npos) << v.text("FLY:PCAP:STATUS");
+}
+
+// RT rule 1: the cycle with blocks firing and a capture running allocates nothing.
+TEST(IocFlyScan, TheCycleWithCaptureAllocatesNothing) {
+    FlyIoc v(kSource + "/examples/flyscan/ioc.yaml");
+    TempDir dir;
+    v.put_text("FLY:PCAP:FILE_PATH", dir.path.string());
+    v.run(200);
+    v.put("FLY:PCAP:ARM", 1);
+    ASSERT_TRUE(v.run_until([&] { return v.ioc->flyscan().capture()->armed(); }));
+    v.put("FLY:PCOMP1:ENABLE", 1);
+    v.put("FLY:PCOMP2:ENABLE", 1);
+    v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 4});
+    v.cycles(10);
+    test::count_allocations(true, true); // the cycle's thread (the writer thread allocates in HDF5)
+    v.cycles(6000);
+    test::count_allocations(false);
+    EXPECT_EQ(test::allocations(), 0);
+    EXPECT_GE(v.ioc->flyscan().pcomp(0).produced(), 4u);
+    v.put("FLY:PCAP:DISARM", 1);
+    ASSERT_TRUE(v.run_until([&] { return !v.ioc->flyscan().writer()->status().busy; }));
+}
+
+} // namespace
