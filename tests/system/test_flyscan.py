@@ -1,0 +1,140 @@
+"""Fly scans through Channel Access (pyepics) on the shipped example (examples/flyscan/ioc.yaml):
+arm a capture, enable the distance- and time-based PCOMP blocks, move the log-spiral arc axis,
+read the counters, watch the file grow with a SWMR reader, disarm, and open the HDF5/NeXus file
+with h5py: one row per trigger, the arc at each distance trigger within one cycle of its point."""
+
+import time
+from pathlib import Path
+
+import epics
+import h5py
+import numpy as np
+from epics import ca
+
+from conftest import RunServer, acquire_port, connect, forget_pvs, release_port, require_binary, wait_for
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+
+def start(tmp_path, prefix):
+    text = (EXAMPLES / "flyscan" / "ioc.yaml").read_text()
+    assert "ioc: {name: FLY}" in text
+    text = text.replace("ioc: {name: FLY}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
+    text = text.replace("file: ../", f"file: {EXAMPLES}/").replace("include: [../", f"include: [{EXAMPLES}/")
+    cfg = tmp_path / "ioc.yaml"
+    cfg.write_text(text)
+    port = acquire_port()
+    srv = RunServer(tmp_path, cfg, port)
+    srv.start()
+    return srv, port
+
+
+def get(name):
+    return ca.get(connect(name))
+
+
+def put(name, value):
+    assert ca.put(connect(name), value, wait=True) == 1, name
+
+
+def text(name):
+    return epics.caget(name, as_string=True, timeout=5)
+
+
+def test_fly_scan_on_the_spiral_writes_a_nexus_file(tmp_path, prefix):
+    require_binary()
+    srv, port = start(tmp_path, prefix)
+    try:
+        p = prefix
+        data = tmp_path / "data"
+        data.mkdir()
+        epics.caput(p + "PCAP:FILE_PATH", str(data), wait=True)
+        epics.caput(p + "PCAP:FILE_NAME", "spiral_%03d.h5", wait=True)
+        assert text(p + "PCAP:FILE_PATH") == str(data)
+        assert get(p + "PCOMP1:STEP") == 0.8
+        assert text(p + "PCOMP1:INP") == "ax3.enc.actpos"
+        put(p + "PCAP:ARM", 1)
+        assert wait_for(lambda: get(p + "PCAP:ACTIVE") == 1, 5)
+        put(p + "PCOMP1:ENABLE", 1)
+        put(p + "PCOMP2:ENABLE", 1)
+        assert wait_for(lambda: get(p + "PCOMP1:STATE") == 3, 5)  # WAIT_RISING: below START
+        # 3.3 mm of arc at 1 mm/s (ramps of 2 s): pulses at 0.8, 1.6, 2.4, 3.2 mm
+        motor = epics.Motor(p + "SpiralL")
+        assert motor.move(3.3, wait=False) == 0
+        assert wait_for(lambda: get(p + "PCOMP1:PRODUCED") >= 2, 20)
+        # the file grows while the scan runs: a SWMR reader sees the rows flushed so far
+        path = data / "spiral_001.h5"
+        assert text(p + "PCAP:FULL_FILE_NAME") == str(path)
+
+        def rows_seen():
+            with h5py.File(path, "r", libver="latest", swmr=True) as f:
+                return f["entry/data/arc"].shape[0]
+        assert wait_for(lambda: rows_seen() >= 2, 5)
+        assert wait_for(lambda: get(p + "SpiralL.DMOV") == 1 and get(p + "SpiralL.MOVN") == 0, 30)
+        assert abs(get(p + "SpiralL.RBV") - 3.3) < 0.01
+        assert get(p + "PCOMP1:PRODUCED") == 4
+        assert get(p + "PCOMP1:HEALTH") == 0
+        captured = get(p + "PCAP:ROWS_CAPTURED")
+        assert captured >= 4 + 1
+        put(p + "PCAP:DISARM", 1)
+        assert wait_for(lambda: get(p + "PCAP:ACTIVE") == 0 and get(p + "PCAP:FILES") == 1, 10)
+        assert get(p + "PCAP:ROWS_WRITTEN") == captured
+        assert get(p + "PCAP:ROWS_DROPPED") == 0
+        assert get(p + "PCAP:ERROR") == 0, text(p + "PCAP:STATUS")
+        assert text(p + "PCAP:STATUS").startswith("wrote %d rows to " % captured)
+        last = epics.caget(p + "PCAP:LAST:arc", timeout=5)
+
+        with h5py.File(path, "r") as f:
+            entry = f["entry"]
+            assert entry.attrs["NX_class"] in (b"NXentry", "NXentry")
+            d = entry["data"]
+            assert d.attrs["NX_class"] in (b"NXdata", "NXdata")
+            arc = d["arc"][()]
+            assert len(arc) == captured
+            assert d["arc"].attrs["units"] in (b"mm", "mm")
+            assert d["arc"].attrs["source"] in (b"ax3.enc.actpos", "ax3.enc.actpos")
+            fired = d["distance_trigger"][()] == 1
+            points = arc[fired]
+            assert len(points) == 4
+            # each distance row: the arc the cycle saw, at or past its point by less than a cycle's move
+            for k, x in enumerate(points):
+                ideal = 0.8 * (k + 1)
+                assert ideal - 1e-9 <= x < ideal + 0.0011, (k, x)
+            # the time-based rows: 1.2 s apart (the engine clock of the cycle)
+            t = d["t"][()][d["time_trigger"][()] == 1]
+            assert len(t) >= 3
+            assert np.allclose(np.diff(t), 1.2, atol=1e-6)
+            assert np.all(np.diff(d["cycle"][()]) > 0)
+            assert np.allclose(last[:len(arc)], arc)
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)
+
+
+def test_bad_puts_are_refused_and_change_nothing(tmp_path, prefix):
+    require_binary()
+    srv, port = start(tmp_path, prefix)
+    try:
+        p = prefix
+        # an INP that names nothing: refused, the old one kept
+        assert ca.put(connect(p + "PCOMP1:INP"), "ax9.enc.actpos", wait=True) != 1 or text(p + "PCOMP1:INP") == "ax3.enc.actpos"
+        assert text(p + "PCOMP1:INP") == "ax3.enc.actpos"
+        assert ca.put(connect(p + "PCOMP1:PRE_START"), -1.0, wait=True) != 1 or get(p + "PCOMP1:PRE_START") == 0
+        assert get(p + "PCOMP1:PRE_START") == 0
+        # an INP the block can compare (while it is disabled) is taken
+        put(p + "PCOMP1:INP", "ax1.enc.actpos")
+        assert text(p + "PCOMP1:INP") == "ax1.enc.actpos"
+        # a file that cannot be created: the capture does not start and says why
+        epics.caput(p + "PCAP:FILE_PATH", "/nonexistent/dir", wait=True)
+        put(p + "PCAP:ARM", 1)
+        assert wait_for(lambda: get(p + "PCAP:ERROR") == 1, 5)
+        assert "/nonexistent/dir" in text(p + "PCAP:STATUS")
+        assert get(p + "PCAP:ACTIVE") == 0
+        assert srv.alive()
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)
