@@ -1,0 +1,357 @@
+#include "daq/nexus_file.hpp"
+
+#include "core/error.hpp"
+
+#include <hdf5.h>
+
+#include <iterator>
+#include <set>
+#include <string_view>
+
+namespace beamctl::daq {
+
+namespace {
+
+constexpr const char* kReserved[] = {"cycle", "time", "timestamp_ns"};
+
+// HDF5 prints its error stack to stderr unless told not to; the setting is per thread (the
+// library is built thread-safe), so every entry point calls this first.
+void quiet_hdf5() noexcept {
+    thread_local bool done = false;
+    if (!done) {
+        H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+        done = true;
+    }
+}
+
+herr_t collect_error(unsigned, const H5E_error2_t* e, void* data) {
+    auto& reasons = *static_cast<std::vector<std::string>*>(data);
+    if (e->desc && *e->desc) reasons.emplace_back(e->desc);
+    return 0;
+}
+
+// The innermost cause on the calling thread's HDF5 error stack (the outer entries only repeat
+// what failed, e.g. "unable to create file"), on one line; clears the stack.
+std::string hdf5_reason() {
+    std::vector<std::string> reasons;
+    H5Ewalk2(H5E_DEFAULT, H5E_WALK_UPWARD, collect_error, &reasons);
+    H5Eclear2(H5E_DEFAULT);
+    if (reasons.empty()) return "unknown HDF5 error";
+    std::string s = reasons.front();
+    for (char& c : s)
+        if (c == '\n') c = ' ';
+    return s;
+}
+
+[[noreturn]] void fail(const std::string& path, std::string_view what) {
+    throw Error(SB() << path << ": " << what << ": " << hdf5_reason());
+}
+
+// An HDF5 id closed with its own close function.
+class Handle {
+public:
+    using Closer = herr_t (*)(hid_t);
+    Handle() = default;
+    Handle(hid_t id, Closer close)
+        : id_(id)
+        , close_(close) {}
+    Handle(Handle&& o) noexcept
+        : id_(o.id_)
+        , close_(o.close_) {
+        o.id_ = H5I_INVALID_HID;
+    }
+    Handle& operator=(Handle&& o) noexcept {
+        if (this != &o) {
+            reset();
+            id_ = o.id_;
+            close_ = o.close_;
+            o.id_ = H5I_INVALID_HID;
+        }
+        return *this;
+    }
+    ~Handle() { reset(); }
+    hid_t get() const noexcept { return id_; }
+    bool valid() const noexcept { return id_ >= 0; }
+    // Closes; false if HDF5 failed to (the id is gone either way).
+    bool reset() noexcept {
+        bool ok = true;
+        if (id_ >= 0) ok = close_(id_) >= 0;
+        id_ = H5I_INVALID_HID;
+        return ok;
+    }
+
+private:
+    hid_t id_ = H5I_INVALID_HID;
+    Closer close_ = nullptr;
+};
+
+// Checks an id an HDF5 call returned; throws with the path, what and HDF5's reason.
+Handle check(hid_t id, Handle::Closer close, const std::string& path, std::string_view what) {
+    if (id < 0) fail(path, what);
+    return Handle(id, close);
+}
+
+Handle utf8_string_type(const std::string& path) {
+    Handle t = check(H5Tcopy(H5T_C_S1), H5Tclose, path, "string type");
+    if (H5Tset_size(t.get(), H5T_VARIABLE) < 0 || H5Tset_cset(t.get(), H5T_CSET_UTF8) < 0)
+        fail(path, "string type");
+    return t;
+}
+
+// A scalar variable-length UTF-8 string attribute (what h5py reads back as str).
+void string_attribute(hid_t obj, const std::string& name, const std::string& value,
+                      const std::string& path, const std::string& where) {
+    Handle type = utf8_string_type(path);
+    Handle space = check(H5Screate(H5S_SCALAR), H5Sclose, path, "dataspace");
+    std::string what = "attribute " + where + "@" + name;
+    Handle attr =
+        check(H5Acreate2(obj, name.c_str(), type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT),
+              H5Aclose, path, "cannot create " + what);
+    const char* p = value.c_str();
+    if (H5Awrite(attr.get(), type.get(), &p) < 0) fail(path, "cannot write " + what);
+}
+
+void int_attribute(hid_t obj, const std::string& name, int32_t value, const std::string& path,
+                   const std::string& where) {
+    Handle space = check(H5Screate(H5S_SCALAR), H5Sclose, path, "dataspace");
+    std::string what = "attribute " + where + "@" + name;
+    Handle attr =
+        check(H5Acreate2(obj, name.c_str(), H5T_STD_I32LE, space.get(), H5P_DEFAULT, H5P_DEFAULT),
+              H5Aclose, path, "cannot create " + what);
+    if (H5Awrite(attr.get(), H5T_NATIVE_INT32, &value) < 0) fail(path, "cannot write " + what);
+}
+
+void string_dataset(hid_t group, const std::string& name, const std::string& value,
+                    const std::string& path, const std::string& where) {
+    Handle type = utf8_string_type(path);
+    Handle space = check(H5Screate(H5S_SCALAR), H5Sclose, path, "dataspace");
+    Handle ds = check(H5Dcreate2(group, name.c_str(), type.get(), space.get(), H5P_DEFAULT,
+                                 H5P_DEFAULT, H5P_DEFAULT),
+                      H5Dclose, path, "cannot create " + where + "/" + name);
+    const char* p = value.c_str();
+    if (H5Dwrite(ds.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, &p) < 0)
+        fail(path, "cannot write " + where + "/" + name);
+}
+
+// Validates the columns and options before anything is created; fills in the defaults.
+void validate(const std::string& path, const std::vector<NexusColumn>& columns, NexusOptions& opt) {
+    if (columns.empty()) throw Error(SB() << path << ": no columns (at least one is needed)");
+    if (opt.chunk_rows == 0) throw Error(SB() << path << ": chunk_rows 0 should be >= 1");
+    std::set<std::string> names(std::begin(kReserved), std::end(kReserved));
+    for (std::size_t i = 0; i < columns.size(); ++i) {
+        const std::string& n = columns[i].name;
+        auto bad = [&](const char* why) {
+            return Error(SB() << path << ": column " << i << " name \"" << n << "\" " << why);
+        };
+        if (n.empty() || n == ".") throw bad("is not a dataset name");
+        if (n.find('/') != std::string::npos) throw bad("should not contain '/'");
+        for (const char* r : kReserved)
+            if (n == r) throw bad("is reserved (cycle, time and timestamp_ns are always written)");
+        if (!names.insert(n).second) throw bad("appears twice");
+    }
+    std::set<std::string> attributes{"NX_class", "default"};
+    for (const auto& [name, value] : opt.attributes)
+        if (name.empty() || !attributes.insert(name).second)
+            throw Error(SB() << path << ": /entry attribute \"" << name << "\" "
+                             << (name.empty() ? "has no name" : "is given twice or reserved"));
+    if (opt.axis.empty()) opt.axis = columns[0].name;
+    if (opt.signal.empty()) opt.signal = columns[columns.size() > 1 ? 1 : 0].name;
+    if (!names.count(opt.axis))
+        throw Error(SB() << path << ": axis \"" << opt.axis
+                         << "\" is not a dataset of /entry/data");
+    if (!names.count(opt.signal))
+        throw Error(SB() << path << ": signal \"" << opt.signal
+                         << "\" is not a dataset of /entry/data");
+}
+
+} // namespace
+
+struct NexusFile::Impl {
+    std::string path;
+    std::size_t ncol = 0;
+    Handle file;
+    // Columns 0..ncol-1, then cycle, time, timestamp_ns.
+    std::vector<Handle> datasets;
+    std::uint64_t rows = 0;
+    std::uint64_t t0_ns = 0; // timestamp of the first row
+    bool broken = false;     // a write failed: the datasets may differ in length
+    // Reused across appends: the values column by column (ncol x capacity), the times [s].
+    std::vector<double> by_column;
+    std::vector<double> time_s;
+    std::size_t capacity_rows = 0;
+
+    void write(std::size_t k, hid_t mem_type, hid_t mem_space, const void* buf, hsize_t n);
+};
+
+void NexusFile::Impl::write(std::size_t k, hid_t mem_type, hid_t mem_space, const void* buf,
+                            hsize_t n) {
+    hid_t ds = datasets[k].get();
+    const hsize_t new_rows = rows + n;
+    const hsize_t start = rows;
+    if (H5Dset_extent(ds, &new_rows) < 0) fail(path, "cannot extend a dataset");
+    Handle file_space = check(H5Dget_space(ds), H5Sclose, path, "dataspace");
+    if (H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, &start, nullptr, &n, nullptr) < 0)
+        fail(path, "cannot select rows");
+    if (H5Dwrite(ds, mem_type, mem_space, file_space.get(), H5P_DEFAULT, buf) < 0)
+        fail(path, "cannot write rows");
+}
+
+NexusFile::NexusFile(const std::string& path, std::vector<NexusColumn> columns, NexusOptions opt)
+    : impl_(std::make_unique<Impl>()) {
+    Impl& m = *impl_;
+    m.path = path;
+    m.ncol = columns.size();
+    validate(path, columns, opt);
+    quiet_hdf5();
+
+    // SWMR needs the latest file format (checksummed metadata, extensible-array chunk index).
+    Handle fapl = check(H5Pcreate(H5P_FILE_ACCESS), H5Pclose, path, "file access list");
+    if (H5Pset_libver_bounds(fapl.get(), H5F_LIBVER_LATEST, H5F_LIBVER_LATEST) < 0)
+        fail(path, "cannot ask for the latest file format");
+    m.file = check(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.get()), H5Fclose, path,
+                   "cannot create the file");
+    // On failure below, the handles close and the partial file stays (H5Fcreate truncated it).
+    string_attribute(m.file.get(), "default", "entry", path, "/");
+
+    Handle entry = check(H5Gcreate2(m.file.get(), "entry", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+                         H5Gclose, path, "cannot create /entry");
+    string_attribute(entry.get(), "NX_class", "NXentry", path, "/entry");
+    string_attribute(entry.get(), "default", "data", path, "/entry");
+    for (const auto& [name, value] : opt.attributes)
+        string_attribute(entry.get(), name, value, path, "/entry");
+    if (!opt.title.empty()) string_dataset(entry.get(), "title", opt.title, path, "/entry");
+
+    Handle data = check(H5Gcreate2(entry.get(), "data", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+                        H5Gclose, path, "cannot create /entry/data");
+    string_attribute(data.get(), "NX_class", "NXdata", path, "/entry/data");
+    string_attribute(data.get(), "signal", opt.signal, path, "/entry/data");
+    string_attribute(data.get(), "axes", opt.axis, path, "/entry/data");
+    int_attribute(data.get(), opt.axis + "_indices", 0, path, "/entry/data");
+
+    // Empty, growing without limit, chunk_rows rows a chunk.
+    const hsize_t zero = 0, unlimited = H5S_UNLIMITED, chunk = opt.chunk_rows;
+    Handle space = check(H5Screate_simple(1, &zero, &unlimited), H5Sclose, path, "dataspace");
+    Handle dcpl = check(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, path, "dataset creation list");
+    if (H5Pset_chunk(dcpl.get(), 1, &chunk) < 0) fail(path, "cannot set the chunk size");
+    auto dataset = [&](const std::string& name, hid_t type) {
+        const std::string where = "/entry/data/" + name;
+        m.datasets.push_back(check(H5Dcreate2(data.get(), name.c_str(), type, space.get(),
+                                              H5P_DEFAULT, dcpl.get(), H5P_DEFAULT),
+                                   H5Dclose, path, "cannot create " + where));
+        return m.datasets.back().get();
+    };
+    for (const NexusColumn& c : columns) {
+        const std::string where = "/entry/data/" + c.name;
+        hid_t ds = dataset(c.name, H5T_IEEE_F64LE);
+        if (!c.units.empty()) string_attribute(ds, "units", c.units, path, where);
+        string_attribute(ds, "source", c.source, path, where);
+        string_attribute(ds, "capture_mode", c.mode, path, where);
+    }
+    dataset("cycle", H5T_STD_U64LE);
+    string_attribute(dataset("time", H5T_IEEE_F64LE), "units", "s", path, "/entry/data/time");
+    string_attribute(dataset("timestamp_ns", H5T_STD_U64LE), "units", "ns", path,
+                     "/entry/data/timestamp_ns");
+
+    // No attribute may be open here; groups and datasets may.
+    entry.reset();
+    data.reset();
+    if (H5Fstart_swmr_write(m.file.get()) < 0) fail(path, "cannot start SWMR writing");
+}
+
+NexusFile::~NexusFile() {
+    try {
+        close();
+    } catch (...) {
+    }
+}
+
+NexusFile::NexusFile(NexusFile&&) noexcept = default;
+NexusFile& NexusFile::operator=(NexusFile&& o) noexcept {
+    if (this != &o) {
+        try {
+            close();
+        } catch (...) {
+        }
+        impl_ = std::move(o.impl_);
+    }
+    return *this;
+}
+
+void NexusFile::append(const uint64_t* cycle, const uint64_t* t_ns, const double* values,
+                       std::size_t n) {
+    if (!impl_) throw Error("append on a moved-from NexusFile");
+    Impl& m = *impl_;
+    if (!m.file.valid()) throw Error(SB() << m.path << ": append after close");
+    if (m.broken) throw Error(SB() << m.path << ": append after a failed write");
+    if (n == 0) return;
+    quiet_hdf5();
+    if (m.rows == 0) m.t0_ns = t_ns[0];
+    if (n > m.capacity_rows) {
+        m.by_column.resize(n * m.ncol);
+        m.time_s.resize(n);
+        m.capacity_rows = n;
+    }
+    // Row-major in, one contiguous run per column out (column j at j * n); one pass over the
+    // input with ncol sequential output streams.
+    const std::size_t ncol = m.ncol;
+    double* out = m.by_column.data();
+    for (std::size_t i = 0; i < n; ++i) {
+        const double* row = values + i * ncol;
+        for (std::size_t j = 0; j < ncol; ++j) out[j * n + i] = row[j];
+    }
+    for (std::size_t i = 0; i < n; ++i) m.time_s[i] = double(int64_t(t_ns[i] - m.t0_ns)) * 1e-9;
+
+    const hsize_t rows = n;
+    m.broken = true; // until every dataset has its rows
+    Handle mem_space = check(H5Screate_simple(1, &rows, nullptr), H5Sclose, m.path, "dataspace");
+    for (std::size_t j = 0; j < ncol; ++j)
+        m.write(j, H5T_NATIVE_DOUBLE, mem_space.get(), out + j * n, rows);
+    m.write(ncol, H5T_NATIVE_UINT64, mem_space.get(), cycle, rows);
+    m.write(ncol + 1, H5T_NATIVE_DOUBLE, mem_space.get(), m.time_s.data(), rows);
+    m.write(ncol + 2, H5T_NATIVE_UINT64, mem_space.get(), t_ns, rows);
+    m.rows += n;
+    m.broken = false;
+}
+
+void NexusFile::flush() {
+    if (!impl_) throw Error("flush on a moved-from NexusFile");
+    Impl& m = *impl_;
+    if (!m.file.valid()) throw Error(SB() << m.path << ": flush after close");
+    quiet_hdf5();
+    for (const Handle& d : m.datasets)
+        if (H5Dflush(d.get()) < 0) fail(m.path, "cannot flush");
+}
+
+void NexusFile::close() {
+    if (!impl_ || !impl_->file.valid()) return;
+    Impl& m = *impl_;
+    quiet_hdf5();
+    std::string err;
+    for (const Handle& d : m.datasets)
+        if (err.empty() && H5Dflush(d.get()) < 0) err = "cannot flush: " + hdf5_reason();
+    bool ok = true;
+    for (Handle& d : m.datasets) ok = d.reset() && ok;
+    m.datasets.clear();
+    ok = m.file.reset() && ok;
+    if (!ok && err.empty()) err = "cannot close: " + hdf5_reason();
+    if (!err.empty()) throw Error(SB() << m.path << ": " << err);
+}
+
+std::uint64_t NexusFile::rows() const noexcept {
+    return impl_ ? impl_->rows : 0;
+}
+std::uint64_t NexusFile::bytes() const noexcept {
+    return impl_ ? impl_->rows * 8 * (impl_->ncol + 3) : 0;
+}
+const std::string& NexusFile::path() const noexcept {
+    static const std::string none;
+    return impl_ ? impl_->path : none;
+}
+std::size_t NexusFile::columns() const noexcept {
+    return impl_ ? impl_->ncol : 0;
+}
+bool NexusFile::is_open() const noexcept {
+    return impl_ && impl_->file.valid();
+}
+
+} // namespace beamctl::daq
