@@ -30,14 +30,16 @@ herr_t collect_error(unsigned, const H5E_error2_t* e, void* data) {
     return 0;
 }
 
-// The calling thread's HDF5 error stack, innermost cause first, as one line; clears the stack.
+// The innermost cause on the calling thread's HDF5 error stack (the outer entries only repeat
+// what failed, e.g. "unable to create file"), on one line; clears the stack.
 std::string hdf5_reason() {
     std::vector<std::string> reasons;
     H5Ewalk2(H5E_DEFAULT, H5E_WALK_UPWARD, collect_error, &reasons);
     H5Eclear2(H5E_DEFAULT);
     if (reasons.empty()) return "unknown HDF5 error";
     std::string s = reasons.front();
-    for (std::size_t i = 1; i < reasons.size(); ++i) s += "; " + reasons[i];
+    for (char& c : s)
+        if (c == '\n') c = ' ';
     return s;
 }
 
@@ -50,8 +52,14 @@ class Handle {
 public:
     using Closer = herr_t (*)(hid_t);
     Handle() = default;
-    Handle(hid_t id, Closer close) : id_(id), close_(close) {}
-    Handle(Handle&& o) noexcept : id_(o.id_), close_(o.close_) { o.id_ = H5I_INVALID_HID; }
+    Handle(hid_t id, Closer close)
+        : id_(id)
+        , close_(close) {}
+    Handle(Handle&& o) noexcept
+        : id_(o.id_)
+        , close_(o.close_) {
+        o.id_ = H5I_INVALID_HID;
+    }
     Handle& operator=(Handle&& o) noexcept {
         if (this != &o) {
             reset();
@@ -96,9 +104,9 @@ void string_attribute(hid_t obj, const std::string& name, const std::string& val
     Handle type = utf8_string_type(path);
     Handle space = check(H5Screate(H5S_SCALAR), H5Sclose, path, "dataspace");
     std::string what = "attribute " + where + "@" + name;
-    Handle attr = check(H5Acreate2(obj, name.c_str(), type.get(), space.get(), H5P_DEFAULT,
-                                   H5P_DEFAULT),
-                        H5Aclose, path, "cannot create " + what);
+    Handle attr =
+        check(H5Acreate2(obj, name.c_str(), type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT),
+              H5Aclose, path, "cannot create " + what);
     const char* p = value.c_str();
     if (H5Awrite(attr.get(), type.get(), &p) < 0) fail(path, "cannot write " + what);
 }
@@ -107,9 +115,9 @@ void int_attribute(hid_t obj, const std::string& name, int32_t value, const std:
                    const std::string& where) {
     Handle space = check(H5Screate(H5S_SCALAR), H5Sclose, path, "dataspace");
     std::string what = "attribute " + where + "@" + name;
-    Handle attr = check(H5Acreate2(obj, name.c_str(), H5T_STD_I32LE, space.get(), H5P_DEFAULT,
-                                   H5P_DEFAULT),
-                        H5Aclose, path, "cannot create " + what);
+    Handle attr =
+        check(H5Acreate2(obj, name.c_str(), H5T_STD_I32LE, space.get(), H5P_DEFAULT, H5P_DEFAULT),
+              H5Aclose, path, "cannot create " + what);
     if (H5Awrite(attr.get(), H5T_NATIVE_INT32, &value) < 0) fail(path, "cannot write " + what);
 }
 
@@ -126,8 +134,7 @@ void string_dataset(hid_t group, const std::string& name, const std::string& val
 }
 
 // Validates the columns and options before anything is created; fills in the defaults.
-void validate(const std::string& path, const std::vector<NexusColumn>& columns,
-              NexusOptions& opt) {
+void validate(const std::string& path, const std::vector<NexusColumn>& columns, NexusOptions& opt) {
     if (columns.empty()) throw Error(SB() << path << ": no columns (at least one is needed)");
     if (opt.chunk_rows == 0) throw Error(SB() << path << ": chunk_rows 0 should be >= 1");
     std::set<std::string> names(std::begin(kReserved), std::end(kReserved));
@@ -142,10 +149,16 @@ void validate(const std::string& path, const std::vector<NexusColumn>& columns,
             if (n == r) throw bad("is reserved (cycle, time and timestamp_ns are always written)");
         if (!names.insert(n).second) throw bad("appears twice");
     }
+    std::set<std::string> attributes{"NX_class", "default"};
+    for (const auto& [name, value] : opt.attributes)
+        if (name.empty() || !attributes.insert(name).second)
+            throw Error(SB() << path << ": /entry attribute \"" << name << "\" "
+                             << (name.empty() ? "has no name" : "is given twice or reserved"));
     if (opt.axis.empty()) opt.axis = columns[0].name;
     if (opt.signal.empty()) opt.signal = columns[columns.size() > 1 ? 1 : 0].name;
     if (!names.count(opt.axis))
-        throw Error(SB() << path << ": axis \"" << opt.axis << "\" is not a dataset of /entry/data");
+        throw Error(SB() << path << ": axis \"" << opt.axis
+                         << "\" is not a dataset of /entry/data");
     if (!names.count(opt.signal))
         throw Error(SB() << path << ": signal \"" << opt.signal
                          << "\" is not a dataset of /entry/data");
@@ -266,6 +279,7 @@ NexusFile& NexusFile::operator=(NexusFile&& o) noexcept {
 
 void NexusFile::append(const uint64_t* cycle, const uint64_t* t_ns, const double* values,
                        std::size_t n) {
+    if (!impl_) throw Error("append on a moved-from NexusFile");
     Impl& m = *impl_;
     if (!m.file.valid()) throw Error(SB() << m.path << ": append after close");
     if (m.broken) throw Error(SB() << m.path << ": append after a failed write");
@@ -285,8 +299,7 @@ void NexusFile::append(const uint64_t* cycle, const uint64_t* t_ns, const double
         const double* row = values + i * ncol;
         for (std::size_t j = 0; j < ncol; ++j) out[j * n + i] = row[j];
     }
-    for (std::size_t i = 0; i < n; ++i)
-        m.time_s[i] = double(int64_t(t_ns[i] - m.t0_ns)) * 1e-9;
+    for (std::size_t i = 0; i < n; ++i) m.time_s[i] = double(int64_t(t_ns[i] - m.t0_ns)) * 1e-9;
 
     const hsize_t rows = n;
     m.broken = true; // until every dataset has its rows
@@ -301,6 +314,7 @@ void NexusFile::append(const uint64_t* cycle, const uint64_t* t_ns, const double
 }
 
 void NexusFile::flush() {
+    if (!impl_) throw Error("flush on a moved-from NexusFile");
     Impl& m = *impl_;
     if (!m.file.valid()) throw Error(SB() << m.path << ": flush after close");
     quiet_hdf5();
@@ -323,7 +337,9 @@ void NexusFile::close() {
     if (!err.empty()) throw Error(SB() << m.path << ": " << err);
 }
 
-std::uint64_t NexusFile::rows() const noexcept { return impl_ ? impl_->rows : 0; }
+std::uint64_t NexusFile::rows() const noexcept {
+    return impl_ ? impl_->rows : 0;
+}
 std::uint64_t NexusFile::bytes() const noexcept {
     return impl_ ? impl_->rows * 8 * (impl_->ncol + 3) : 0;
 }
@@ -331,7 +347,11 @@ const std::string& NexusFile::path() const noexcept {
     static const std::string none;
     return impl_ ? impl_->path : none;
 }
-std::size_t NexusFile::columns() const noexcept { return impl_ ? impl_->ncol : 0; }
-bool NexusFile::is_open() const noexcept { return impl_ && impl_->file.valid(); }
+std::size_t NexusFile::columns() const noexcept {
+    return impl_ ? impl_->ncol : 0;
+}
+bool NexusFile::is_open() const noexcept {
+    return impl_ && impl_->file.valid();
+}
 
 } // namespace beamctl::daq

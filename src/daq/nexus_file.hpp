@@ -37,11 +37,11 @@ struct NexusColumn {
 struct NexusOptions {
     std::size_t chunk_rows = 4096; // chunk size of every dataset [rows] (>= 1)
     std::string title;             // /entry/title (string dataset); none if empty
-    std::string axis;              // NXdata "axes": a dataset of /entry/data (default: first column)
-    std::string signal; // NXdata "signal": a dataset of /entry/data (default: second column, or the
-                        // first if there is one)
-    std::vector<std::pair<std::string, std::string>> attributes; // extra string attributes on /entry
-                                                                 // (IOC name, ISO 8601 start time)
+    std::string axis;   // NXdata "axes": a dataset of /entry/data (default: first column)
+    std::string signal; // NXdata "signal": a dataset of /entry/data (default: the second column,
+                        // or the first if it is the only one)
+    // Extra string attributes on /entry (IOC name, ISO 8601 start time).
+    std::vector<std::pair<std::string, std::string>> attributes;
 };
 
 class NexusFile {
@@ -57,8 +57,8 @@ public:
     NexusFile& operator=(const NexusFile&) = delete;
 
     // Appends n rows: cycle[n], t_ns[n] [ns] and values[n * columns()] row-major. One write per
-    // dataset; allocates only when n exceeds every earlier n. After an Error the file takes no
-    // more rows (close it).
+    // dataset; its own buffers grow only when n exceeds every earlier n (HDF5 mallocs inside).
+    // After an Error the file takes no more rows (close it).
     void append(const uint64_t* cycle, const uint64_t* t_ns, const double* values, std::size_t n);
     // Makes the rows appended so far visible to SWMR readers (H5Dflush of every dataset; no fsync).
     void flush();
@@ -66,7 +66,8 @@ public:
     void close();
 
     std::uint64_t rows() const noexcept;
-    std::uint64_t bytes() const noexcept; // row data handed to HDF5 [bytes]: 8 * (columns + 3) a row
+    // Row data handed to HDF5 so far [bytes]: 8 * (columns() + 3) a row.
+    std::uint64_t bytes() const noexcept;
     const std::string& path() const noexcept;
     std::size_t columns() const noexcept;
     bool is_open() const noexcept;
