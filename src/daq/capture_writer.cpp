@@ -116,7 +116,8 @@ void CaptureWriter::thread_main() {
     std::vector<uint64_t> cycles(batch), times(batch);
     std::unique_ptr<NexusFile> file;
     uint64_t capture_no = 0, dropped_logged = 0;
-    double last_flush = now_s(), last_drop_log = 0, write_s = 0;
+    std::size_t pending = 0; // rows gathered in the batch, not yet appended
+    double last_flush = now_s(), last_drop_log = 0, write_s = 0, last_append = 0;
     for (;;) {
         std::string path;
         bool quit = false;
@@ -156,8 +157,9 @@ void CaptureWriter::thread_main() {
                 last_head_ = last_count_ = 0;
             }
             if (opt_.log) opt_.log(false, SB() << "capture " << capture_no << ": writing " << path);
+            pending = 0;
             capture_.request_arm(capture_no);
-            last_flush = now_s();
+            last_flush = last_append = now_s();
         }
         if (!file) {
             if (quit) return;
@@ -166,20 +168,29 @@ void CaptureWriter::thread_main() {
         // Whether the capture has ended is read before draining: every row it pushed is then
         // in the ring.
         const bool ended = capture_.capture() == capture_no && !capture_.armed();
+        // Rows gather in the batch until it is full or `append_s` passed since the last append
+        // (each append costs a few HDF5 calls per dataset, whatever its size).
         std::size_t n = 0, total = 0;
-        while ((n = capture_.ring().pop(heads.data(), vals.data(), batch)) > 0) {
-            std::size_t keep = 0;
+        for (;;) {
+            const std::size_t base = pending;
+            n = capture_.ring().pop(&heads[base], &vals[base * cols], batch - base);
             for (std::size_t i = 0; i < n; ++i) {
-                if (heads[i].capture != capture_no) continue; // a row of an earlier capture
-                if (keep != i) std::copy_n(&vals[i * cols], cols, &vals[keep * cols]);
-                cycles[keep] = heads[i].cycle;
-                times[keep] = heads[i].t_ns;
-                ++keep;
+                const std::size_t from = base + i;
+                if (heads[from].capture != capture_no) continue; // a row of an earlier capture
+                if (pending != from) {
+                    std::copy_n(&vals[from * cols], cols, &vals[pending * cols]);
+                    heads[pending] = heads[from];
+                }
+                cycles[pending] = heads[from].cycle;
+                times[pending] = heads[from].t_ns;
+                ++pending;
             }
-            if (keep) {
+            total += n;
+            const bool full = pending == batch;
+            if (pending && (full || ended || quit || now_s() - last_append >= opt_.append_s)) {
                 double t0 = thread_cpu_s();
                 try {
-                    file->append(cycles.data(), times.data(), vals.data(), keep);
+                    file->append(cycles.data(), times.data(), vals.data(), pending);
                 } catch (const std::exception& e) {
                     if (opt_.log) opt_.log(true, e.what());
                     set_status([&](Status& s) {
@@ -188,9 +199,10 @@ void CaptureWriter::thread_main() {
                     });
                 }
                 write_s += thread_cpu_s() - t0;
+                last_append = now_s();
                 std::lock_guard<std::mutex> l(mu_);
                 std::size_t L = opt_.last_rows;
-                for (std::size_t i = 0; L && i < keep; ++i) {
+                for (std::size_t i = 0; L && i < pending; ++i) {
                     for (std::size_t c = 0; c < cols; ++c) last_[c][last_head_] = vals[i * cols + c];
                     last_cycle_[last_head_] = double(cycles[i]);
                     last_head_ = (last_head_ + 1) % L;
@@ -200,9 +212,9 @@ void CaptureWriter::thread_main() {
                 st_.bytes = file->bytes();
                 st_.write_s = write_s;
                 ++st_.version;
+                pending = 0;
             }
-            total += n;
-            if (n < batch) break;
+            if (!full) break;
         }
         const double now = now_s();
         if (uint64_t d = capture_.capture() == capture_no ? capture_.dropped() : 0; d > dropped_logged && now - last_drop_log >= 1.0) {

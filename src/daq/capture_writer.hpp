@@ -33,7 +33,8 @@ public:
         NexusOptions nexus;
         double flush_s = 1.0;         // [s] SWMR flush period while capturing
         std::size_t last_rows = 1000; // rows kept for the live waveforms
-        std::size_t batch_rows = 4096;
+        std::size_t batch_rows = 4096; // rows per append at most
+        double append_s = 0.05;        // [s] rows wait at most this long for a fuller append
         double poll_s = 0.002;        // [s] the thread's sleep when the ring is empty
         // Log lines (file created, closed, dropped rows, errors); called on the writer thread.
         std::function<void(bool error, const std::string&)> log;
