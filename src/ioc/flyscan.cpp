@@ -190,6 +190,7 @@ IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv
             }
     }
     db_.load(f);
+    check_names();
     auto find = [&](const std::string& name) {
         pv::Record* r = db_.find(name);
         if (!r) throw Error(SB() << "flyscan: no record " << name);
@@ -292,6 +293,54 @@ IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv
 
 IocFlyScan::~IocFlyScan() = default;
 
+// Every name of `pcomp:` and `capture:` exists (what `beamctl check` can say without bring-up;
+// bind() then resolves each to its place).
+void IocFlyScan::check_names() {
+    auto known = [&](const std::string& name, std::string& why) {
+        if (name == "time") return true;
+        for (const auto& b : blocks_) {
+            std::string p = SB() << "pcomp" << b->cfg.id << ".";
+            if (name.rfind(p, 0) == 0) {
+                std::string item = name.substr(p.size());
+                if (item == "out" || item == "active" || item == "produced" || item == "rose") return true;
+                why = SB() << "'" << name << "': a block has out, active, produced and rose";
+                return false;
+            }
+        }
+        int bit = -1;
+        const registry::Signal* s = reg_.find_with_bit(name, bit);
+        if (!s) why = SB() << "no signal '" << name << "' in this IOC (`beamctl signals` lists them; or time)";
+        else if (s->loop_only) why = SB() << "'" << name << "' is a value of the IOC loop, not of the cycle";
+        else if (s->owner_kind != registry::OwnerKind::Axis && s->owner_kind != registry::OwnerKind::Bus)
+            why = SB() << "'" << name << "' is a signal of " << s->owner << "; position compare and capture read bus entries, axis variables, pcomp<n>.* and time";
+        else return true;
+        return false;
+    };
+    std::string why;
+    for (const auto& b : blocks_) {
+        if (!known(b->cfg.input, why)) throw Error(SB() << at(b->cfg.input_where) << ": pcomp" << b->cfg.id << " input: " << why);
+        if (b->cfg.output.empty()) continue;
+        int bit = -1;
+        const registry::Signal* s = reg_.find_with_bit(b->cfg.output, bit);
+        if (!s || s->owner_kind != registry::OwnerKind::Bus || s->direction != registry::Direction::Output)
+            throw Error(SB() << at(b->cfg.output_where) << ": pcomp" << b->cfg.id << " output: '" << b->cfg.output
+                             << "' is not an output entry of a bus (ec<m>.s<k>.<entry>[.<bit>])");
+        // the block is the output's one writer
+        if (!reg_.claim(s->name, SB() << "pcomp" << b->cfg.id, why))
+            throw Error(SB() << at(b->cfg.output_where) << ": pcomp" << b->cfg.id << " output: " << why);
+    }
+    if (!cfg_.capture) return;
+    const config::CaptureEntry& c = *cfg_.capture;
+    for (const config::CaptureField& cf : c.fields)
+        if (!known(cf.signal, why)) throw Error(SB() << at(cf.where) << ": capture field: " << why);
+    for (const std::string& t : c.triggers) {
+        bool block = false;
+        for (const auto& b : blocks_) block = block || t == std::string(SB() << "pcomp" << b->cfg.id);
+        if (t != "cycle" && !block && !known(t, why)) throw Error(SB() << at(c.trigger_where) << ": capture trigger: " << why << " (or pcomp<n>, cycle)");
+    }
+    if (!c.gate.empty() && !known(c.gate, why)) throw Error(SB() << at(c.gate_where) << ": capture gate: " << why);
+}
+
 bool IocFlyScan::send(Block& b) {
     if (b.cmds.push(b.want)) return true;
     LOG_WARN(lg, "pcomp" << b.cfg.id << ": refused, the cycle has not taken the last changes yet");
@@ -364,13 +413,6 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes) {
         b.want.inp = b.inp;
         b.enable = false; // the configured ENABLE is a rising edge in the first cycle
         if (!b.cfg.output.empty()) {
-            std::string owner = SB() << "pcomp" << b.cfg.id;
-            int bit = -1;
-            const registry::Signal* s = reg_.find_with_bit(b.cfg.output, bit);
-            if (!s || s->owner_kind != registry::OwnerKind::Bus || s->direction != registry::Direction::Output)
-                throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: '" << b.cfg.output
-                                 << "' is not an output entry of a bus (ec<m>.s<k>.<entry>[.<bit>])");
-            if (!reg_.claim(s->name, owner, why)) throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << why);
             b.out = reg_.bind(b.cfg.output, why);
             if (!b.out.bound()) throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << why);
         }

@@ -88,6 +88,7 @@ private:
     };
     class Stage;
     ValueSource resolve(const std::string& name, std::string& why) const;
+    void check_names(); // and claims the outputs
     bool send(Block& b);
     bool arm();
     void set_text(pv::Record* r, const std::string& text);

@@ -208,7 +208,8 @@ TEST(IocFlyScan, ConfigurationErrorsNameWhatAndWhere) {
         std::string path = dir.write("bad.yaml", base + extra);
         try {
             rt::VirtualClock clock;
-            ioc::Ioc ioc(config::IocConfig::load(path), clock);
+            ioc::Ioc ioc(config::IocConfig::load(path), clock); // what `beamctl check` builds
+            ADD_FAILURE() << "built without an error: " << extra;
             ioc.bring_up();
             ADD_FAILURE() << "no error for: " << extra;
         } catch (const std::exception& e) {
