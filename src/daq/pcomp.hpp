@@ -41,6 +41,12 @@ struct PcompParams {
     PcompDir dir = PcompDir::Positive;
 };
 
+// The block's names in PLC code (pcomp<n>.<item>), in this order: the first kPcompPlcWritable
+// are parameters PLC code may write, the rest are results it reads.
+inline constexpr const char* kPcompPlcItems[] = {"enable", "start", "step", "width", "pulses", "pre_start", "relative",
+                                                 "dir", "out", "active", "produced", "health", "state"};
+inline constexpr int kPcompPlcWritable = 8;
+
 class Pcomp {
 public:
     PcompParams params;

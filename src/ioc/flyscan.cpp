@@ -75,14 +75,29 @@ public:
         for (auto& bp : f_.blocks_) {
             Block& b = *bp;
             Block::Cmd cmd;
-            while (b.cmds.pop(cmd)) {
-                b.pc.params = cmd.params;
-                b.enable = cmd.enable;
+            while (b.cmds.pop(cmd)) { // PV puts: into the cells, as a PLC's writes
+                to_cells(cmd, b.cell);
                 b.inp = cmd.inp;
             }
+            // the cells (PV puts and PLC code) -> the block; nonsense is clamped, never taken
+            double* k = b.cell;
+            daq::PcompParams& q = b.pc.params;
+            q.start = k[Block::Start];
+            q.step = k[Block::Step];
+            q.width = k[Block::Width];
+            q.pre_start = k[Block::PreStart] > 0 ? k[Block::PreStart] : 0;
+            q.pulses = k[Block::Pulses] > 0 && k[Block::Pulses] < 4294967295.0 ? uint32_t(k[Block::Pulses]) : 0;
+            q.relative = k[Block::Relative] != 0;
+            q.dir = k[Block::Dir] >= 2 ? daq::PcompDir::Either : k[Block::Dir] >= 1 ? daq::PcompDir::Negative : daq::PcompDir::Positive;
             const double x = b.inp.read(c.t_ns);
-            const bool out = b.pc.step(b.enable, x);
+            const bool out = b.pc.step(k[Block::Enable] != 0, x);
             b.out.set(out ? 1 : 0); // unbound: nothing
+            k[Block::Out] = out;
+            k[Block::Active] = b.pc.active();
+            k[Block::Produced] = b.pc.produced();
+            k[Block::Health] = double(b.pc.health());
+            k[Block::State] = double(b.pc.state());
+            for (int i = 0; i < Block::kParams; ++i) b.st_param[i].store(k[i], std::memory_order_relaxed);
             b.st_out.store(out, std::memory_order_relaxed);
             b.st_active.store(b.pc.active(), std::memory_order_relaxed);
             b.st_produced.store(b.pc.produced(), std::memory_order_relaxed);
@@ -128,10 +143,11 @@ IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv
     for (const config::PcompEntry& e : cfg.pcomp) {
         auto b = std::make_unique<Block>();
         b->cfg = e;
-        b->enable = false;
         b->pc.params = daq::PcompParams{e.pre_start, e.start, e.width, e.step, e.pulses, e.relative, daq::PcompDir(e.dir)};
         b->want.params = b->pc.params;
         b->want.enable = e.enable;
+        to_cells(b->want, b->cell); // a configured ENABLE is a rising edge in the first cycle
+        for (int i = 0; i < Block::kParams; ++i) b->seen_param[i] = b->cell[i];
         std::string owner = SB() << "pcomp" << e.id;
         for (const char* item : {"out", "active", "produced"}) {
             registry::Signal s;
@@ -341,6 +357,29 @@ void IocFlyScan::check_names() {
     if (!c.gate.empty() && !known(c.gate, why)) throw Error(SB() << at(c.gate_where) << ": capture gate: " << why);
 }
 
+void IocFlyScan::to_cells(const Block::Cmd& c, double* k) {
+    k[Block::Enable] = c.enable;
+    k[Block::Start] = c.params.start;
+    k[Block::Step] = c.params.step;
+    k[Block::Width] = c.params.width;
+    k[Block::Pulses] = c.params.pulses;
+    k[Block::PreStart] = c.params.pre_start;
+    k[Block::Relative] = c.params.relative;
+    k[Block::Dir] = double(int(c.params.dir));
+}
+
+std::optional<plc::Binding> IocFlyScan::plc_cell(const std::string& name) {
+    static_assert(std::size(daq::kPcompPlcItems) == Block::kCells && daq::kPcompPlcWritable == Block::kParams);
+    const auto& names = daq::kPcompPlcItems;
+    for (auto& b : blocks_) {
+        std::string p = SB() << "pcomp" << b->cfg.id << ".";
+        if (name.rfind(p, 0) != 0) continue;
+        for (int i = 0; i < Block::kCells; ++i)
+            if (name.compare(p.size(), std::string::npos, names[i]) == 0) return plc::Binding{&b->cell[i], i < Block::kParams, 1};
+    }
+    return std::nullopt;
+}
+
 bool IocFlyScan::send(Block& b) {
     if (b.cmds.push(b.want)) return true;
     LOG_WARN(lg, "pcomp" << b.cfg.id << ": refused, the cycle has not taken the last changes yet");
@@ -411,12 +450,10 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes) {
         b.inp = resolve(b.cfg.input, why);
         if (b.inp.kind == ValueSource::Kind::None) throw Error(SB() << at(b.cfg.input_where) << ": pcomp" << b.cfg.id << " input: " << why);
         b.want.inp = b.inp;
-        b.enable = false; // the configured ENABLE is a rising edge in the first cycle
         if (!b.cfg.output.empty()) {
             b.out = reg_.bind(b.cfg.output, why);
             if (!b.out.bound()) throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << why);
         }
-        b.cmds.push(b.want);
     }
     if (cfg_.capture) {
         const config::CaptureEntry& c = *cfg_.capture;
@@ -533,6 +570,31 @@ void IocFlyScan::publish() {
         set(b.health, b.st_health.load(std::memory_order_relaxed));
         set(b.state, b.st_state.load(std::memory_order_relaxed));
         set(b.posn, b.st_posn.load(std::memory_order_relaxed));
+        // parameters PLC code changed: into their PVs and into what the next put sends
+        pv::Record* rec[Block::kParams] = {b.enable_r, b.start, b.step, b.width, b.pulses, b.pre_start, b.relative, b.dir};
+        Block::Cmd now = b.want;
+        bool changed = false;
+        for (int i = 0; i < Block::kParams; ++i) {
+            double v = b.st_param[i].load(std::memory_order_relaxed);
+            if (v == b.seen_param[i]) continue;
+            b.seen_param[i] = v;
+            double cur[Block::kCells];
+            to_cells(b.want, cur);
+            if (cur[i] == v) continue; // our own put arriving
+            changed = true;
+            set(rec[i], v);
+            switch (i) {
+            case Block::Enable: now.enable = v != 0; break;
+            case Block::Start: now.params.start = v; break;
+            case Block::Step: now.params.step = v; break;
+            case Block::Width: now.params.width = v; break;
+            case Block::Pulses: now.params.pulses = v > 0 ? uint32_t(v) : 0; break;
+            case Block::PreStart: now.params.pre_start = v > 0 ? v : 0; break;
+            case Block::Relative: now.params.relative = v != 0; break;
+            case Block::Dir: now.params.dir = daq::PcompDir(v >= 2 ? 2 : v >= 1 ? 1 : 0); break;
+            }
+        }
+        if (changed) b.want = now;
         // a block that ended by itself (PULSES reached, an error) is re-armed by a new ENABLE edge
     }
     if (!writer_) return;

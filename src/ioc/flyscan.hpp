@@ -19,6 +19,7 @@
 #include "daq/capture_writer.hpp"
 #include "daq/pcomp.hpp"
 #include "motion/axis_group.hpp"
+#include "plc/program.hpp"
 #include "pv/database.hpp"
 #include "registry/registry.hpp"
 #include "rt/engine.hpp"
@@ -61,6 +62,9 @@ public:
     const daq::Pcomp& pcomp(std::size_t i) const { return blocks_.at(i)->pc; }
     daq::Capture* capture() { return capture_.get(); }
     daq::CaptureWriter* writer() { return writer_.get(); }
+    // PLC code's names of the blocks (pcomp<n>.enable, .start, ... .out, .state): the cells the
+    // cycle reads before and writes after each block's evaluation; nullopt for other names.
+    std::optional<plc::Binding> plc_cell(const std::string& name);
     // The path the next ARM writes (FILE_PATH/FILE_NAME with the capture number).
     std::string next_file() const;
 
@@ -70,7 +74,6 @@ private:
         daq::Pcomp pc;
         ValueSource inp;
         registry::BoundSignal out;
-        bool enable = false;
         // IOC loop -> RT: the whole wanted state (parameters, enable, input) after each put
         struct Cmd {
             daq::PcompParams params;
@@ -79,6 +82,13 @@ private:
         };
         Cmd want;
         SpscQueue<Cmd> cmds{64};
+        // The block as PLC code sees it (RT thread): parameters PLC code and PV puts write, read
+        // by the cycle before each evaluation; results written after it.
+        enum Cell { Enable, Start, Step, Width, Pulses, PreStart, Relative, Dir, Out, Active, Produced, Health, State, kCells };
+        static constexpr int kParams = Out; // cells before Out are writable
+        double cell[kCells] = {};
+        std::atomic<double> st_param[kParams] = {}; // the parameters as the cycle last used them
+        double seen_param[kParams] = {};            // IOC loop: as publish() last saw them
         // RT -> IOC loop
         std::atomic<uint32_t> st_out{0}, st_active{0}, st_produced{0}, st_health{0}, st_state{0};
         std::atomic<double> st_posn{0};
@@ -90,6 +100,7 @@ private:
     ValueSource resolve(const std::string& name, std::string& why) const;
     void check_names(); // and claims the outputs
     bool send(Block& b);
+    static void to_cells(const Block::Cmd& c, double* cell);
     bool arm();
     void set_text(pv::Record* r, const std::string& text);
     std::string text(pv::Record* r) const;

@@ -687,7 +687,8 @@ void Ioc::bring_up() {
     std::vector<ethercat::Bus*> buses;
     for (auto& b : buses_) buses.push_back(b.bus.get());
     memmaps_->bind(registry_, buses);
-    plcs_->bind(*engine_, axes_->group(), std::move(bus_ok), storages_->storages(), memmaps_->memmaps());
+    plcs_->bind(*engine_, axes_->group(), std::move(bus_ok), storages_->storages(), memmaps_->memmaps(),
+                [this](const std::string& name) { return flyscan_->plc_cell(name); });
     flyscan_->bind(*engine_, axes_->group());
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").

@@ -1,5 +1,7 @@
 #include "ioc/plcs.hpp"
 
+#include "daq/pcomp.hpp"
+
 #include "ioc/pv_table.hpp"
 #include "ioc/pv_util.hpp"
 
@@ -75,6 +77,7 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
         axis_names_[a.axis.id.value_or(1)] = a.epics.name;
     }
     for (const auto& st : cfg.storages) storage_ids_.push_back(st.id);
+    for (const auto& pc : cfg.pcomp) pcomp_ids_.push_back(pc.id);
     for (const auto& l : cfg.luts) {
         try {
             luts_.emplace_back(l.id, std::make_unique<LookupTable>(LookupTable::load(l.file)));
@@ -173,6 +176,18 @@ plc::PlcRuntime::Options IocPlcs::check_options() const {
         return plc::EcEntry{{}, kind_of(s->type), s->direction == registry::Direction::Output};
     };
     for (const auto& p : plugins_) o.plugins.push_back(p.get());
+    // pcomp<n>.* of the IOC's position-compare blocks: stand-in cells
+    auto stand_ins = std::make_shared<std::deque<double>>();
+    o.cells = [ids = pcomp_ids_, stand_ins](const std::string& name) -> std::optional<plc::Binding> {
+        for (int id : ids) {
+            std::string p = SB() << "pcomp" << id << ".";
+            if (name.rfind(p, 0) != 0) continue;
+            for (int i = 0; i < int(std::size(daq::kPcompPlcItems)); ++i)
+                if (name.compare(p.size(), std::string::npos, daq::kPcompPlcItems[i]) == 0)
+                    return plc::Binding{&stand_ins->emplace_back(0.0), i < daq::kPcompPlcWritable, 1};
+        }
+        return std::nullopt;
+    };
     return o;
 }
 
@@ -317,9 +332,11 @@ std::unique_ptr<pv::LinkDevice> IocPlcs::make_device(std::string_view name, int 
 }
 
 void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok,
-                   std::vector<daq::DataStorage*> storages, std::vector<registry::MemMap*> memmaps) {
+                   std::vector<daq::DataStorage*> storages, std::vector<registry::MemMap*> memmaps,
+                   std::function<std::optional<plc::Binding>(const std::string&)> cells) {
     if (sources_.empty() && plugins_.empty()) return;
     plc::PlcRuntime::Options o;
+    o.cells = std::move(cells);
     o.storages = std::move(storages);
     o.memmaps = std::move(memmaps);
     o.groups = groups_;

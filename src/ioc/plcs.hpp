@@ -54,7 +54,8 @@ public:
     // ax names to the axes), adds the general PLCs' stage and the axis PLCs' hook.
     // `storages`: the IOC's data storages (ds<n> of PLC code).
     void bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok,
-              std::vector<daq::DataStorage*> storages = {}, std::vector<registry::MemMap*> memmaps = {});
+              std::vector<daq::DataStorage*> storages = {}, std::vector<registry::MemMap*> memmaps = {},
+              std::function<std::optional<plc::Binding>(const std::string&)> cells = {});
     // IOC loop: statuses into PVs, output lines to stdout, faults to the log.
     void publish();
 
@@ -76,6 +77,7 @@ private:
     std::vector<int> axis_ids_;
     std::map<int, std::string> axis_names_; // axis id -> epics.name (axis PLC PVs)
     std::vector<int> storage_ids_; // `storages:` of the IOC file
+    std::vector<int> pcomp_ids_;   // `pcomp:` of the IOC file
     std::vector<std::vector<int>> groups_; // ECMC axis groups (axis.group), in order of appearance: axis ids
     std::vector<std::pair<int, std::unique_ptr<LookupTable>>> luts_; // `luts:` of the IOC file
     std::unique_ptr<plc::M2m> m2m_; // `m2m:`, or a PLC calls m2m_*

@@ -170,6 +170,8 @@ struct PlcRuntime::Plc : Host {
         }
         if (split_indexed(n, "ec", id, rest)) return ec_entry(n);
         if (split_indexed(n, "ds", id, rest)) return ds_variable(n, id, rest);
+        if (rt.opt_.cells)
+            if (auto b = rt.opt_.cells(n)) return b;
         for (Plugin* p : rt.opt_.plugins)
             if (auto v = p->constant(n)) {
                 cells.push_back(*v);

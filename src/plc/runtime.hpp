@@ -13,6 +13,8 @@
 //   ax<n>.plc.enable|error|scantime|firstscan|dbg  an axis PLC's
 //   ds<n>.append|data|index|size|full|clear|error   data storage n (daq::DataStorage), read
 //                              before each scan and applied after it when the scan changed them
+//   pcomp<n>.enable|start|step|width|pulses|pre_start|relative|dir (rw), .out|active|produced|
+//                              health|state (r): position-compare blocks (Options::cells)
 //   plugin constants
 // Functions: ExprTk's math (the language), ec_* bit operations and ec_get_time, mc_* motion
 // function blocks (on the axis command API, acting on the rising edge of `execute`, returning
@@ -90,6 +92,9 @@ public:
         // ECMC axis groups (axis.group): the axis ids of group g, for mc_grp_*(g, ...)
         std::vector<std::vector<int>> groups;
         std::vector<daq::DataStorage*> storages; // ds<id> by DataStorage::id()
+        // Cells of other blocks of the cycle the host offers by name (pcomp<n>.enable, ...):
+        // asked after the built-in namespaces; nullopt: not one of them.
+        std::function<std::optional<Binding>(const std::string& name)> cells;
         std::vector<registry::MemMap*> memmaps;  // ec_*_mm_*(id): ECMC's memory map ids in order
         std::vector<std::pair<int, const LookupTable*>> luts; // lut_get_value(id, x): id 0..15
         M2m* m2m = nullptr; // m2m_* (null: their calls report 0x2005A, shared memory not valid)

@@ -262,3 +262,41 @@ TEST(IocFlyScan, TheCycleWithCaptureAllocatesNothing) {
 }
 
 } // namespace
+
+namespace {
+
+// PLC code drives a block (pcomp<n>.* names): it sets STEP and ENABLE in its first scan and reads
+// OUT and PRODUCED; the PVs show what the PLC set, and a later PV put still acts.
+TEST(IocFlyScan, PlcCodeReachesTheBlocks) {
+    TempDir dir;
+    dir.write("p.plc",
+              "if (plc0.firstscan) { pcomp1.step := 0.02; pcomp1.enable := 1; };\n"
+              "static.produced := pcomp1.produced;\n"
+              "if (pcomp1.out) { static.high := static.high + 1; };\n"
+              "static.state := pcomp1.state;\n");
+    std::string path = dir.write("ioc.yaml",
+                                 "ioc: {name: T}\nengine: {rate_hz: 1000}\n"
+                                 "buses:\n  - id: 0\n    link: {type: sim}\n    slaves:\n"
+                                 "      - {position: 0, type: EK1100}\n      - {position: 1, type: EL2808}\n"
+                                 "plcs:\n  - {id: 0, file: p.plc}\n"
+                                 "pcomp:\n  - {id: 1, input: time, step: 0.01, width: 0.005, relative: true, output: ec0.s1.binaryOutput01}\n");
+    FlyIoc v(path);
+    v.run(1000);
+    const daq::Pcomp& pc = v.ioc->flyscan().pcomp(0);
+    EXPECT_DOUBLE_EQ(pc.params.step, 0.02);
+    EXPECT_TRUE(pc.active());
+    EXPECT_NEAR(double(pc.produced()), 50, 1.5); // one every 20 cycles over ~1000 cycles
+    EXPECT_EQ(v.stat(0, "produced"), double(pc.produced()));
+    EXPECT_NEAR(v.stat(0, "high"), 0.25 * 1000, 30); // WIDTH 5 ms of every 20 ms
+    EXPECT_EQ(v.stat(0, "state"), pc.out() ? 4 : 3); // WAIT_FALLING while high, else WAIT_RISING
+    EXPECT_DOUBLE_EQ(v.get("T:PCOMP1:STEP"), 0.02);
+    EXPECT_EQ(v.get("T:PCOMP1:ENABLE"), 1);
+    // a PV put after the PLC's change still acts, and keeps the PLC's other values
+    ASSERT_EQ(v.put("T:PCOMP1:WIDTH", 0.01), pv::PutStatus::Ok);
+    v.run(20);
+    EXPECT_DOUBLE_EQ(pc.params.width, 0.01);
+    EXPECT_DOUBLE_EQ(pc.params.step, 0.02);
+    EXPECT_TRUE(pc.active());
+}
+
+} // namespace
