@@ -38,31 +38,6 @@ struct FlyIoc : VirtualIoc {
         c.push_back(0);
         return ioc->database().put(a, pv::Prim::Char, c.data(), uint32_t(c.size()));
     }
-    double get(const std::string& name, uint32_t i = 0) {
-        pv::Record* r = ioc->database().find(name);
-        if (!r) throw std::runtime_error("no record " + name);
-        const pv::FieldDesc* f = r->type().find("VAL");
-        pv::Elements e = r->elements(*f);
-        double x = 0;
-        pv::get_element(*r, *f, e, i, pv::Prim::Double, &x);
-        return x;
-    }
-    std::string text(const std::string& name) {
-        std::string s;
-        for (uint32_t i = 0; i < 512; ++i) {
-            char c = char(get(name, i));
-            if (!c) break;
-            s += c;
-        }
-        return s;
-    }
-    // Cycles with the IOC loop's publish every 10 (as the running IOC's publisher).
-    void run(int n) {
-        for (int k = 0; k < n; k += 10) {
-            cycles(std::min(10, n - k));
-            ioc->publish();
-        }
-    }
     // The writer thread works in wall-clock time: cycle on until `done` (at most 10 s).
     template <typename F> bool run_until(F done) {
         auto end = std::chrono::steady_clock::now() + std::chrono::seconds(10);

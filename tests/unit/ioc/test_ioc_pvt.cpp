@@ -39,31 +39,6 @@ struct PvtIoc : VirtualIoc {
         ASSERT_TRUE(ioc->database().resolve(name, a)) << name;
         ASSERT_EQ(ioc->database().put(a, pv::Prim::Double, v.data(), uint32_t(v.size())), pv::PutStatus::Ok) << name;
     }
-    double get(const std::string& name, uint32_t i = 0) {
-        pv::Record* r = ioc->database().find(name);
-        if (!r) throw std::runtime_error("no record " + name);
-        const pv::FieldDesc* f = r->type().find("VAL");
-        pv::Elements e = r->elements(*f);
-        double x = 0;
-        pv::get_element(*r, *f, e, i, pv::Prim::Double, &x);
-        return x;
-    }
-    std::string text(const std::string& name) {
-        std::string s;
-        for (uint32_t i = 0; i < 256; ++i) {
-            char c = char(get(name, i));
-            if (!c) break;
-            s += c;
-        }
-        return s;
-    }
-    // cycles with the IOC loop's publish in between (as the running IOC does every 10 ms)
-    void run(int n) {
-        for (int k = 0; k < n; k += 10) {
-            cycles(10);
-            ioc->publish();
-        }
-    }
 };
 
 std::string ioc_file(TempDir& d, const std::string& extra = "") {

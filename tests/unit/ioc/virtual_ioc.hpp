@@ -6,10 +6,12 @@
 #include "ioc/ioc.hpp"
 #include "motion/axis.hpp"
 #include "plc/runtime.hpp"
+#include "pv/convert.hpp"
 #include "rt/engine.hpp"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -35,6 +37,32 @@ struct VirtualIoc {
         int i = ioc->axes().find(name);
         if (i < 0) throw std::runtime_error("no axis " + name);
         return ioc->axes().group()->axis(std::size_t(i));
+    }
+    // A PV's element i as a double, and a CHAR waveform as text (the IOC loop's view).
+    double get(const std::string& name, uint32_t i = 0) {
+        pv::Record* r = ioc->database().find(name);
+        if (!r) throw std::runtime_error("no record " + name);
+        const pv::FieldDesc* f = r->type().find("VAL");
+        pv::Elements e = r->elements(*f);
+        double x = 0;
+        pv::get_element(*r, *f, e, i, pv::Prim::Double, &x);
+        return x;
+    }
+    std::string text(const std::string& name) {
+        std::string s;
+        for (uint32_t i = 0; i < 512; ++i) {
+            char c = char(get(name, i));
+            if (!c) break;
+            s += c;
+        }
+        return s;
+    }
+    // Cycles with the IOC loop's publish every 10 (as the running IOC's publisher, every 10 ms).
+    void run(int n) {
+        for (int k = 0; k < n; k += 10) {
+            cycles(std::min(10, n - k));
+            ioc->publish();
+        }
     }
     void send(const std::string& name, motion::AxisCommand c) {
         ASSERT_NE(ioc->axes().send(std::size_t(ioc->axes().find(name)), c), 0u);
