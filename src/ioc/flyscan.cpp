@@ -267,7 +267,7 @@ IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv
                 LOG_WARN(lg, r.name() << ": '" << buf << "' refused: " << why);
                 return pv::PutStatus::Failed;
             }
-            if (self->want.enable || self->pc.active()) {
+            if (self->want.enable || self->st_active.load(std::memory_order_relaxed)) {
                 LOG_WARN(lg, r.name() << ": '" << buf << "' refused: disable the block first");
                 return pv::PutStatus::Failed;
             }
@@ -588,7 +588,7 @@ void IocFlyScan::publish() {
             case Block::Start: now.params.start = v; break;
             case Block::Step: now.params.step = v; break;
             case Block::Width: now.params.width = v; break;
-            case Block::Pulses: now.params.pulses = v > 0 ? uint32_t(v) : 0; break;
+            case Block::Pulses: now.params.pulses = v > 0 && v < 4294967295.0 ? uint32_t(v) : 0; break;
             case Block::PreStart: now.params.pre_start = v > 0 ? v : 0; break;
             case Block::Relative: now.params.relative = v != 0; break;
             case Block::Dir: now.params.dir = daq::PcompDir(v >= 2 ? 2 : v >= 1 ? 1 : 0); break;
