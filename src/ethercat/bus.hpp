@@ -85,6 +85,9 @@ public:
     virtual uint64_t tick_grace_ns() const noexcept { return 0; }
     // The master of this process, if it is one (tests of the master, the scanner's own buses).
     virtual Master* local_master() noexcept { return nullptr; }
+    // RT thread, after receive: the DC reference clock's system time [ns] as the last frame passed
+    // it; 0 when this process runs no DC on the bus (no DC slave, or a bus behind a scanner).
+    virtual uint64_t dc_time() const noexcept { return 0; }
 };
 
 // The bus master of this process on a link.
@@ -114,6 +117,7 @@ public:
     std::vector<uint8_t> sdo_read(int position, uint16_t index, uint8_t sub) override;
     void sdo_write(int position, uint16_t index, uint8_t sub, const std::vector<uint8_t>& data) override;
     Master* local_master() noexcept override { return master_.get(); }
+    uint64_t dc_time() const noexcept override { return master_->dc_reference_time(); }
 
 private:
     std::unique_ptr<Link> link_;
@@ -187,6 +191,7 @@ public:
     Master& master();
     BusBackend& backend() { return *backend_; }
     int id() const { return id_; }
+    uint64_t dc_time() const noexcept { return backend_->dc_time(); }
     const char* link_kind() const { return backend_->kind(); }
 
     static uint64_t get(const std::vector<uint8_t>& image, const SignalInfo& s) noexcept;

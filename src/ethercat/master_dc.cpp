@@ -30,6 +30,16 @@ uint64_t master_time_ns() { // [ns] since the EtherCAT epoch 2000-01-01, from th
 }
 } // namespace
 
+bool master_detail::uses_dc_time(const SiiInfo& sii) {
+    // A DC opmode, or process data mapped onto the ESC's DC registers (0x0900-0x09FF: an EL1252's
+    // latch times, an EL2252's start time): its system time must be the bus's (IgH writes the
+    // offset of every DC-capable slave for this reason; SYNC0 only for those with an opmode).
+    if (sii.dc_assign_activate) return true;
+    for (const SyncManagerDesc& sm : sii.sms)
+        if (sm.start >= 0x0900 && sm.start < 0x0A00) return true;
+    return false;
+}
+
 void Master::configure_dc(const std::vector<std::size_t>& which) {
     // Minimal distributed clocks (ethercat.md §4): the reference is the first configured slave with
     // DC (its cyclic FRMW 0x0910 is in the frame even while it is absent); each DC slave present
@@ -44,7 +54,7 @@ void Master::configure_dc(const std::vector<std::size_t>& which) {
     // One latch and one master timestamp for all of them, delays from the first present.
     std::vector<std::size_t> dc;
     for (std::size_t i : which)
-        if (slaves_[i].sii.dc_assign_activate) dc.push_back(i);
+        if (uses_dc_time(slaves_[i].sii)) dc.push_back(i);
     if (!dc.empty()) {
         uint32_t latch = 0;
         if (transact(kBwr, 0, 0x0900, &latch, 4) < 1) throw Error(SB() << "ec" << bus_ << ": DC receive-time latch got no answer");
@@ -97,6 +107,7 @@ void Master::configure_dc_at(std::size_t i, const uint32_t* t_ref, uint64_t mast
     if (transact(kFpwr, s.station, 0x0920, offset, 8) != 1)
         throw Error(SB() << slave_name(s) << ": no answer configuring DC offset");
     uint16_t aa = s.sii.dc_assign_activate;
+    if (!aa) return; // system time only (latches), no SYNC signals
     uint16_t off = 0;
     // An oversampling terminal takes n samples per cycle: SYNC0 every cycle/n, SYNC1 the rest of
     // the cycle (ecmccfg's ecmcEL3702.cmd).

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "core/error.hpp"
+#include "ethercat/sii.hpp"
 
 #include <atomic>
 #include <cstdint>
@@ -101,5 +102,9 @@ class IdentityMismatch : public Error {
 public:
     using Error::Error;
 };
+
+// The slave's system time must be the bus's: it has a DC opmode or maps ESC DC registers
+// (master_dc.cpp).
+bool uses_dc_time(const SiiInfo& sii);
 
 } // namespace beamctl::ethercat::master_detail

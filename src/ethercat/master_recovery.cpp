@@ -147,7 +147,7 @@ void Master::configure_slave(std::size_t i, bool full_sii) {
             throw Error(SB() << slave_name(s) << ": its PDO " << (out ? "outputs" : "inputs")
                              << " differ from the layout reserved at start (restart the IOC to use them)");
     configure_process_data(i);
-    if (s.sii.dc_assign_activate) configure_dc_slave(i);
+    if (uses_dc_time(s.sii)) configure_dc_slave(i);
     request_state({i}, 4, "SAFEOP");
     request_state({i}, 8, "OP");
 }

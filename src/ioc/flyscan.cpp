@@ -77,6 +77,8 @@ public:
             Block::Cmd cmd;
             while (b.cmds.pop(cmd)) { // PV puts: into the cells, as a PLC's writes
                 to_cells(cmd, b.cell);
+                if (b.timed && (cmd.inp.kind != b.inp.kind || cmd.inp.cell != b.inp.cell || cmd.inp.entry.bit_offset != b.inp.entry.bit_offset))
+                    b.timed->reset();
                 b.inp = cmd.inp;
             }
             // the cells (PV puts and PLC code) -> the block; nonsense is clamped, never taken
@@ -91,7 +93,17 @@ public:
             q.dir = k[Block::Dir] >= 2 ? daq::PcompDir::Either : k[Block::Dir] >= 1 ? daq::PcompDir::Negative : daq::PcompDir::Positive;
             const double x = b.inp.read(c.t_ns);
             const bool out = b.pc.step(k[Block::Enable] != 0, x);
-            b.out.set(out ? 1 : 0); // unbound: nothing
+            if (!b.timed) {
+                b.out.set(out ? 1 : 0); // unbound: nothing
+            } else if (const uint64_t dc = b.bus->dc_time()) { // no DC time yet: nothing to time against
+                const uint64_t x_ns = b.inp.kind == ValueSource::Kind::Time ? dc + c.period_ns : dc;
+                b.timed->step(q, k[Block::Enable] != 0, x, x_ns, dc, c.period_ns);
+                b.start_time.set(int64_t(b.timed->start_time()));
+                b.out.set(b.timed->level() ? 1 : 0);
+                b.activate.set(b.timed->activate());
+                b.st_timed.store(b.timed->scheduled(), std::memory_order_relaxed);
+                b.st_late.store(b.timed->late(), std::memory_order_relaxed);
+            }
             k[Block::Out] = out;
             k[Block::Active] = b.pc.active();
             k[Block::Produced] = b.pc.produced();
@@ -177,6 +189,8 @@ IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv
         f.records.push_back(record("mbbi", p + "STATE", {{"ZRST", "WAIT_ENABLE"}, {"ONST", "WAIT_DIR"}, {"TWST", "WAIT_PRE_START"},
                                                          {"THST", "WAIT_RISING"}, {"FRST", "WAIT_FALLING"}}));
         f.records.push_back(record("ai", p + "POSN", {{"DESC", "INP now"}, {"PREC", "4"}, {"EGU", egu}}));
+        f.records.push_back(record("longin", p + "TIMED", {{"DESC", "edges sent timestamped"}}));
+        f.records.push_back(record("longin", p + "LATE", {{"DESC", "timestamped edges too late"}, {"HIGH", "1"}, {"HSV", "MINOR"}}));
         blocks_.push_back(std::move(b));
     }
     if (cfg.capture) {
@@ -230,7 +244,9 @@ IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv
         b.health = find(p + "HEALTH");
         b.state = find(p + "STATE");
         b.posn = find(p + "POSN");
-        for (pv::Record* r : {b.active, b.out_r, b.produced, b.health, b.state, b.posn}) r->val_read_only = true;
+        b.timed_r = find(p + "TIMED");
+        b.late = find(p + "LATE");
+        for (pv::Record* r : {b.active, b.out_r, b.produced, b.health, b.state, b.posn, b.timed_r, b.late}) r->val_read_only = true;
         Block* self = &b;
         auto param = [this, self](pv::Record& r, const pv::FieldDesc& fd) {
             if (std::string_view(fd.name) != "VAL") return pv::PutStatus::Ok;
@@ -341,9 +357,20 @@ void IocFlyScan::check_names() {
         if (!s || s->owner_kind != registry::OwnerKind::Bus || s->direction != registry::Direction::Output)
             throw Error(SB() << at(b->cfg.output_where) << ": pcomp" << b->cfg.id << " output: '" << b->cfg.output
                              << "' is not an output entry of a bus (ec<m>.s<k>.<entry>[.<bit>])");
-        // the block is the output's one writer
+        // the block is the output's one writer; of an EL2252 channel also of its slave's startTime
+        // and activate (one block per EL2252)
         if (!reg_.claim(s->name, SB() << "pcomp" << b->cfg.id, why))
             throw Error(SB() << at(b->cfg.output_where) << ": pcomp" << b->cfg.id << " output: " << why);
+        const std::size_t dot = s->name.find('.', s->name.find('.') + 1);
+        const std::string slave = s->name.substr(0, dot + 1); // "ec0.s4."
+        const registry::Signal* st = reg_.find(slave + "startTime");
+        const registry::Signal* act = reg_.find(slave + "activate");
+        if (dot != std::string::npos && st && act && st->direction == registry::Direction::Output && st->type == "UINT64") {
+            for (const registry::Signal* t : {st, act})
+                if (!reg_.claim(t->name, SB() << "pcomp" << b->cfg.id << " (timestamped output " << s->name << ")", why))
+                    throw Error(SB() << at(b->cfg.output_where) << ": pcomp" << b->cfg.id << " output: " << why);
+            b->timed_prefix = slave;
+        }
     }
     if (!cfg_.capture) return;
     const config::CaptureEntry& c = *cfg_.capture;
@@ -441,7 +468,7 @@ ValueSource IocFlyScan::resolve(const std::string& name, std::string& why) const
     return v;
 }
 
-void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes) {
+void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::vector<ethercat::Bus*>& buses) {
     if (!enabled()) return;
     axes_ = axes;
     for (auto& bp : blocks_) {
@@ -453,6 +480,18 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes) {
         if (!b.cfg.output.empty()) {
             b.out = reg_.bind(b.cfg.output, why);
             if (!b.out.bound()) throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << why);
+            if (!b.timed_prefix.empty()) {
+                for (ethercat::Bus* bus : buses)
+                    if (b.timed_prefix.rfind(std::string(SB() << "ec" << bus->id() << "."), 0) == 0) b.bus = bus;
+                if (!b.bus || !b.bus->backend().local_master())
+                    throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << b.cfg.output
+                                     << " is a DC-timestamped output; it needs a bus this IOC masters (not one behind a scanner)");
+                b.start_time = reg_.bind(b.timed_prefix + "startTime", why);
+                b.activate = reg_.bind(b.timed_prefix + "activate", why);
+                if (!b.start_time.bound() || !b.activate.bound())
+                    throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << why);
+                b.timed = std::make_unique<daq::TimedPcompOutput>();
+            }
         }
     }
     if (cfg_.capture) {
@@ -570,6 +609,8 @@ void IocFlyScan::publish() {
         set(b.health, b.st_health.load(std::memory_order_relaxed));
         set(b.state, b.st_state.load(std::memory_order_relaxed));
         set(b.posn, b.st_posn.load(std::memory_order_relaxed));
+        set(b.timed_r, double(b.st_timed.load(std::memory_order_relaxed)));
+        set(b.late, double(b.st_late.load(std::memory_order_relaxed)));
         // parameters PLC code changed: into their PVs and into what the next put sends
         pv::Record* rec[Block::kParams] = {b.enable_r, b.start, b.step, b.width, b.pulses, b.pre_start, b.relative, b.dir};
         Block::Cmd now = b.want;

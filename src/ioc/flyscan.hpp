@@ -3,7 +3,8 @@
 // the Triggers stage of the cycle (after the axes and PLCs, before bus send: a block's OUT leaves
 // on its output bit in the same cycle's frame) and served with PandA's field names:
 //   $(P)PCOMP<n>:ENABLE, INP (the engine signal compared, a put rebinds it), PRE_START, START,
-//     WIDTH, STEP, PULSES, RELATIVE, DIR, ACTIVE, OUT, PRODUCED, HEALTH, STATE, POSN (INP now)
+//     WIDTH, STEP, PULSES, RELATIVE, DIR, ACTIVE, OUT, PRODUCED, HEALTH, STATE, POSN (INP now),
+//     TIMED (edges sent to a DC-timestamped output), LATE (edges too late for it)
 //   $(P)PCAP:ARM, DISARM, ACTIVE, FILE_PATH, FILE_NAME (where the next file goes), FULL_FILE_NAME,
 //     CAPTURE (number of the last capture), ROWS_CAPTURED, ROWS_WRITTEN, ROWS_DROPPED, FILES,
 //     STATUS (text), ERROR, LAST:<column> and LAST:CYCLE (the last rows, for live plots)
@@ -18,6 +19,8 @@
 #include "daq/capture.hpp"
 #include "daq/capture_writer.hpp"
 #include "daq/pcomp.hpp"
+#include "daq/timed_output.hpp"
+#include "ethercat/bus.hpp"
 #include "motion/axis_group.hpp"
 #include "plc/program.hpp"
 #include "pv/database.hpp"
@@ -51,7 +54,9 @@ public:
 
     bool enabled() const { return !blocks_.empty() || cfg_.capture.has_value(); }
     // Bring-up: binds inputs, outputs, capture fields; adds the stage. Throws Error (file:line:col).
-    void bind(rt::Engine& engine, motion::AxisGroup* axes);
+    // An output on an EL2252 channel (a slave with startTime and activate) gets its edges at their
+    // predicted DC times (daq::TimedPcompOutput); it needs a bus this IOC masters (`buses`).
+    void bind(rt::Engine& engine, motion::AxisGroup* axes, const std::vector<ethercat::Bus*>& buses = {});
     // IOC loop: the blocks' and the capture's state into the PVs.
     void publish();
     // Clean stop: ends a running capture (its file is completed).
@@ -60,6 +65,7 @@ public:
     // Tests: the blocks and the capture.
     std::size_t blocks() const { return blocks_.size(); }
     const daq::Pcomp& pcomp(std::size_t i) const { return blocks_.at(i)->pc; }
+    const daq::TimedPcompOutput* timed_output(std::size_t i) const { return blocks_.at(i)->timed.get(); }
     daq::Capture* capture() { return capture_.get(); }
     daq::CaptureWriter* writer() { return writer_.get(); }
     // PLC code's names of the blocks (pcomp<n>.enable, .start, ... .out, .state): the cells the
@@ -74,6 +80,11 @@ private:
         daq::Pcomp pc;
         ValueSource inp;
         registry::BoundSignal out;
+        // a DC-timestamped output (EL2252): its slave's startTime and activate, and its bus
+        std::string timed_prefix; // "ec0.s4." when the output is one
+        std::unique_ptr<daq::TimedPcompOutput> timed;
+        registry::BoundSignal start_time, activate;
+        ethercat::Bus* bus = nullptr;
         // IOC loop -> RT: the whole wanted state (parameters, enable, input) after each put
         struct Cmd {
             daq::PcompParams params;
@@ -92,9 +103,10 @@ private:
         // RT -> IOC loop
         std::atomic<uint32_t> st_out{0}, st_active{0}, st_produced{0}, st_health{0}, st_state{0};
         std::atomic<double> st_posn{0};
+        std::atomic<uint64_t> st_timed{0}, st_late{0};
         pv::Record *enable_r = nullptr, *inp_r = nullptr, *pre_start = nullptr, *start = nullptr, *width = nullptr, *step = nullptr,
                    *pulses = nullptr, *relative = nullptr, *dir = nullptr, *active = nullptr, *out_r = nullptr, *produced = nullptr,
-                   *health = nullptr, *state = nullptr, *posn = nullptr;
+                   *health = nullptr, *state = nullptr, *posn = nullptr, *timed_r = nullptr, *late = nullptr;
     };
     class Stage;
     ValueSource resolve(const std::string& name, std::string& why) const;

@@ -157,7 +157,12 @@ void Plant::step(Segment& seg) noexcept {
         for (unsigned k = 0; k < n; ++k)
             s.channel->set_volts(seg, s.volts(t_ - dt + dt * double(k + 1) / double(n), rng_), dt > 0, k);
     }
+    for (auto& t : timed_outputs) t->update(seg);
     for (auto& w : wires) {
+        if (w.timed) {
+            w.to.set(seg, w.timed->level[w.timed_channel]);
+            continue;
+        }
         unsigned n = std::min(w.from.samples(seg), w.to.samples(seg)); // oversampled ends: every sample
         for (unsigned k = 0; k < n; ++k) w.to.sample(k).set(seg, w.from.sample(k).get(seg));
     }

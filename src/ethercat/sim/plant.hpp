@@ -88,6 +88,8 @@ struct SignalModel {
 
 struct WireModel {
     IoPoint from, to; // same width; an output that is not valid (slave not in OP) reads 0
+    const TimedOutputs* timed = nullptr; // from an EL2252 pin: the pin, not the process data
+    int timed_channel = 0;
 };
 
 class Plant {
@@ -106,6 +108,7 @@ public:
     std::vector<WireModel> wires;
     std::vector<CycleCounter> cycle_counters;
     std::vector<LatchInput> latches;
+    std::vector<std::unique_ptr<TimedOutputs>> timed_outputs; // EL2252s
     uint64_t steps = 0; // frames that advanced time
 
     static constexpr double kMaxSubstep = 100e-6; // [s]

@@ -396,10 +396,30 @@ std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog, Er
             m.channel = std::make_unique<AnalogInputChannel>(seg, sc.to.slave, sc.to.entry, sc.full_scale);
             plant->signals.push_back(std::move(m));
         });
+    // EL2252s (a startTime entry beside binaryOutput01/02): pins switched by DC time.
+    auto same = [](const IoPoint& a, const IoPoint& b) {
+        return a.slave == b.slave && a.loc.sm == b.loc.sm && a.loc.bit == b.loc.bit && a.loc.output == b.loc.output;
+    };
+    for (std::size_t p = 0; p < seg.size(); ++p) {
+        IoPoint st = bind_optional(seg, int(p), "startTime"), act = bind_optional(seg, int(p), "activate");
+        if (!st.bound() || !act.bound() || !st.loc.output) continue;
+        auto t = std::make_unique<TimedOutputs>();
+        t->start_time = st;
+        t->activate = act;
+        t->outputs[0] = bind_optional(seg, int(p), "binaryOutput01");
+        t->outputs[1] = bind_optional(seg, int(p), "binaryOutput02");
+        plant->timed_outputs.push_back(std::move(t));
+    }
     for (const Wire& w : wiring)
         errors.capture([&] {
             WireModel m;
             m.from = b.bind(w.from);
+            for (auto& t : plant->timed_outputs)
+                for (int ch = 0; ch < 2; ++ch)
+                    if (t->outputs[ch].bound() && same(t->outputs[ch], m.from)) {
+                        m.timed = t.get();
+                        m.timed_channel = ch;
+                    }
             m.to = b.input(w.to, "a wire");
             if (m.from.loc.bits != m.to.loc.bits)
                 throw Error(SB() << w.from.where << ": " << w.from.entry << " has " << int(m.from.loc.bits) << " bits but "
@@ -413,8 +433,15 @@ std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog, Er
             if (cc.bound() && !cc.loc.output) plant->cycle_counters.push_back(CycleCounter{cc});
             IoPoint pos = bind_optional(seg, int(p), "timestampLatchPositive" + ch);
             IoPoint in = bind_optional(seg, int(p), "binaryInput" + ch);
-            if (pos.bound() && in.bound())
-                plant->latches.push_back(LatchInput{in, pos, bind_optional(seg, int(p), "timestampLatchNegative" + ch)});
+            if (pos.bound() && in.bound()) {
+                LatchInput l{in, pos, bind_optional(seg, int(p), "timestampLatchNegative" + ch)};
+                for (const WireModel& w : plant->wires)
+                    if (w.timed && same(w.to, in)) {
+                        l.timed = w.timed;
+                        l.timed_channel = w.timed_channel;
+                    }
+                plant->latches.push_back(l);
+            }
         }
     }
     plant->steps = 0;

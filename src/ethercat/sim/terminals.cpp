@@ -285,9 +285,46 @@ void LatchInput::update(Segment& seg) noexcept {
     bool v = input.get(seg) & 1;
     if (v != last) {
         uint64_t t = seg.slave(std::size_t(input.slave)).system_time();
+        // an EL2252 pin switched at its own time, since the last frame
+        if (timed && timed->level[timed_channel] == v) t -= std::min(t, seg.time() - std::min(seg.time(), timed->edge_ns[timed_channel]));
         (v ? positive : negative).set(seg, t);
     }
     last = v;
+}
+
+// ---- EL2252 ---------------------------------------------------------------------------------
+
+void TimedOutputs::update(Segment& seg) noexcept {
+    const uint64_t now = seg.time();
+    Esc& esc = seg.slave(std::size_t(activate.slave));
+    const uint64_t sys = esc.system_time();
+    auto set_pin = [&](int ch, bool v, uint64_t at) {
+        if (level[ch] == v) return;
+        level[ch] = v;
+        edge_ns[ch] = at;
+    };
+    if (esc.al_state() != kOp) { // safe state: pins off, nothing armed
+        for (int ch = 0; ch < 2; ++ch) set_pin(ch, false, now);
+        armed_ = false;
+        last_activate_ = 0;
+        return;
+    }
+    if (armed_ && event_ <= sys) { // SYNC0 fired since the last frame, with the data it held
+        const uint64_t at = now - std::min(now, sys - event_);
+        for (int ch = 0; ch < 2; ++ch) set_pin(ch, data_[ch], at);
+        armed_ = false;
+        ++events;
+    }
+    const uint8_t act = uint8_t(activate.get(seg));
+    if (act == 3 && last_activate_ != 3) {
+        event_ = start_time.get(seg);
+        armed_ = event_ > sys;
+        if (!armed_) ++missed;
+    } else if (act != 3) {
+        armed_ = false;
+    }
+    last_activate_ = act;
+    for (int ch = 0; ch < 2; ++ch) data_[ch] = outputs[ch].get(seg) & 1;
 }
 
 } // namespace beamctl::ethercat::sim

@@ -175,10 +175,34 @@ struct CycleCounter {
     void update(Segment& seg) noexcept { counter.set(seg, ++count); }
 };
 
+// EL2252 binaryOutput01/02 switched by distributed clocks (SYNC0 single shot): the terminal takes
+// startTime (the DC system time of the next switching) when `activate` becomes 3 and sets its pins
+// to binaryOutputNN at that time; the outputs hold between events. ecmccfg's sequence
+// (examples/test/el1252Toel2252): startTime, the outputs and activate 0 in one frame, activate 3 in
+// the next. A start time that is already past when activated never fires (counted in `missed`), as
+// an ESC's SYNC0 start time in the past does not; activate 0 cancels an event not yet fired.
+// Pins are off while the slave is not in OP.
+struct TimedOutputs {
+    IoPoint activate, start_time, outputs[2];
+    bool level[2] = {};       // the pins
+    uint64_t edge_ns[2] = {}; // segment time [ns] of each pin's last change
+    uint64_t events = 0, missed = 0;
+    void update(Segment& seg) noexcept;
+
+private:
+    bool armed_ = false;
+    uint8_t last_activate_ = 0;
+    uint64_t event_ = 0;        // DC system time of the armed event
+    bool data_[2] = {};         // binaryOutputNN of the last frame (what SYNC0 latches)
+};
+
 // EL1252 binaryInputNN with timestampLatchPositiveNN/NegativeNN: the slave's DC system time of
 // the last rising/falling edge (edges are seen once per frame).
+// An input wired to an EL2252 pin (`timed`) latches the pin's edge time, between frames.
 struct LatchInput {
     IoPoint input, positive, negative;
+    const TimedOutputs* timed = nullptr;
+    int timed_channel = 0;
     bool last = false;
     void update(Segment& seg) noexcept;
 };

@@ -274,4 +274,104 @@ TEST(IocFlyScan, PlcCodeReachesTheBlocks) {
     EXPECT_TRUE(pc.active());
 }
 
+// The timestamped example: the same compare points on an EL2808 (next frame) and an EL2252 (the
+// predicted crossing time), both cabled to an EL1252 that latches each edge's DC time. The ideal
+// time of a point is where the compared input, interpolated between its samples (each at the DC
+// time of the frame that sampled it), reaches it.
+TEST(IocFlyScan, TimestampedOutputSwitchesWithin1usOfTheCrossing) {
+    FlyIoc v(kSource + "/examples/flyscan/timestamped.yaml");
+    v.run(200);
+    ASSERT_EQ(v.put("FLY:PCOMP1:ENABLE", 1), pv::PutStatus::Ok);
+    ASSERT_EQ(v.put("FLY:PCOMP3:ENABLE", 1), pv::PutStatus::Ok);
+    v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 10.1});
+    std::string why;
+    registry::BoundSignal plain = v.ioc->signals().bind("ec0.s5.timestampLatchPositive01", why),
+                          timed = v.ioc->signals().bind("ec0.s5.timestampLatchPositive02", why),
+                          timed_fall = v.ioc->signals().bind("ec0.s5.timestampLatchNegative02", why);
+    ASSERT_TRUE(plain.bound() && timed.bound() && timed_fall.bound()) << why;
+    motion::Axis& arc = v.axis("SpiralL");
+    const uint64_t period = 1'000'000;
+    std::vector<std::pair<uint64_t, double>> samples; // (DC time of the sample, setpos)
+    std::vector<uint64_t> plain_rises, timed_rises, timed_falls;
+    uint64_t last_plain = plain.get_raw(), last_timed = timed.get_raw(), last_fall = timed_fall.get_raw();
+    bool moving = true;
+    for (int k = 0; k < 20000 && (moving || k < 100); ++k) {
+        v.cycles(1);
+        samples.emplace_back(v.ioc->bus(0).dc_time(), arc.variables().traj.setpos);
+        if (plain.get_raw() != last_plain) plain_rises.push_back(last_plain = plain.get_raw());
+        if (timed.get_raw() != last_timed) timed_rises.push_back(last_timed = timed.get_raw());
+        if (timed_fall.get_raw() != last_fall) timed_falls.push_back(last_fall = timed_fall.get_raw());
+        moving = arc.status().busy;
+    }
+    // times relative to the first sample [ns] (absolute DC times exceed a double's 53 bits)
+    const uint64_t t0 = samples.front().first;
+    auto rel = [&](uint64_t t) { return double(int64_t(t - t0)); };
+    auto ideal = [&](double p) -> double {
+        for (std::size_t i = 1; i < samples.size(); ++i)
+            if (samples[i - 1].second < p && samples[i].second >= p)
+                return rel(samples[i - 1].first) +
+                       (p - samples[i - 1].second) / (samples[i].second - samples[i - 1].second) * double(samples[i].first - samples[i - 1].first);
+        return -1;
+    };
+    ASSERT_EQ(plain_rises.size(), 12u); // 0.8 .. 9.6 mm
+    ASSERT_EQ(timed_rises.size(), 12u);
+    ASSERT_EQ(timed_falls.size(), 12u); // 0.4 mm later each, the last at 10.0
+    // Within 1 us at constant velocity (1 mm/s from 1 mm on, until the deceleration 1 mm before
+    // 10.1); while the axis accelerates (0.5 mm/s^2) the linear prediction over three cycles is
+    // off by a few us (a * (3 ms)^2 / 2 / v).
+    auto tolerance = [](double p) { return p > 1.0 && p < 9.1 ? 1000.0 : 10000.0; };
+    for (std::size_t i = 0; i < 12; ++i) {
+        const double p_rise = 0.8 * double(i + 1), p_fall = p_rise + 0.4;
+        const double t_rise = ideal(p_rise), t_fall = ideal(p_fall);
+        ASSERT_GT(t_rise, 0);
+        ASSERT_GT(t_fall, 0);
+        EXPECT_NEAR(rel(timed_rises[i]), t_rise, tolerance(p_rise)) << "timestamped rise " << i + 1;
+        EXPECT_NEAR(rel(timed_falls[i]), t_fall, tolerance(p_fall)) << "timestamped fall " << i + 1;
+        // the plain output: with the frame after the cycle that saw the point passed
+        EXPECT_GE(rel(plain_rises[i]), t_rise) << "plain rise " << i + 1;
+        EXPECT_LE(rel(plain_rises[i]), t_rise + 2.0 * double(period)) << "plain rise " << i + 1;
+        // the timestamped edge is between frames, not on one
+        EXPECT_NE(timed_rises[i] % period, plain_rises[i] % period);
+    }
+    const daq::TimedPcompOutput* out = v.ioc->flyscan().timed_output(1);
+    ASSERT_NE(out, nullptr);
+    EXPECT_EQ(out->scheduled(), 24u);
+    EXPECT_EQ(out->late(), 0u);
+    EXPECT_EQ(v.ioc->flyscan().timed_output(0), nullptr);
+    v.run(20);
+    EXPECT_EQ(v.get("FLY:PCOMP3:TIMED"), 24);
+    EXPECT_EQ(v.get("FLY:PCOMP3:LATE"), 0);
+    EXPECT_EQ(v.get("FLY:PCOMP3:PRODUCED"), 12);
+}
+
+// Two blocks cannot share one EL2252 (its one startTime), and the claim names the first.
+TEST(IocFlyScan, OneTimestampedBlockPerEl2252) {
+    TempDir dir;
+    std::string text;
+    {
+        std::ifstream in(kSource + "/examples/flyscan/timestamped.yaml");
+        text.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    auto put = [&](const std::string& from, const std::string& to) { text.replace(text.find(from), from.size(), to); };
+    put("output: ec0.s3.binaryOutput01", "output: ec0.s4.binaryOutput02");
+    put("plant: timestamped_plant.yaml", "plant: " + kSource + "/examples/flyscan/timestamped_plant.yaml");
+    put("../demo", kSource + "/examples/demo");
+    put("../demo", kSource + "/examples/demo");
+    put("../demo", kSource + "/examples/demo");
+    put("../demo", kSource + "/examples/demo");
+    put("../demo", kSource + "/examples/demo");
+    put("../kinematics", kSource + "/examples/kinematics");
+    put("../plc_lib", kSource + "/examples/plc_lib");
+    const std::string path = (dir.path / "two.yaml").string();
+    std::ofstream(path) << text;
+    try {
+        VirtualIoc v(path);
+        FAIL() << "two blocks on one EL2252 were taken";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("ec0.s4.startTime"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("pcomp1"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("two.yaml:"), std::string::npos) << e.what();
+    }
+}
+
 } // namespace

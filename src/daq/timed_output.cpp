@@ -1,0 +1,56 @@
+#include "daq/timed_output.hpp"
+
+#include <cmath>
+
+namespace beamctl::daq {
+
+void TimedPcompOutput::reset() noexcept {
+    have_prev_ = false;
+    size_ = 0;
+    shadow_ = Pcomp{};
+}
+
+void TimedPcompOutput::step(const PcompParams& p, bool enable, double x, uint64_t x_ns, uint64_t dc_ns, uint64_t period_ns) noexcept {
+    const double period = double(period_ns);
+    // the shadow on INP at the predicted sample time
+    const uint64_t target = dc_ns + uint64_t(kHorizon) * period_ns;
+    const double lead = double(int64_t(target - x_ns)) / period; // cycles (a difference: DC times exceed a double's 53 bits)
+    const double xp = have_prev_ ? x + lead * (x - prev_x_) : x;
+    prev_x_ = x;
+    have_prev_ = true;
+    shadow_.params = p;
+    shadow_.step(enable, xp);
+    if (shadow_.rose() || shadow_.fell()) {
+        last_edge_ns_ = target - uint64_t(std::llround((1.0 - shadow_.edge_fraction()) * period));
+        if (size_ < kQueue) {
+            queue_[(head_ + size_) % kQueue] = Edge{last_edge_ns_, shadow_.rose()};
+            ++size_;
+        } else {
+            ++late_; // a queue of eight edges is only full when edges come faster than one per two cycles
+        }
+    }
+    // the terminal: this cycle's frame passes at dc + period, the next one at dc + 2 periods
+    const uint64_t this_frame = dc_ns + period_ns, next_frame = dc_ns + 2 * period_ns;
+    if (phase_ == Phase::Armed && armed_at_ <= this_frame) phase_ = Phase::Idle; // fired before this frame
+    if (phase_ == Phase::Loaded) {
+        activate_ = 3; // arms the single shot at start_
+        phase_ = Phase::Armed;
+        return;
+    }
+    while (phase_ == Phase::Idle && size_ > 0) {
+        const Edge e = queue_[head_];
+        head_ = (head_ + 1) % kQueue;
+        --size_;
+        if (e.at <= next_frame) { // armed with the next frame, it would never fire
+            ++late_;
+            continue;
+        }
+        start_ = armed_at_ = e.at;
+        level_ = e.level;
+        activate_ = 0;
+        phase_ = Phase::Loaded;
+        ++scheduled_;
+    }
+}
+
+} // namespace beamctl::daq
