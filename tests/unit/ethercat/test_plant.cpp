@@ -294,6 +294,62 @@ wiring:
     EXPECT_GE(tn, tp + 5'000'000u); // at least the 5 ms the output stayed on
 }
 
+// EL2252: the pins switch at startTime (armed by activate 0 -> 3, ecmccfg's sequence), between
+// frames; a cabled EL1252 latches that time, on the same time base (both get the bus's system
+// time). A start time already past when armed never fires; activate 0 cancels an armed event.
+TEST(Plant, El2252SwitchesAtItsStartTime) {
+    PlantBus b(R"(
+slaves:
+  - {position: 0, type: EK1100}
+  - {position: 1, type: EL2252}
+  - {position: 2, type: EL1252}
+wiring:
+  - {from: s1.binaryOutput01, to: s2.binaryInput01}
+)");
+    b.cycles(3);
+    const uint64_t now = b.m->dc_reference_time(); // the frame of the last cycle
+    ASSERT_GT(now, 0u);
+    const uint64_t at = now + 2'345'678; // 2.35 ms ahead: between frames
+    b.set("ec0.s1.startTime", at);
+    b.set("ec0.s1.binaryOutput01", 1);
+    b.set("ec0.s1.activate", 0);
+    b.cycles(1);
+    b.set("ec0.s1.activate", 3);
+    b.cycles(1);
+    EXPECT_EQ(b.plant->timed_outputs.at(0)->level[0], false); // not yet
+    b.cycles(3);
+    EXPECT_EQ(b.plant->timed_outputs.at(0)->level[0], true);
+    EXPECT_EQ(b.get("ec0.s2.timestampLatchPositive01"), at);
+    EXPECT_EQ(b.plant->timed_outputs.at(0)->events, 1u);
+    // a start time in the past: never fires, counted
+    b.set("ec0.s1.binaryOutput01", 0);
+    b.set("ec0.s1.startTime", b.m->dc_reference_time() - 1000);
+    b.set("ec0.s1.activate", 0);
+    b.cycles(1);
+    b.set("ec0.s1.activate", 3);
+    b.cycles(5);
+    EXPECT_EQ(b.plant->timed_outputs.at(0)->level[0], true);
+    EXPECT_EQ(b.plant->timed_outputs.at(0)->missed, 1u);
+    // armed, then cancelled by activate 0 before its time
+    b.set("ec0.s1.startTime", b.m->dc_reference_time() + 10'000'000);
+    b.set("ec0.s1.activate", 0);
+    b.cycles(1);
+    b.set("ec0.s1.activate", 3);
+    b.cycles(2);
+    b.set("ec0.s1.activate", 0);
+    b.cycles(20);
+    EXPECT_EQ(b.plant->timed_outputs.at(0)->level[0], true);
+    EXPECT_EQ(b.plant->timed_outputs.at(0)->events, 1u);
+    // the falling edge at its time
+    const uint64_t off = b.m->dc_reference_time() + 3'500'001;
+    b.set("ec0.s1.startTime", off);
+    b.cycles(1);
+    b.set("ec0.s1.activate", 3);
+    b.cycles(5);
+    EXPECT_EQ(b.plant->timed_outputs.at(0)->level[0], false);
+    EXPECT_EQ(b.get("ec0.s2.timestampLatchNegative01"), off);
+}
+
 TEST(Plant, DrivesWithoutAPlantMoveDefaultStages) {
     PlantBus b(R"(
 slaves:
