@@ -1,11 +1,12 @@
 #include "daq/timed_output.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace beamctl::daq {
 
 void TimedPcompOutput::reset() noexcept {
-    have_prev_ = false;
+    samples_ = 0;
     size_ = 0;
     shadow_ = Pcomp{};
 }
@@ -15,9 +16,14 @@ void TimedPcompOutput::step(const PcompParams& p, bool enable, double x, uint64_
     // the shadow on INP at the predicted sample time
     const uint64_t target = dc_ns + uint64_t(kHorizon) * period_ns;
     const double lead = double(int64_t(target - x_ns)) / period; // cycles (a difference: DC times exceed a double's 53 bits)
-    const double xp = have_prev_ ? x + lead * (x - prev_x_) : x;
-    prev_x_ = x;
-    have_prev_ = true;
+    // velocity [INP per cycle] over the window
+    const unsigned want = unsigned(std::clamp<uint64_t>(kWindowNs / std::max<uint64_t>(period_ns, 1), 1, kHistory - 1));
+    const unsigned back = std::min(want, samples_);
+    const double velocity = back ? (x - history_[(newest_ + kHistory - back + 1) % kHistory]) / double(back) : 0;
+    newest_ = (newest_ + 1) % kHistory;
+    history_[newest_] = x;
+    samples_ = std::min(samples_ + 1, kHistory);
+    const double xp = x + lead * velocity;
     shadow_.params = p;
     shadow_.step(enable, xp);
     if (shadow_.rose() || shadow_.fell()) {

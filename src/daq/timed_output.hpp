@@ -5,7 +5,8 @@
 // The crossing is known only after it happened, so the edges come from a shadow of the block (the
 // same parameters and ENABLE) fed with INP extrapolated at its last velocity to the time three
 // frames after the one that sampled INP: an edge of the shadow lies in the window between the
-// next frame and the one after, and its time is interpolated there (Pcomp::edge_fraction). Each
+// next frame and the one after, and its time is interpolated there (Pcomp::edge_fraction); the
+// velocity is INP's over the last 2 ms (or the last cycle, if longer). Each
 // edge goes to the terminal in ecmccfg's sequence (examples/test/el1252Toel2252): startTime, the
 // output level and activate 0 in one frame, activate 3 in the next, which arms the terminal's
 // SYNC0 single shot; the next edge can be loaded once the frame time passed the armed one. So
@@ -51,9 +52,14 @@ private:
         bool level;
     };
     static constexpr unsigned kQueue = 8;
+    // INP's velocity over the last kWindowNs (at least one cycle, at most kHistory cycles): a
+    // longer baseline than one cycle keeps an encoder's quantization out of the prediction at
+    // high rates, a short one follows acceleration.
+    static constexpr uint64_t kWindowNs = 2'000'000;
+    static constexpr unsigned kHistory = 32;
     Pcomp shadow_;
-    double prev_x_ = 0;
-    bool have_prev_ = false;
+    double history_[kHistory] = {};
+    unsigned samples_ = 0, newest_ = 0;
     Edge queue_[kQueue] = {};
     unsigned head_ = 0, size_ = 0;
     enum class Phase : uint8_t { Idle, Loaded, Armed } phase_ = Phase::Idle;

@@ -317,9 +317,10 @@ TEST(IocFlyScan, TimestampedOutputSwitchesWithin1usOfTheCrossing) {
     ASSERT_EQ(timed_rises.size(), 12u);
     ASSERT_EQ(timed_falls.size(), 12u); // 0.4 mm later each, the last at 10.0
     // Within 1 us at constant velocity (1 mm/s from 1 mm on, until the deceleration 1 mm before
-    // 10.1); while the axis accelerates (0.5 mm/s^2) the linear prediction over three cycles is
-    // off by a few us (a * (3 ms)^2 / 2 / v).
-    auto tolerance = [](double p) { return p > 1.0 && p < 9.1 ? 1000.0 : 10000.0; };
+    // 10.1); while the axis accelerates (0.5 mm/s^2) the linear prediction over three cycles from
+    // a 2 ms velocity is off by some us (about a * (3 ms)^2 / 2 / v + 3 ms * a * 1 ms / v, 12 us at
+    // 10.0 mm where v is 0.32 mm/s).
+    auto tolerance = [](double p) { return p > 1.0 && p < 9.1 ? 1000.0 : 20000.0; };
     for (std::size_t i = 0; i < 12; ++i) {
         const double p_rise = 0.8 * double(i + 1), p_fall = p_rise + 0.4;
         const double t_rise = ideal(p_rise), t_fall = ideal(p_fall);
