@@ -1,7 +1,9 @@
 """Fly scans through Channel Access (pyepics) on the shipped example (examples/flyscan/ioc.yaml):
 arm a capture, enable the distance- and time-based PCOMP blocks, move the log-spiral arc axis,
 read the counters, watch the file grow with a SWMR reader, disarm, and open the HDF5/NeXus file
-with h5py: one row per trigger, the arc at each distance trigger within one cycle of its point."""
+with h5py: one row per trigger, the arc at each distance trigger within one cycle of its point.
+And examples/flyscan/timestamped.yaml: the same points on an EL2808 and on a DC-timestamped EL2252,
+both latched by an EL1252."""
 
 import time
 from pathlib import Path
@@ -16,11 +18,12 @@ from conftest import RunServer, acquire_port, connect, forget_pvs, release_port,
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
-def start(tmp_path, prefix):
-    text = (EXAMPLES / "flyscan" / "ioc.yaml").read_text()
+def start(tmp_path, prefix, example="ioc.yaml"):
+    text = (EXAMPLES / "flyscan" / example).read_text()
     assert "ioc: {name: FLY}" in text
     text = text.replace("ioc: {name: FLY}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
     text = text.replace("file: ../", f"file: {EXAMPLES}/").replace("include: [../", f"include: [{EXAMPLES}/")
+    text = text.replace("plant: timestamped_plant.yaml", f"plant: {EXAMPLES}/flyscan/timestamped_plant.yaml")
     cfg = tmp_path / "ioc.yaml"
     cfg.write_text(text)
     port = acquire_port()
@@ -132,6 +135,40 @@ def test_bad_puts_are_refused_and_change_nothing(tmp_path, prefix):
         assert wait_for(lambda: get(p + "PCAP:ERROR") == 1, 5)
         assert "/nonexistent/dir" in text(p + "PCAP:STATUS")
         assert get(p + "PCAP:ACTIVE") == 0
+        assert srv.alive()
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)
+
+
+def test_timestamped_output_switches_between_frames(tmp_path, prefix):
+    require_binary()
+    srv, port = start(tmp_path, prefix, "timestamped.yaml")
+    try:
+        p = prefix
+        assert text(p + "PCOMP3:INP") == "ax3.traj.setpos"
+        put(p + "PCOMP1:ENABLE", 1)
+        put(p + "PCOMP3:ENABLE", 1)
+        plain = p + "m0s005-timestampLatchPositive01"
+        timed = p + "m0s005-timestampLatchPositive02"
+        before = (get(plain), get(timed))
+        # 2.5 mm of arc: rises at 0.8, 1.6, 2.4 mm and falls at 1.2, 2.0 mm on both outputs
+        motor = epics.Motor(p + "SpiralL")
+        assert motor.move(2.5, wait=False) == 0
+        assert wait_for(lambda: get(p + "SpiralL.DMOV") == 1 and get(p + "SpiralL.MOVN") == 0, 30)
+        assert wait_for(lambda: get(p + "PCOMP3:TIMED") == 5, 5)
+        assert get(p + "PCOMP1:PRODUCED") == 3
+        assert get(p + "PCOMP3:PRODUCED") == 3
+        assert get(p + "PCOMP3:LATE") == 0
+        assert get(p + "PCOMP1:TIMED") == 0  # the EL2808 block: plain
+        # the last rise (2.4 mm) latched on both: the timestamped edge came first, by less than
+        # two cycles (1 kHz), and is not on the 1 ms frame grid the plain one is on
+        after = (get(plain), get(timed))
+        assert after[0] != before[0] and after[1] != before[1]
+        lead_ns = after[0] - after[1]
+        assert 0 < lead_ns <= 2_000_000, lead_ns
         assert srv.alive()
     finally:
         srv.stop()
