@@ -363,7 +363,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         for (std::size_t i = 0; i < list.size(); ++i) {
             const YamlNode& d = list[i];
             if (!d.keys({"id", "input", "output", "start", "step", "width", "pulses", "pre_start", "relative", "dir", "enable",
-                         "egu", "desc"}))
+                         "egu", "desc", "analog_high", "analog_low"}))
                 continue;
             PcompEntry e;
             e.where = d.where();
@@ -381,6 +381,8 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             e.relative = d["relative"].boolean().value_or(false);
             if (auto dir = d["dir"].one_of({"positive", "negative", "either"})) e.dir = *dir == "positive" ? 0 : *dir == "negative" ? 1 : 2;
             e.enable = d["enable"].boolean().value_or(false);
+            e.analog_high = d["analog_high"].integer(between(-32768, 65535)).value_or(16384);
+            e.analog_low = d["analog_low"].integer(between(-32768, 65535)).value_or(0);
             e.egu = d["egu"].string().value_or(e.input == "time" ? "s" : "");
             e.desc = d["desc"].string().value_or(SB() << "pcomp" << e.id << " on " << e.input);
             cfg.pcomp.push_back(std::move(e));

@@ -193,7 +193,9 @@ struct PcompEntry {
     int id = 1;                 // pcomp<id>, 1..32
     std::string input;          // INP: an engine signal ("ax1.enc.actpos", "ec0.s3.positionActual01") or
                                 // "time": the engine clock [s] (a time-based pulse train)
-    std::string output;         // an output bit driven with OUT in the same cycle ("": none)
+    std::string output;         // an output bit driven with OUT in the same cycle ("": none), an
+                                // EL2252 channel (timestamped) or an analog output (EL4732 samples)
+    int64_t analog_high = 16384, analog_low = 0; // an analog output's raw values for OUT 1 / 0 (5 V / 0 V on +-10 V)
     double start = 0, step = 0, width = 0, pre_start = 0;
     uint32_t pulses = 0;        // 0: unlimited
     bool relative = false;

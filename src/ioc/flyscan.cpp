@@ -93,7 +93,17 @@ public:
             q.dir = k[Block::Dir] >= 2 ? daq::PcompDir::Either : k[Block::Dir] >= 1 ? daq::PcompDir::Negative : daq::PcompDir::Positive;
             const double x = b.inp.read(c.t_ns);
             const bool out = b.pc.step(k[Block::Enable] != 0, x);
-            if (!b.timed) {
+            if (b.over) {
+                if (const uint64_t dc = b.bus->dc_time()) {
+                    const uint64_t x_ns = b.inp.kind == ValueSource::Kind::Time ? dc + c.period_ns : dc;
+                    const unsigned n = unsigned(b.samples.size());
+                    b.over->step(q, k[Block::Enable] != 0, x, x_ns, dc, c.period_ns, n);
+                    for (unsigned i = 0; i < n; ++i) b.samples[i].set(b.over->sample(i) ? b.cfg.analog_high : b.cfg.analog_low);
+                    b.st_timed.store(b.over->edges(), std::memory_order_relaxed);
+                }
+            } else if (!b.samples.empty()) {
+                b.samples[0].set(out ? b.cfg.analog_high : b.cfg.analog_low);
+            } else if (!b.timed) {
                 b.out.set(out ? 1 : 0); // unbound: nothing
             } else if (const uint64_t dc = b.bus->dc_time()) { // no DC time yet: nothing to time against
                 const uint64_t x_ns = b.inp.kind == ValueSource::Kind::Time ? dc + c.period_ns : dc;
@@ -361,6 +371,22 @@ void IocFlyScan::check_names() {
         // and activate (one block per EL2252)
         if (!reg_.claim(s->name, SB() << "pcomp" << b->cfg.id, why))
             throw Error(SB() << at(b->cfg.output_where) << ": pcomp" << b->cfg.id << " output: " << why);
+        if (s->type != "BOOL" && bit < 0) {
+            // an analog output: its value is analog_high / analog_low; an EL4732 channel's first
+            // sample (<entry>_1) takes the channel's n samples of the cycle
+            b->sample_names = {s->name};
+            const std::size_t us = s->name.rfind("_1");
+            if (us != std::string::npos && us + 2 == s->name.size())
+                for (int k = 2; k <= 1000; ++k) {
+                    const std::string n = s->name.substr(0, us + 1) + std::to_string(k);
+                    const registry::Signal* more = reg_.find(n);
+                    if (!more || more->direction != registry::Direction::Output) break;
+                    if (!reg_.claim(n, SB() << "pcomp" << b->cfg.id << " (oversampled output " << s->name << ")", why))
+                        throw Error(SB() << at(b->cfg.output_where) << ": pcomp" << b->cfg.id << " output: " << why);
+                    b->sample_names.push_back(n);
+                }
+            continue;
+        }
         const std::size_t dot = s->name.find('.', s->name.find('.') + 1);
         const std::string slave = s->name.substr(0, dot + 1); // "ec0.s4."
         const registry::Signal* st = reg_.find(slave + "startTime");
@@ -480,12 +506,22 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
         if (!b.cfg.output.empty()) {
             b.out = reg_.bind(b.cfg.output, why);
             if (!b.out.bound()) throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << why);
-            if (!b.timed_prefix.empty()) {
+            if (!b.sample_names.empty()) {
+                b.out = {}; // the samples instead
+                for (const std::string& n : b.sample_names) {
+                    b.samples.push_back(reg_.bind(n, why));
+                    if (!b.samples.back().bound()) throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << why);
+                }
+            }
+            if (!b.timed_prefix.empty() || b.samples.size() > 1) {
                 for (ethercat::Bus* bus : buses)
-                    if (b.timed_prefix.rfind(std::string(SB() << "ec" << bus->id() << "."), 0) == 0) b.bus = bus;
+                    if (b.cfg.output.rfind(std::string(SB() << "ec" << bus->id() << "."), 0) == 0) b.bus = bus;
                 if (!b.bus || !b.bus->backend().local_master())
                     throw Error(SB() << at(b.cfg.output_where) << ": pcomp" << b.cfg.id << " output: " << b.cfg.output
-                                     << " is a DC-timestamped output; it needs a bus this IOC masters (not one behind a scanner)");
+                                     << " is a DC-timestamped or oversampled output; it needs a bus this IOC masters (not one behind a scanner)");
+            }
+            if (b.samples.size() > 1) b.over = std::make_unique<daq::OversampledPcompOutput>();
+            if (!b.timed_prefix.empty()) {
                 b.start_time = reg_.bind(b.timed_prefix + "startTime", why);
                 b.activate = reg_.bind(b.timed_prefix + "activate", why);
                 if (!b.start_time.bound() || !b.activate.bound())

@@ -4,7 +4,8 @@
 // on its output bit in the same cycle's frame) and served with PandA's field names:
 //   $(P)PCOMP<n>:ENABLE, INP (the engine signal compared, a put rebinds it), PRE_START, START,
 //     WIDTH, STEP, PULSES, RELATIVE, DIR, ACTIVE, OUT, PRODUCED, HEALTH, STATE, POSN (INP now),
-//     TIMED (edges sent to a DC-timestamped output), LATE (edges too late for it)
+//     TIMED (edges sent to a DC-timestamped output or placed in an oversampled one), LATE (edges
+//     too late for the timestamped output)
 //   $(P)PCAP:ARM, DISARM, ACTIVE, FILE_PATH, FILE_NAME (where the next file goes), FULL_FILE_NAME,
 //     CAPTURE (number of the last capture), ROWS_CAPTURED, ROWS_WRITTEN, ROWS_DROPPED, FILES,
 //     STATUS (text), ERROR, LAST:<column> and LAST:CYCLE (the last rows, for live plots)
@@ -66,6 +67,7 @@ public:
     std::size_t blocks() const { return blocks_.size(); }
     const daq::Pcomp& pcomp(std::size_t i) const { return blocks_.at(i)->pc; }
     const daq::TimedPcompOutput* timed_output(std::size_t i) const { return blocks_.at(i)->timed.get(); }
+    const daq::OversampledPcompOutput* oversampled_output(std::size_t i) const { return blocks_.at(i)->over.get(); }
     daq::Capture* capture() { return capture_.get(); }
     daq::CaptureWriter* writer() { return writer_.get(); }
     // PLC code's names of the blocks (pcomp<n>.enable, .start, ... .out, .state): the cells the
@@ -83,6 +85,10 @@ private:
         // a DC-timestamped output (EL2252): its slave's startTime and activate, and its bus
         std::string timed_prefix; // "ec0.s4." when the output is one
         std::unique_ptr<daq::TimedPcompOutput> timed;
+        // an analog output: its samples (one, or an EL4732's n per cycle: placed by `over`)
+        std::vector<std::string> sample_names;
+        std::vector<registry::BoundSignal> samples;
+        std::unique_ptr<daq::OversampledPcompOutput> over;
         registry::BoundSignal start_time, activate;
         ethercat::Bus* bus = nullptr;
         // IOC loop -> RT: the whole wanted state (parameters, enable, input) after each put

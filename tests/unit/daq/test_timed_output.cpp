@@ -90,4 +90,30 @@ TEST(TimedOutput, TimeTrainFromTheClock) {
     EXPECT_EQ(o.late(), 0u);
 }
 
+// EL4732 at 10 samples per cycle: sample k of a frame plays at frame + (k + 1) * 100 us; the
+// edge switches from the first sample at or after the crossing.
+TEST(TimedOutput, OversampledEdgeInTheSampleOfTheCrossing) {
+    // 1 mm/s; a 5 ms pulse at 12.34 ms
+    PcompParams p{0, 0.01234, 0.005, 0.02, 1, false, PcompDir::Positive};
+    OversampledPcompOutput o;
+    std::vector<std::vector<bool>> frames; // frame k passes at kDc0 + (k + 1) T
+    for (int k = 1; k <= 30; ++k) {
+        const uint64_t dc = kDc0 + uint64_t(k) * kT;
+        o.step(p, true, double(k) * 1e-3, dc, dc, kT, 10); // 1 um per 1 ms cycle
+        std::vector<bool> f;
+        for (unsigned i = 0; i < 10; ++i) f.push_back(o.sample(i));
+        frames.push_back(f);
+    }
+    // the rise at 12.34 ms: the frame passing at 12 ms (k = 11), from sample 3 (12.4 ms) on
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+        const double frame_ms = double(k + 2);
+        for (unsigned i = 0; i < 10; ++i) {
+            const double t_ms = frame_ms + double(i + 1) * 0.1;
+            const bool want = t_ms >= 12.34 - 1e-9 && t_ms < 17.34 - 1e-9;
+            EXPECT_EQ(frames[k][i], want) << "frame at " << frame_ms << " ms, sample " << i;
+        }
+    }
+    EXPECT_EQ(o.edges(), 2u);
+}
+
 } // namespace

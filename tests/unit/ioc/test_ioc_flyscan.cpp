@@ -283,6 +283,7 @@ TEST(IocFlyScan, TimestampedOutputSwitchesWithin1usOfTheCrossing) {
     v.run(200);
     ASSERT_EQ(v.put("FLY:PCOMP1:ENABLE", 1), pv::PutStatus::Ok);
     ASSERT_EQ(v.put("FLY:PCOMP3:ENABLE", 1), pv::PutStatus::Ok);
+    ASSERT_EQ(v.put("FLY:PCOMP4:ENABLE", 1), pv::PutStatus::Ok);
     v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 10.1});
     std::string why;
     registry::BoundSignal plain = v.ioc->signals().bind("ec0.s5.timestampLatchPositive01", why),
@@ -294,10 +295,30 @@ TEST(IocFlyScan, TimestampedOutputSwitchesWithin1usOfTheCrossing) {
     std::vector<std::pair<uint64_t, double>> samples; // (DC time of the sample, setpos)
     std::vector<uint64_t> plain_rises, timed_rises, timed_falls;
     uint64_t last_plain = plain.get_raw(), last_timed = timed.get_raw(), last_fall = timed_fall.get_raw();
+    // the EL4732 read back by the EL3702, 10 samples per cycle: the time of each step's first sample
+    constexpr unsigned kN = 10;
+    std::vector<registry::BoundSignal> in;
+    for (unsigned i = 1; i <= kN; ++i) in.push_back(v.ioc->signals().bind("ec0.s7.analogInputArray01_" + std::to_string(i), why));
+    ASSERT_TRUE(in.back().bound()) << why;
+    std::vector<std::pair<uint64_t, bool>> steps; // (DC time of the sample, rising)
+    std::set<unsigned> step_samples;              // which of the n samples the steps were in
+    bool level = false;
     bool moving = true;
     for (int k = 0; k < 20000 && (moving || k < 100); ++k) {
         v.cycles(1);
-        samples.emplace_back(v.ioc->bus(0).dc_time(), arc.variables().traj.setpos);
+        const uint64_t dc = v.ioc->bus(0).dc_time();
+        samples.emplace_back(dc, arc.variables().traj.setpos);
+        // received this cycle: what the EL4732 played after the frame before the last one, sample
+        // i at that frame + (i + 1) / n cycles
+        for (unsigned i = 0; i < kN; ++i) {
+            const int64_t raw = in[i].get();
+            ASSERT_TRUE(raw == 0 || raw == 16384) << raw;
+            if ((raw != 0) != level) {
+                level = raw != 0;
+                steps.emplace_back(dc - period + (i + 1) * period / kN, level);
+                step_samples.insert(i);
+            }
+        }
         if (plain.get_raw() != last_plain) plain_rises.push_back(last_plain = plain.get_raw());
         if (timed.get_raw() != last_timed) timed_rises.push_back(last_timed = timed.get_raw());
         if (timed_fall.get_raw() != last_fall) timed_falls.push_back(last_fall = timed_fall.get_raw());
@@ -333,7 +354,16 @@ TEST(IocFlyScan, TimestampedOutputSwitchesWithin1usOfTheCrossing) {
         EXPECT_LE(rel(plain_rises[i]), t_rise + 2.0 * double(period)) << "plain rise " << i + 1;
         // the timestamped edge is between frames, not on one
         EXPECT_NE(timed_rises[i] % period, plain_rises[i] % period);
+        // the oversampled output steps in the sample at or first after the crossing
+        ASSERT_EQ(steps.size(), 24u);
+        for (auto [p, k] : {std::pair{p_rise, 2 * i}, std::pair{p_fall, 2 * i + 1}}) {
+            EXPECT_EQ(steps[k].second, k % 2 == 0);
+            const double t = ideal(p), sample_t = rel(steps[k].first);
+            EXPECT_GE(sample_t, t - tolerance(p)) << "oversampled edge " << k;
+            EXPECT_LT(sample_t, t + double(period / kN) + tolerance(p)) << "oversampled edge " << k;
+        }
     }
+    EXPECT_GE(step_samples.size(), 4u); // the crossings fall anywhere in the cycle, not on frames
     const daq::TimedPcompOutput* out = v.ioc->flyscan().timed_output(1);
     ASSERT_NE(out, nullptr);
     EXPECT_EQ(out->scheduled(), 24u);
@@ -343,6 +373,8 @@ TEST(IocFlyScan, TimestampedOutputSwitchesWithin1usOfTheCrossing) {
     EXPECT_EQ(v.get("FLY:PCOMP3:TIMED"), 24);
     EXPECT_EQ(v.get("FLY:PCOMP3:LATE"), 0);
     EXPECT_EQ(v.get("FLY:PCOMP3:PRODUCED"), 12);
+    EXPECT_EQ(v.get("FLY:PCOMP4:TIMED"), 24);
+    EXPECT_EQ(v.get("FLY:PCOMP4:PRODUCED"), 12);
 }
 
 // Two blocks cannot share one EL2252 (its one startTime), and the claim names the first.
