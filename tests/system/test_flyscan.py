@@ -151,6 +151,7 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
         assert text(p + "PCOMP3:INP") == "ax3.traj.setpos"
         put(p + "PCOMP1:ENABLE", 1)
         put(p + "PCOMP3:ENABLE", 1)
+        put(p + "PCOMP4:ENABLE", 1)
         plain = p + "m0s005-timestampLatchPositive01"
         timed = p + "m0s005-timestampLatchPositive02"
         before = (get(plain), get(timed))
@@ -163,6 +164,11 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
         assert get(p + "PCOMP3:PRODUCED") == 3
         assert get(p + "PCOMP3:LATE") == 0
         assert get(p + "PCOMP1:TIMED") == 0  # the EL2808 block: plain
+        # the EL4732 block placed the same 5 edges; the EL3702 reads its 10 samples per cycle back
+        assert get(p + "PCOMP4:TIMED") == 5
+        assert get(p + "PCOMP4:PRODUCED") == 3
+        samples = epics.caget(p + "m0s007-AI01-Arr", timeout=5)
+        assert len(samples) == 10 and set(samples) <= {0, 16384}, samples
         # the last rise (2.4 mm) latched on both: the timestamped edge came first, by less than
         # two cycles (1 kHz), and is not on the 1 ms frame grid the plain one is on
         after = (get(plain), get(timed))

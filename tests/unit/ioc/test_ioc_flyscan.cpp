@@ -407,4 +407,41 @@ TEST(IocFlyScan, OneTimestampedBlockPerEl2252) {
     }
 }
 
+// Without oversampling an analog output follows OUT with analog_high / analog_low, in the cycle.
+TEST(IocFlyScan, AnalogOutputFollowsOut) {
+    TempDir dir;
+    std::string text;
+    {
+        std::ifstream in(kSource + "/examples/flyscan/timestamped.yaml");
+        text.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    auto put = [&](const std::string& from, const std::string& to) {
+        for (std::size_t p = 0; (p = text.find(from, p)) != std::string::npos; p += to.size()) text.replace(p, from.size(), to);
+    };
+    put("type: EL4732, oversampling: 10", "type: EL4732");
+    put("analog_high: 16384, analog_low: 0", "analog_high: 3000, analog_low: -200");
+    put("{from: s6.analogOutput01_1, to: s7.analogInputArray01_1}", "");
+    put("plant: timestamped_plant.yaml", "plant: " + kSource + "/examples/flyscan/timestamped_plant.yaml");
+    put("../", kSource + "/examples/");
+    const std::string path = (dir.path / "analog.yaml").string();
+    std::ofstream(path) << text;
+    FlyIoc v(path);
+    EXPECT_EQ(v.ioc->flyscan().oversampled_output(2), nullptr);
+    v.run(100);
+    ASSERT_EQ(v.put("FLY:PCOMP4:ENABLE", 1), pv::PutStatus::Ok);
+    v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 2.5});
+    std::string why;
+    registry::BoundSignal ao = v.ioc->signals().bind("ec0.s6.analogOutput01_1", why);
+    ASSERT_TRUE(ao.bound()) << why;
+    const daq::Pcomp& pc = v.ioc->flyscan().pcomp(2);
+    int high = 0;
+    for (int k = 0; k < 8000; ++k) {
+        v.cycles(1);
+        ASSERT_EQ(ao.get(), pc.out() ? 3000 : -200) << "cycle " << k;
+        high += pc.out();
+    }
+    EXPECT_EQ(pc.produced(), 3u);
+    EXPECT_GT(high, 1000);
+}
+
 } // namespace
