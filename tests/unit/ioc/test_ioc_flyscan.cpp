@@ -68,6 +68,20 @@ std::vector<double> read_dataset(const std::string& file, const std::string& nam
     return v;
 }
 
+// examples/flyscan/timestamped.yaml with `edits` (every occurrence of each first replaced by its
+// second) and its relative paths made absolute, written to `path`.
+void write_timestamped_variant(const std::string& path, const std::vector<std::pair<std::string, std::string>>& edits) {
+    std::ifstream in(kSource + "/examples/flyscan/timestamped.yaml");
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    auto all = [&](const std::string& from, const std::string& to) {
+        for (std::size_t p = 0; (p = text.find(from, p)) != std::string::npos; p += to.size()) text.replace(p, from.size(), to);
+    };
+    for (const auto& [from, to] : edits) all(from, to);
+    all("plant: timestamped_plant.yaml", "plant: " + kSource + "/examples/flyscan/timestamped_plant.yaml");
+    all("../", kSource + "/examples/");
+    std::ofstream(path) << text;
+}
+
 TEST(IocFlyScan, SpiralExampleFiresAtEveryPointAndWritesTheFile) {
     FlyIoc v(kSource + "/examples/flyscan/ioc.yaml");
     TempDir dir;
@@ -380,23 +394,8 @@ TEST(IocFlyScan, TimestampedOutputSwitchesWithin1usOfTheCrossing) {
 // Two blocks cannot share one EL2252 (its one startTime), and the claim names the first.
 TEST(IocFlyScan, OneTimestampedBlockPerEl2252) {
     TempDir dir;
-    std::string text;
-    {
-        std::ifstream in(kSource + "/examples/flyscan/timestamped.yaml");
-        text.assign(std::istreambuf_iterator<char>(in), {});
-    }
-    auto put = [&](const std::string& from, const std::string& to) { text.replace(text.find(from), from.size(), to); };
-    put("output: ec0.s3.binaryOutput01", "output: ec0.s4.binaryOutput02");
-    put("plant: timestamped_plant.yaml", "plant: " + kSource + "/examples/flyscan/timestamped_plant.yaml");
-    put("../demo", kSource + "/examples/demo");
-    put("../demo", kSource + "/examples/demo");
-    put("../demo", kSource + "/examples/demo");
-    put("../demo", kSource + "/examples/demo");
-    put("../demo", kSource + "/examples/demo");
-    put("../kinematics", kSource + "/examples/kinematics");
-    put("../plc_lib", kSource + "/examples/plc_lib");
     const std::string path = (dir.path / "two.yaml").string();
-    std::ofstream(path) << text;
+    write_timestamped_variant(path, {{"output: ec0.s3.binaryOutput01", "output: ec0.s4.binaryOutput02"}});
     try {
         VirtualIoc v(path);
         FAIL() << "two blocks on one EL2252 were taken";
@@ -410,21 +409,9 @@ TEST(IocFlyScan, OneTimestampedBlockPerEl2252) {
 // Without oversampling an analog output follows OUT with analog_high / analog_low, in the cycle.
 TEST(IocFlyScan, AnalogOutputFollowsOut) {
     TempDir dir;
-    std::string text;
-    {
-        std::ifstream in(kSource + "/examples/flyscan/timestamped.yaml");
-        text.assign(std::istreambuf_iterator<char>(in), {});
-    }
-    auto put = [&](const std::string& from, const std::string& to) {
-        for (std::size_t p = 0; (p = text.find(from, p)) != std::string::npos; p += to.size()) text.replace(p, from.size(), to);
-    };
-    put("type: EL4732, oversampling: 10", "type: EL4732");
-    put("analog_high: 16384, analog_low: 0", "analog_high: 3000, analog_low: -200");
-    put("{from: s6.analogOutput01_1, to: s7.analogInputArray01_1}", "");
-    put("plant: timestamped_plant.yaml", "plant: " + kSource + "/examples/flyscan/timestamped_plant.yaml");
-    put("../", kSource + "/examples/");
     const std::string path = (dir.path / "analog.yaml").string();
-    std::ofstream(path) << text;
+    write_timestamped_variant(path, {{"type: EL4732, oversampling: 10", "type: EL4732"},
+                                     {"analog_high: 16384, analog_low: 0", "analog_high: 3000, analog_low: -200"}});
     FlyIoc v(path);
     EXPECT_EQ(v.ioc->flyscan().oversampled_output(2), nullptr);
     v.run(100);
