@@ -169,6 +169,7 @@ void validate(const std::string& path, const std::vector<NexusColumn>& columns, 
 struct NexusFile::Impl {
     std::string path;
     std::size_t ncol = 0;
+    std::vector<bool> uint64; // per column: uint64 bit patterns in the doubles
     Handle file;
     // Columns 0..ncol-1, then cycle, time, timestamp_ns.
     std::vector<Handle> datasets;
@@ -201,6 +202,7 @@ NexusFile::NexusFile(const std::string& path, std::vector<NexusColumn> columns, 
     Impl& m = *impl_;
     m.path = path;
     m.ncol = columns.size();
+    for (const NexusColumn& c : columns) m.uint64.push_back(c.uint64);
     validate(path, columns, opt);
     quiet_hdf5();
 
@@ -242,7 +244,7 @@ NexusFile::NexusFile(const std::string& path, std::vector<NexusColumn> columns, 
     };
     for (const NexusColumn& c : columns) {
         const std::string where = "/entry/data/" + c.name;
-        hid_t ds = dataset(c.name, H5T_IEEE_F64LE);
+        hid_t ds = dataset(c.name, c.uint64 ? H5T_STD_U64LE : H5T_IEEE_F64LE);
         if (!c.units.empty()) string_attribute(ds, "units", c.units, path, where);
         string_attribute(ds, "source", c.source, path, where);
         string_attribute(ds, "capture_mode", c.mode, path, where);
@@ -304,8 +306,8 @@ void NexusFile::append(const uint64_t* cycle, const uint64_t* t_ns, const double
     const hsize_t rows = n;
     m.broken = true; // until every dataset has its rows
     Handle mem_space = check(H5Screate_simple(1, &rows, nullptr), H5Sclose, m.path, "dataspace");
-    for (std::size_t j = 0; j < ncol; ++j)
-        m.write(j, H5T_NATIVE_DOUBLE, mem_space.get(), out + j * n, rows);
+    for (std::size_t j = 0; j < ncol; ++j) // a uint64 column: the doubles' bytes are its values
+        m.write(j, m.uint64[j] ? H5T_NATIVE_UINT64 : H5T_NATIVE_DOUBLE, mem_space.get(), out + j * n, rows);
     m.write(ncol, H5T_NATIVE_UINT64, mem_space.get(), cycle, rows);
     m.write(ncol + 1, H5T_NATIVE_DOUBLE, mem_space.get(), m.time_s.data(), rows);
     m.write(ncol + 2, H5T_NATIVE_UINT64, mem_space.get(), t_ns, rows);

@@ -32,6 +32,8 @@ struct NexusColumn {
     std::string units;  // NeXus "units" ("mm", "s"); no attribute if empty
     std::string source; // the engine signal it captures ("ax1.enc.actpos"), attribute "source"
     std::string mode;   // "Value", "Diff", "Sum", "Min", "Max": attribute "capture_mode"
+    bool uint64 = false; // the row's double holds a uint64's bit pattern (a DC time stamp): a
+                         // uint64 dataset
 };
 
 struct NexusOptions {

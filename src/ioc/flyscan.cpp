@@ -46,6 +46,12 @@ double ValueSource::read(uint64_t t_ns) const noexcept {
     case Kind::Time: return double(t_ns) * 1e-9;
     case Kind::Cell: return *cell;
     case Kind::Integer: return double(entry.get());
+    case Kind::Uint64Bits: {
+        const uint64_t raw = entry.get_raw();
+        double d;
+        std::memcpy(&d, &raw, sizeof d);
+        return d;
+    }
     case Kind::Float32: {
         uint32_t raw = uint32_t(entry.get_raw());
         float f;
@@ -77,8 +83,10 @@ public:
             Block::Cmd cmd;
             while (b.cmds.pop(cmd)) { // PV puts: into the cells, as a PLC's writes
                 to_cells(cmd, b.cell);
-                if (b.timed && (cmd.inp.kind != b.inp.kind || cmd.inp.cell != b.inp.cell || cmd.inp.entry.bit_offset != b.inp.entry.bit_offset))
-                    b.timed->reset();
+                if (cmd.inp.kind != b.inp.kind || cmd.inp.cell != b.inp.cell || cmd.inp.entry.bit_offset != b.inp.entry.bit_offset) {
+                    if (b.timed) b.timed->reset(); // the predictions start over on the new input
+                    if (b.over) b.over->reset();
+                }
                 b.inp = cmd.inp;
             }
             // the cells (PV puts and PLC code) -> the block; nonsense is clamped, never taken
@@ -400,8 +408,14 @@ void IocFlyScan::check_names() {
     }
     if (!cfg_.capture) return;
     const config::CaptureEntry& c = *cfg_.capture;
-    for (const config::CaptureField& cf : c.fields)
+    for (const config::CaptureField& cf : c.fields) {
         if (!known(cf.signal, why)) throw Error(SB() << at(cf.where) << ": capture field: " << why);
+        const registry::Signal* sig = reg_.find(cf.signal);
+        if (sig && sig->owner_kind == registry::OwnerKind::Bus && (sig->type == "UINT64" || sig->type == "ULINT"))
+            for (const std::string& m : cf.modes)
+                if (m != "value")
+                    throw Error(SB() << at(cf.where) << ": capture field " << cf.signal << ": a UINT64 entry (a time stamp) is captured as its value only, not '" << m << "'");
+    }
     for (const std::string& t : c.triggers) {
         bool block = false;
         for (const auto& b : blocks_) block = block || t == std::string(SB() << "pcomp" << b->cfg.id);
@@ -538,12 +552,17 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
             std::string why;
             ValueSource v = resolve(cf.signal, why);
             if (v.kind == ValueSource::Kind::None) throw Error(SB() << at(cf.where) << ": capture field: " << why);
+            // a UINT64 entry (DC time stamps in ns: beyond a double's 53 bits) is kept exact
+            const registry::Signal* sig = v.kind == ValueSource::Kind::Integer ? reg_.find(cf.signal) : nullptr;
+            const bool u64 = sig && (sig->type == "UINT64" || sig->type == "ULINT");
+            if (u64) v.kind = ValueSource::Kind::Uint64Bits; // value only (check_names)
             fields_.push_back(v);
             for (const std::string& m : cf.modes) {
                 daq::CaptureMode mode = daq::CaptureMode::Value;
                 daq::parse_capture_mode(m, mode);
                 cols.push_back({fields_.size() - 1, mode});
-                ncols.push_back({m == "value" ? cf.name : cf.name + "_" + m, cf.units, cf.signal, daq::to_string(mode)});
+                ncols.push_back({m == "value" ? cf.name : cf.name + "_" + m, cf.units, cf.signal, daq::to_string(mode), u64});
+                last_uint64_.push_back(u64);
             }
         }
         for (const std::string& name : c.triggers) {
@@ -690,6 +709,12 @@ void IocFlyScan::publish() {
     set_array(db_, *last_cycle_, scratch_.data(), uint32_t(scratch_.size()));
     for (std::size_t c = 0; c < last_.size(); ++c) {
         writer_->last_rows(c, scratch_);
+        if (c < last_uint64_.size() && last_uint64_[c])
+            for (double& d : scratch_) { // bit patterns -> their values (ns; the PV is a double)
+                uint64_t raw;
+                std::memcpy(&raw, &d, sizeof raw);
+                d = double(raw);
+            }
         set_array(db_, *last_[c], scratch_.data(), uint32_t(scratch_.size()));
     }
 }

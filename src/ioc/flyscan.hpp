@@ -38,7 +38,9 @@ namespace beamctl::ioc {
 // An engine value read as a double in the cycle: an axis variable, a process-data entry (integer
 // or REAL/LREAL), the engine clock [s], or a position-compare block's output.
 struct ValueSource {
-    enum class Kind : uint8_t { None, Time, Cell, Integer, Float32, Float64, PcompOut, PcompActive, PcompProduced, PcompRose } kind = Kind::None;
+    // Uint64Bits: a UINT64 entry (a DC time stamp, ns) carried exactly as its bit pattern in the
+    // double (capture "value" columns only; the file gets a uint64 dataset).
+    enum class Kind : uint8_t { None, Time, Cell, Integer, Uint64Bits, Float32, Float64, PcompOut, PcompActive, PcompProduced, PcompRose } kind = Kind::None;
     const double* cell = nullptr;
     registry::BoundSignal entry;
     const daq::Pcomp* pcomp = nullptr;
@@ -147,6 +149,7 @@ private:
                *full_name_ = nullptr, *capture_no_ = nullptr, *rows_captured_ = nullptr, *rows_written_ = nullptr,
                *rows_dropped_ = nullptr, *files_ = nullptr, *status_ = nullptr, *error_ = nullptr, *last_cycle_ = nullptr;
     std::vector<pv::Record*> last_;
+    std::vector<bool> last_uint64_; // a column of uint64 bit patterns
     uint64_t status_version_ = ~uint64_t(0);
     std::vector<double> scratch_;
     std::unique_ptr<Stage> stage_;

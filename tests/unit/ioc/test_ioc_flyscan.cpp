@@ -82,6 +82,27 @@ void write_timestamped_variant(const std::string& path, const std::vector<std::p
     std::ofstream(path) << text;
 }
 
+std::vector<uint64_t> read_uint64_dataset(const std::string& file, const std::string& name, bool* is_uint64) {
+    hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    if (f < 0) throw std::runtime_error("cannot open " + file);
+    hid_t d = H5Dopen2(f, ("/entry/data/" + name).c_str(), H5P_DEFAULT);
+    std::vector<uint64_t> v;
+    if (d >= 0) {
+        hid_t t = H5Dget_type(d);
+        *is_uint64 = H5Tequal(t, H5T_STD_U64LE) > 0;
+        H5Tclose(t);
+        hid_t sp = H5Dget_space(d);
+        hsize_t n = 0;
+        H5Sget_simple_extent_dims(sp, &n, nullptr);
+        v.resize(n);
+        if (n) H5Dread(d, H5T_NATIVE_UINT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+        H5Sclose(sp);
+        H5Dclose(d);
+    }
+    H5Fclose(f);
+    return v;
+}
+
 TEST(IocFlyScan, SpiralExampleFiresAtEveryPointAndWritesTheFile) {
     FlyIoc v(kSource + "/examples/flyscan/ioc.yaml");
     TempDir dir;
@@ -429,6 +450,58 @@ TEST(IocFlyScan, AnalogOutputFollowsOut) {
     }
     EXPECT_EQ(pc.produced(), 3u);
     EXPECT_GT(high, 1000);
+}
+
+// EL1252 edge times into the capture: a row at each rising edge the EL1252 sees (a signal trigger),
+// its DC time stamp kept exactly (a uint64 dataset; a double holds only 53 bits of ns).
+TEST(IocFlyScan, LatchedEdgeTimesAreCapturedExactly) {
+    TempDir dir;
+    const std::string path = (dir.path / "latch.yaml").string();
+    write_timestamped_variant(path, {{"pcomp:\n", "capture:\n  trigger: ec0.s5.binaryInput02\n  fields:\n"
+                                                  "    - {signal: ec0.s5.timestampLatchPositive02, name: edge, units: ns}\n"
+                                                  "    - {signal: ax3.traj.setpos, name: arc, units: mm}\n"
+                                                  "  file_path: " + dir.path.string() + "\n  file_name: latch_%03d.h5\npcomp:\n"}});
+    FlyIoc v(path);
+    v.run(100);
+    ASSERT_EQ(v.put("FLY:PCAP:ARM", 1), pv::PutStatus::Ok);
+    ASSERT_TRUE(v.run_until([&] { return v.ioc->flyscan().capture()->armed(); })) << v.text("FLY:PCAP:STATUS");
+    ASSERT_EQ(v.put("FLY:PCOMP3:ENABLE", 1), pv::PutStatus::Ok);
+    v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 5.1});
+    std::string why;
+    registry::BoundSignal latch = v.ioc->signals().bind("ec0.s5.timestampLatchPositive02", why);
+    std::vector<uint64_t> seen;
+    uint64_t last = latch.get_raw();
+    for (int k = 0; k < 9000; ++k) {
+        v.cycles(1);
+        if (k % 10 == 0) v.ioc->publish();
+        if (latch.get_raw() != last) seen.push_back(last = latch.get_raw());
+    }
+    ASSERT_EQ(seen.size(), 6u); // 0.8 .. 4.8 mm
+    ASSERT_GT(seen[0], uint64_t(1) << 53); // beyond a double's integers
+    ASSERT_EQ(v.put("FLY:PCAP:DISARM", 1), pv::PutStatus::Ok);
+    ASSERT_TRUE(v.run_until([&] { return v.get("FLY:PCAP:ACTIVE") == 0 && v.get("FLY:PCAP:FILES") == 1; }));
+    bool is_uint64 = false;
+    const std::vector<uint64_t> edge = read_uint64_dataset((dir.path / "latch_001.h5").string(), "edge", &is_uint64);
+    EXPECT_TRUE(is_uint64);
+    EXPECT_EQ(edge, seen);
+    // the live waveform shows them as numbers (ns, to a double's precision)
+    v.run(20);
+    EXPECT_NEAR(v.get("FLY:PCAP:LAST:edge", 5), double(seen[5]), 256.0);
+}
+
+TEST(IocFlyScan, ATimeStampIsCapturedAsItsValueOnly) {
+    TempDir dir;
+    const std::string path = (dir.path / "diff.yaml").string();
+    write_timestamped_variant(path, {{"pcomp:\n", "capture:\n  trigger: cycle\n  fields:\n"
+                                                  "    - {signal: ec0.s5.timestampLatchPositive02, name: edge, modes: [value, diff]}\n"
+                                                  "pcomp:\n"}});
+    try {
+        VirtualIoc v(path);
+        FAIL() << "a diff of a UINT64 time stamp was taken";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("diff.yaml:"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("value only, not 'diff'"), std::string::npos) << e.what();
+    }
 }
 
 } // namespace
