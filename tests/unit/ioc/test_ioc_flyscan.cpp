@@ -50,23 +50,32 @@ struct FlyIoc : VirtualIoc {
     }
 };
 
-std::vector<double> read_dataset(const std::string& file, const std::string& name) {
+// A dataset of /entry/data read as T (memory type `mem`); `is` (if given) says whether the
+// dataset's own type is `file_type`.
+template <class T> std::vector<T> read_column(const std::string& file, const std::string& name, hid_t mem, hid_t file_type = -1, bool* is = nullptr) {
     hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
     if (f < 0) throw std::runtime_error("cannot open " + file);
     hid_t d = H5Dopen2(f, ("/entry/data/" + name).c_str(), H5P_DEFAULT);
-    std::vector<double> v;
+    std::vector<T> v;
     if (d >= 0) {
+        if (is) {
+            hid_t t = H5Dget_type(d);
+            *is = H5Tequal(t, file_type) > 0;
+            H5Tclose(t);
+        }
         hid_t s = H5Dget_space(d);
         hsize_t n = 0;
         H5Sget_simple_extent_dims(s, &n, nullptr);
         v.resize(n);
-        if (n) H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+        if (n) H5Dread(d, mem, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
         H5Sclose(s);
         H5Dclose(d);
     }
     H5Fclose(f);
     return v;
 }
+
+std::vector<double> read_dataset(const std::string& file, const std::string& name) { return read_column<double>(file, name, H5T_NATIVE_DOUBLE); }
 
 // examples/flyscan/timestamped.yaml with `edits` (every occurrence of each first replaced by its
 // second) and its relative paths made absolute, written to `path`.
@@ -80,27 +89,6 @@ void write_timestamped_variant(const std::string& path, const std::vector<std::p
     all("plant: timestamped_plant.yaml", "plant: " + kSource + "/examples/flyscan/timestamped_plant.yaml");
     all("../", kSource + "/examples/");
     std::ofstream(path) << text;
-}
-
-std::vector<uint64_t> read_uint64_dataset(const std::string& file, const std::string& name, bool* is_uint64) {
-    hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-    if (f < 0) throw std::runtime_error("cannot open " + file);
-    hid_t d = H5Dopen2(f, ("/entry/data/" + name).c_str(), H5P_DEFAULT);
-    std::vector<uint64_t> v;
-    if (d >= 0) {
-        hid_t t = H5Dget_type(d);
-        *is_uint64 = H5Tequal(t, H5T_STD_U64LE) > 0;
-        H5Tclose(t);
-        hid_t sp = H5Dget_space(d);
-        hsize_t n = 0;
-        H5Sget_simple_extent_dims(sp, &n, nullptr);
-        v.resize(n);
-        if (n) H5Dread(d, H5T_NATIVE_UINT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
-        H5Sclose(sp);
-        H5Dclose(d);
-    }
-    H5Fclose(f);
-    return v;
 }
 
 TEST(IocFlyScan, SpiralExampleFiresAtEveryPointAndWritesTheFile) {
@@ -481,7 +469,8 @@ TEST(IocFlyScan, LatchedEdgeTimesAreCapturedExactly) {
     ASSERT_EQ(v.put("FLY:PCAP:DISARM", 1), pv::PutStatus::Ok);
     ASSERT_TRUE(v.run_until([&] { return v.get("FLY:PCAP:ACTIVE") == 0 && v.get("FLY:PCAP:FILES") == 1; }));
     bool is_uint64 = false;
-    const std::vector<uint64_t> edge = read_uint64_dataset((dir.path / "latch_001.h5").string(), "edge", &is_uint64);
+    const std::vector<uint64_t> edge =
+        read_column<uint64_t>((dir.path / "latch_001.h5").string(), "edge", H5T_NATIVE_UINT64, H5T_STD_U64LE, &is_uint64);
     EXPECT_TRUE(is_uint64);
     EXPECT_EQ(edge, seen);
     // the live waveform shows them as numbers (ns, to a double's precision)
