@@ -127,6 +127,15 @@ void IocMemMaps::bind(registry::Registry& reg, const std::vector<ethercat::Bus*>
                                         : " is not in the PDO assignment the slave reported"));
             it.sig.push_back(si);
         }
+        // an output channel another writer claimed (a PCOMP block's samples): its PV is read-only,
+        // as the entries' own PVs are; a put would be overwritten by the next cycle
+        if (it.map.output && it.rec)
+            for (const std::string& el : it.elements)
+                if (const registry::Signal* s = reg.find(el); s && !s->writer.empty()) {
+                    it.rec->val_read_only = true;
+                    LOG_INFO(lg, it.rec->name() << ": read-only, " << el << " is set by " << s->writer);
+                    break;
+                }
     }
 }
 

@@ -397,6 +397,11 @@ TEST(IocFlyScan, TimestampedOutputSwitchesWithin1usOfTheCrossing) {
     EXPECT_EQ(v.get("FLY:PCOMP3:LATE"), 0);
     EXPECT_EQ(v.get("FLY:PCOMP3:PRODUCED"), 12);
     EXPECT_EQ(v.get("FLY:PCOMP4:TIMED"), 24);
+    // the EL4732 channel's memory-map PV is the block's: read-only, as the entries' PVs
+    pv::Record* ao = v.ioc->database().find("FLY:m0s006-AO01-Arr");
+    ASSERT_NE(ao, nullptr);
+    EXPECT_TRUE(ao->val_read_only);
+    EXPECT_FALSE(v.ioc->database().find("FLY:m0s006-AO02-Arr")->val_read_only);
     EXPECT_EQ(v.get("FLY:PCOMP4:PRODUCED"), 12);
 }
 
