@@ -61,7 +61,6 @@ public:
 
     uint64_t scheduled() const noexcept { return scheduled_; } // edges sent to the terminal
     uint64_t late() const noexcept { return late_; }           // edges not sent: their time had passed
-    uint64_t last_edge_ns() const noexcept { return predictor_.edge_ns(); }
 
 private:
     struct Edge {
@@ -92,7 +91,6 @@ public:
     bool sample(unsigned k) const noexcept { return k < first_changed_ ? before_ : level_; }
     bool level() const noexcept { return level_; } // at the end of the window
     uint64_t edges() const noexcept { return edges_; }
-    unsigned edge_sample() const noexcept { return first_changed_; } // of the last edge
 
 private:
     PcompPredictor predictor_;

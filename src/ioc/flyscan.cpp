@@ -38,6 +38,11 @@ std::string join(const std::vector<std::string>& v) {
     return s;
 }
 
+// A UINT64 bus entry (a DC time stamp, ns): captured exactly, value mode only.
+bool is_uint64_entry(const registry::Signal* s) {
+    return s && s->owner_kind == registry::OwnerKind::Bus && (s->type == "UINT64" || s->type == "ULINT");
+}
+
 } // namespace
 
 double ValueSource::read(uint64_t t_ns) const noexcept {
@@ -410,8 +415,7 @@ void IocFlyScan::check_names() {
     const config::CaptureEntry& c = *cfg_.capture;
     for (const config::CaptureField& cf : c.fields) {
         if (!known(cf.signal, why)) throw Error(SB() << at(cf.where) << ": capture field: " << why);
-        const registry::Signal* sig = reg_.find(cf.signal);
-        if (sig && sig->owner_kind == registry::OwnerKind::Bus && (sig->type == "UINT64" || sig->type == "ULINT"))
+        if (is_uint64_entry(reg_.find(cf.signal)))
             for (const std::string& m : cf.modes)
                 if (m != "value")
                     throw Error(SB() << at(cf.where) << ": capture field " << cf.signal << ": a UINT64 entry (a time stamp) is captured as its value only, not '" << m << "'");
@@ -553,8 +557,7 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
             ValueSource v = resolve(cf.signal, why);
             if (v.kind == ValueSource::Kind::None) throw Error(SB() << at(cf.where) << ": capture field: " << why);
             // a UINT64 entry (DC time stamps in ns: beyond a double's 53 bits) is kept exact
-            const registry::Signal* sig = v.kind == ValueSource::Kind::Integer ? reg_.find(cf.signal) : nullptr;
-            const bool u64 = sig && (sig->type == "UINT64" || sig->type == "ULINT");
+            const bool u64 = v.kind == ValueSource::Kind::Integer && is_uint64_entry(reg_.find(cf.signal));
             if (u64) v.kind = ValueSource::Kind::Uint64Bits; // value only (check_names)
             fields_.push_back(v);
             for (const std::string& m : cf.modes) {
