@@ -22,10 +22,12 @@ double now_s() {
 } // namespace
 
 CaptureWriter::CaptureWriter(Capture& capture, Options opt) : capture_(capture), opt_(std::move(opt)) {
-    if (opt_.columns.size() != capture_.columns().size())
-        throw Error(SB() << "capture writer: " << opt_.columns.size() << " file columns for " << capture_.columns().size()
+    std::size_t values = 0;
+    for (const NexusColumn& c : opt_.columns) values += c.width;
+    if (values != capture_.columns().size())
+        throw Error(SB() << "capture writer: " << values << " values a row in the file for " << capture_.columns().size()
                          << " capture columns");
-    last_.assign(opt_.columns.size(), std::vector<double>(opt_.last_rows, 0.0));
+    last_.assign(values, std::vector<double>(opt_.last_rows, 0.0));
     last_cycle_.assign(opt_.last_rows, 0.0);
     thread_ = std::thread([this] { thread_main(); });
 }
@@ -59,12 +61,13 @@ CaptureWriter::Status CaptureWriter::status() const {
     return s;
 }
 
-void CaptureWriter::last_rows(std::size_t c, std::vector<double>& out) const {
+void CaptureWriter::last_rows(std::size_t c, std::vector<double>& out, std::size_t width) const {
     std::lock_guard<std::mutex> l(mu_);
     out.clear();
-    if (c >= last_.size()) return;
+    if (c + width > last_.size()) return;
     std::size_t n = opt_.last_rows, first = (last_head_ + n - last_count_) % (n ? n : 1);
-    for (std::size_t i = 0; i < last_count_; ++i) out.push_back(last_[c][(first + i) % n]);
+    for (std::size_t i = 0; i < last_count_; ++i)
+        for (std::size_t k = 0; k < width; ++k) out.push_back(last_[c + k][(first + i) % n]);
 }
 
 void CaptureWriter::last_cycles(std::vector<double>& out) const {
@@ -110,7 +113,7 @@ void CaptureWriter::finish(NexusFile& f) {
 }
 
 void CaptureWriter::thread_main() {
-    const std::size_t cols = opt_.columns.size(), batch = std::max<std::size_t>(opt_.batch_rows, 1);
+    const std::size_t cols = capture_.columns().size(), batch = std::max<std::size_t>(opt_.batch_rows, 1);
     std::vector<RowHeader> heads(batch);
     std::vector<double> vals(batch * std::max<std::size_t>(cols, 1));
     std::vector<uint64_t> cycles(batch), times(batch);

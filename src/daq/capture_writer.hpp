@@ -29,7 +29,7 @@ namespace beamctl::daq {
 class CaptureWriter {
 public:
     struct Options {
-        std::vector<NexusColumn> columns; // one per Capture column, in order
+        std::vector<NexusColumn> columns; // the Capture's columns in order (one of width w takes w)
         NexusOptions nexus;
         double flush_s = 1.0;         // [s] SWMR flush period while capturing
         std::size_t last_rows = 1000; // rows kept for the live waveforms
@@ -65,8 +65,9 @@ public:
         uint64_t version = 0;       // changes when anything above changed
     };
     Status status() const;
-    // The last `last_rows` rows of column c (oldest first), and their cycle numbers.
-    void last_rows(std::size_t c, std::vector<double>& out) const;
+    // The last `last_rows` rows of Capture column c (oldest first), and their cycle numbers; with
+    // `width`, of columns c .. c + width - 1, row by row.
+    void last_rows(std::size_t c, std::vector<double>& out, std::size_t width = 1) const;
     void last_cycles(std::vector<double>& out) const;
 
 private:

@@ -4,6 +4,7 @@
 
 #include <hdf5.h>
 
+#include <algorithm>
 #include <iterator>
 #include <set>
 #include <string_view>
@@ -148,6 +149,7 @@ void validate(const std::string& path, const std::vector<NexusColumn>& columns, 
         for (const char* r : kReserved)
             if (n == r) throw bad("is reserved (cycle, time and timestamp_ns are always written)");
         if (!names.insert(n).second) throw bad("appears twice");
+        if (columns[i].width == 0) throw bad("has width 0 (at least one value a row)");
     }
     std::set<std::string> attributes{"NX_class", "default"};
     for (const auto& [name, value] : opt.attributes)
@@ -168,10 +170,12 @@ void validate(const std::string& path, const std::vector<NexusColumn>& columns, 
 
 struct NexusFile::Impl {
     std::string path;
-    std::size_t ncol = 0;
-    std::vector<bool> uint64; // per column: uint64 bit patterns in the doubles
+    std::size_t ncol = 0;     // values a row
+    // per column (dataset): uint64 bit patterns in the doubles, its first value in a row, width
+    std::vector<bool> uint64;
+    std::vector<std::size_t> offset, width;
     Handle file;
-    // Columns 0..ncol-1, then cycle, time, timestamp_ns.
+    // Columns 0..columns-1, then cycle, time, timestamp_ns.
     std::vector<Handle> datasets;
     std::uint64_t rows = 0;
     std::uint64_t t0_ns = 0; // timestamp of the first row
@@ -181,19 +185,20 @@ struct NexusFile::Impl {
     std::vector<double> time_s;
     std::size_t capacity_rows = 0;
 
-    void write(std::size_t k, hid_t mem_type, hid_t mem_space, const void* buf, hsize_t n);
+    // n rows of dataset k (w values each, row-major in buf).
+    void write(std::size_t k, hid_t mem_type, const void* buf, hsize_t n, hsize_t w = 1);
 };
 
-void NexusFile::Impl::write(std::size_t k, hid_t mem_type, hid_t mem_space, const void* buf,
-                            hsize_t n) {
+void NexusFile::Impl::write(std::size_t k, hid_t mem_type, const void* buf, hsize_t n, hsize_t w) {
     hid_t ds = datasets[k].get();
-    const hsize_t new_rows = rows + n;
-    const hsize_t start = rows;
-    if (H5Dset_extent(ds, &new_rows) < 0) fail(path, "cannot extend a dataset");
+    const int rank = w > 1 ? 2 : 1;
+    const hsize_t new_extent[2] = {rows + n, w}, start[2] = {rows, 0}, count[2] = {n, w};
+    if (H5Dset_extent(ds, new_extent) < 0) fail(path, "cannot extend a dataset");
     Handle file_space = check(H5Dget_space(ds), H5Sclose, path, "dataspace");
-    if (H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, &start, nullptr, &n, nullptr) < 0)
+    if (H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, count, nullptr) < 0)
         fail(path, "cannot select rows");
-    if (H5Dwrite(ds, mem_type, mem_space, file_space.get(), H5P_DEFAULT, buf) < 0)
+    Handle mem_space = check(H5Screate_simple(rank, count, nullptr), H5Sclose, path, "dataspace");
+    if (H5Dwrite(ds, mem_type, mem_space.get(), file_space.get(), H5P_DEFAULT, buf) < 0)
         fail(path, "cannot write rows");
 }
 
@@ -201,9 +206,13 @@ NexusFile::NexusFile(const std::string& path, std::vector<NexusColumn> columns, 
     : impl_(std::make_unique<Impl>()) {
     Impl& m = *impl_;
     m.path = path;
-    m.ncol = columns.size();
-    for (const NexusColumn& c : columns) m.uint64.push_back(c.uint64);
     validate(path, columns, opt);
+    for (const NexusColumn& c : columns) {
+        m.uint64.push_back(c.uint64);
+        m.offset.push_back(m.ncol);
+        m.width.push_back(c.width);
+        m.ncol += c.width;
+    }
     quiet_hdf5();
 
     // SWMR needs the latest file format (checksummed metadata, extensible-array chunk index).
@@ -230,13 +239,16 @@ NexusFile::NexusFile(const std::string& path, std::vector<NexusColumn> columns, 
     string_attribute(data.get(), "axes", opt.axis, path, "/entry/data");
     int_attribute(data.get(), opt.axis + "_indices", 0, path, "/entry/data");
 
-    // Empty, growing without limit, chunk_rows rows a chunk.
-    const hsize_t zero = 0, unlimited = H5S_UNLIMITED, chunk = opt.chunk_rows;
-    Handle space = check(H5Screate_simple(1, &zero, &unlimited), H5Sclose, path, "dataspace");
-    Handle dcpl = check(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, path, "dataset creation list");
-    if (H5Pset_chunk(dcpl.get(), 1, &chunk) < 0) fail(path, "cannot set the chunk size");
-    auto dataset = [&](const std::string& name, hid_t type) {
+    // Empty, growing without limit in rows, chunk_rows rows a chunk (of a [rows, w] dataset
+    // chunk_rows / w rows: every chunk the same size, within HDF5's default 1 MiB chunk cache).
+    auto dataset = [&](const std::string& name, hid_t type, hsize_t w = 1) {
         const std::string where = "/entry/data/" + name;
+        const int rank = w > 1 ? 2 : 1;
+        const hsize_t zero[2] = {0, w}, max[2] = {H5S_UNLIMITED, w},
+                      chunk[2] = {std::max<hsize_t>(1, opt.chunk_rows / w), w};
+        Handle space = check(H5Screate_simple(rank, zero, max), H5Sclose, path, "dataspace");
+        Handle dcpl = check(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, path, "dataset creation list");
+        if (H5Pset_chunk(dcpl.get(), rank, chunk) < 0) fail(path, "cannot set the chunk size");
         m.datasets.push_back(check(H5Dcreate2(data.get(), name.c_str(), type, space.get(),
                                               H5P_DEFAULT, dcpl.get(), H5P_DEFAULT),
                                    H5Dclose, path, "cannot create " + where));
@@ -244,10 +256,11 @@ NexusFile::NexusFile(const std::string& path, std::vector<NexusColumn> columns, 
     };
     for (const NexusColumn& c : columns) {
         const std::string where = "/entry/data/" + c.name;
-        hid_t ds = dataset(c.name, c.uint64 ? H5T_STD_U64LE : H5T_IEEE_F64LE);
+        hid_t ds = dataset(c.name, c.uint64 ? H5T_STD_U64LE : H5T_IEEE_F64LE, c.width);
         if (!c.units.empty()) string_attribute(ds, "units", c.units, path, where);
         string_attribute(ds, "source", c.source, path, where);
         string_attribute(ds, "capture_mode", c.mode, path, where);
+        if (c.width > 1) int_attribute(ds, "samples_per_row", int32_t(c.width), path, where);
     }
     dataset("cycle", H5T_STD_U64LE);
     string_attribute(dataset("time", H5T_IEEE_F64LE), "units", "s", path, "/entry/data/time");
@@ -293,24 +306,27 @@ void NexusFile::append(const uint64_t* cycle, const uint64_t* t_ns, const double
         m.time_s.resize(n);
         m.capacity_rows = n;
     }
-    // Row-major in, one contiguous run per column out (column j at j * n); one pass over the
-    // input with ncol sequential output streams.
-    const std::size_t ncol = m.ncol;
+    // Row-major in, one contiguous run per dataset out (the dataset whose first value is at
+    // offset o of a row, width w, at o * n: n rows of w); one pass over the input with a
+    // sequential output stream per dataset.
+    const std::size_t ncol = m.ncol, nds = m.width.size();
     double* out = m.by_column.data();
     for (std::size_t i = 0; i < n; ++i) {
         const double* row = values + i * ncol;
-        for (std::size_t j = 0; j < ncol; ++j) out[j * n + i] = row[j];
+        for (std::size_t d = 0; d < nds; ++d) {
+            const std::size_t o = m.offset[d], w = m.width[d];
+            for (std::size_t k = 0; k < w; ++k) out[o * n + i * w + k] = row[o + k];
+        }
     }
     for (std::size_t i = 0; i < n; ++i) m.time_s[i] = double(int64_t(t_ns[i] - m.t0_ns)) * 1e-9;
 
     const hsize_t rows = n;
     m.broken = true; // until every dataset has its rows
-    Handle mem_space = check(H5Screate_simple(1, &rows, nullptr), H5Sclose, m.path, "dataspace");
-    for (std::size_t j = 0; j < ncol; ++j) // a uint64 column: the doubles' bytes are its values
-        m.write(j, m.uint64[j] ? H5T_NATIVE_UINT64 : H5T_NATIVE_DOUBLE, mem_space.get(), out + j * n, rows);
-    m.write(ncol, H5T_NATIVE_UINT64, mem_space.get(), cycle, rows);
-    m.write(ncol + 1, H5T_NATIVE_DOUBLE, mem_space.get(), m.time_s.data(), rows);
-    m.write(ncol + 2, H5T_NATIVE_UINT64, mem_space.get(), t_ns, rows);
+    for (std::size_t d = 0; d < nds; ++d) // a uint64 column: the doubles' bytes are its values
+        m.write(d, m.uint64[d] ? H5T_NATIVE_UINT64 : H5T_NATIVE_DOUBLE, out + m.offset[d] * n, rows, m.width[d]);
+    m.write(nds, H5T_NATIVE_UINT64, cycle, rows);
+    m.write(nds + 1, H5T_NATIVE_DOUBLE, m.time_s.data(), rows);
+    m.write(nds + 2, H5T_NATIVE_UINT64, t_ns, rows);
     m.rows += n;
     m.broken = false;
 }

@@ -1,11 +1,13 @@
 // A fly scan's capture file: HDF5 (C API) in a NeXus layout, written in SWMR mode so that a reader
 // (H5F_ACC_SWMR_READ, or h5py's swmr=True) can follow it while it grows.
 //
-// Layout (every dataset 1-D, chunked, extendible, uncompressed, one row per captured cycle):
+// Layout (every dataset chunked, extendible, uncompressed, one row per captured cycle; 1-D, or
+// [rows, width] for a column of `width` values a row such as an oversampled input's samples):
 //   /                      default="entry"
 //   /entry                 NX_class="NXentry", default="data", title (if given), extra attributes
 //   /entry/data            NX_class="NXdata", signal, axes, <axes>_indices=0
-//   /entry/data/<column>   float64, units (if any), source, capture_mode
+//   /entry/data/<column>   float64, units (if any), source, capture_mode (and samples_per_row
+//                          when width > 1)
 //   /entry/data/cycle      uint64: the engine cycle of the row
 //   /entry/data/time       float64 [s] since the first row
 //   /entry/data/timestamp_ns  uint64 [ns], absolute
@@ -34,6 +36,8 @@ struct NexusColumn {
     std::string mode;   // "Value", "Diff", "Sum", "Min", "Max": attribute "capture_mode"
     bool uint64 = false; // the row's double holds a uint64's bit pattern (a DC time stamp): a
                          // uint64 dataset
+    std::size_t width = 1; // values a row (>= 1): the dataset is [rows, width] when > 1 (the n
+                           // samples a cycle of an oversampled input, in time order)
 };
 
 struct NexusOptions {
@@ -58,7 +62,8 @@ public:
     NexusFile(const NexusFile&) = delete;
     NexusFile& operator=(const NexusFile&) = delete;
 
-    // Appends n rows: cycle[n], t_ns[n] [ns] and values[n * columns()] row-major. One write per
+    // Appends n rows: cycle[n], t_ns[n] [ns] and values[n * columns()] row-major (a column of
+    // width w takes w consecutive values of a row). One write per
     // dataset; its own buffers grow only when n exceeds every earlier n (HDF5 mallocs inside).
     // After an Error the file takes no more rows (close it).
     void append(const uint64_t* cycle, const uint64_t* t_ns, const double* values, std::size_t n);
@@ -71,7 +76,7 @@ public:
     // Row data handed to HDF5 so far [bytes]: 8 * (columns() + 3) a row.
     std::uint64_t bytes() const noexcept;
     const std::string& path() const noexcept;
-    std::size_t columns() const noexcept;
+    std::size_t columns() const noexcept; // values a row: the columns' widths summed
     bool is_open() const noexcept;
 
 private:

@@ -170,7 +170,8 @@ private:
     std::vector<double> in_;
 };
 
-IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db) : cfg_(cfg), reg_(reg), db_(db) {
+IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db, const IocMemMaps* memmaps)
+    : cfg_(cfg), reg_(reg), db_(db), memmaps_(memmaps) {
     pv::DbFile f;
     auto text = [](const std::string& name, const char* nelm) {
         return record("waveform", name, {{"FTVL", "CHAR"}, {"NELM", nelm}});
@@ -234,13 +235,16 @@ IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv
         f.records.push_back(record("longin", p + "FILES", {{"DESC", "files completed"}}));
         std::string nelm = std::to_string(std::max<std::size_t>(c.last_rows, 1));
         f.records.push_back(record("waveform", p + "LAST:CYCLE", {{"FTVL", "DOUBLE"}, {"NELM", nelm}, {"DESC", "cycles of the last rows"}}));
-        for (const config::CaptureField& cf : c.fields)
+        for (const config::CaptureField& cf : c.fields) {
+            const std::vector<std::string>* samples = samples_of(cf.signal); // n values a row
+            const std::string n = samples ? std::to_string(std::max<std::size_t>(c.last_rows, 1) * samples->size()) : nelm;
             for (const std::string& m : cf.modes) {
                 std::string col = m == "value" ? cf.name : cf.name + "_" + m;
                 columns_.push_back(col);
                 f.records.push_back(record("waveform", p + "LAST:" + col,
-                                           {{"FTVL", "DOUBLE"}, {"NELM", nelm}, {"EGU", cf.units.substr(0, 15)}, {"PREC", "6"}}));
+                                           {{"FTVL", "DOUBLE"}, {"NELM", n}, {"EGU", cf.units.substr(0, 15)}, {"PREC", "6"}}));
             }
+        }
     }
     db_.load(f);
     check_names();
@@ -330,10 +334,10 @@ IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv
         rows_dropped_ = find(p + "ROWS_DROPPED");
         files_ = find(p + "FILES");
         last_cycle_ = find(p + "LAST:CYCLE");
-        for (const std::string& col : columns_) last_.push_back(find(p + "LAST:" + col));
+        for (const std::string& col : columns_) last_.push_back({find(p + "LAST:" + col)});
         for (pv::Record* r : {cap_active_, full_name_, status_, error_, capture_no_, rows_captured_, rows_written_, rows_dropped_, files_, last_cycle_})
             r->val_read_only = true;
-        for (pv::Record* r : last_) r->val_read_only = true;
+        for (LastPv& l : last_) l.r->val_read_only = true;
         arm_->put_hook = [this](pv::Record& r, const pv::FieldDesc& fd) {
             if (std::string_view(fd.name) != "VAL" || get_value(r) == 0) return pv::PutStatus::Ok;
             return arm() ? pv::PutStatus::Ok : pv::PutStatus::Failed;
@@ -414,6 +418,14 @@ void IocFlyScan::check_names() {
     if (!cfg_.capture) return;
     const config::CaptureEntry& c = *cfg_.capture;
     for (const config::CaptureField& cf : c.fields) {
+        if (const std::vector<std::string>* samples = samples_of(cf.signal)) {
+            for (const std::string& m : cf.modes)
+                if (m != "value")
+                    throw Error(SB() << at(cf.where) << ": capture field " << cf.signal << ": a memory map (" << samples->size()
+                                     << " samples a cycle) is captured as its values only, not '" << m << "'");
+            if (!known(samples->front(), why)) throw Error(SB() << at(cf.where) << ": capture field " << cf.signal << ": " << why);
+            continue;
+        }
         if (!known(cf.signal, why)) throw Error(SB() << at(cf.where) << ": capture field: " << why);
         if (is_uint64_entry(reg_.find(cf.signal)))
             for (const std::string& m : cf.modes)
@@ -554,6 +566,20 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
         std::vector<daq::NexusColumn> ncols;
         for (const config::CaptureField& cf : c.fields) {
             std::string why;
+            if (const std::vector<std::string>* samples = samples_of(cf.signal)) {
+                // an oversampled channel: its n samples of the cycle, in time order (value only)
+                last_[ncols.size()].col = cols.size();
+                last_[ncols.size()].width = samples->size();
+                for (const std::string& e : *samples) {
+                    fields_.push_back(resolve(e, why));
+                    if (fields_.back().kind == ValueSource::Kind::None) throw Error(SB() << at(cf.where) << ": capture field " << cf.signal << ": " << why);
+                    cols.push_back({fields_.size() - 1, daq::CaptureMode::Value});
+                }
+                daq::NexusColumn nc{cf.name, cf.units, cf.signal, daq::to_string(daq::CaptureMode::Value)};
+                nc.width = samples->size();
+                ncols.push_back(std::move(nc));
+                continue;
+            }
             ValueSource v = resolve(cf.signal, why);
             if (v.kind == ValueSource::Kind::None) throw Error(SB() << at(cf.where) << ": capture field: " << why);
             // a UINT64 entry (DC time stamps in ns: beyond a double's 53 bits) is kept exact
@@ -563,9 +589,10 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
             for (const std::string& m : cf.modes) {
                 daq::CaptureMode mode = daq::CaptureMode::Value;
                 daq::parse_capture_mode(m, mode);
+                last_[ncols.size()].col = cols.size();
+                last_[ncols.size()].u64 = u64;
                 cols.push_back({fields_.size() - 1, mode});
                 ncols.push_back({m == "value" ? cf.name : cf.name + "_" + m, cf.units, cf.signal, daq::to_string(mode), u64});
-                last_uint64_.push_back(u64);
             }
         }
         for (const std::string& name : c.triggers) {
@@ -597,7 +624,9 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
                               {"engine_rate_hz", std::string(SB() << cfg_.rate_hz)}};
         o.flush_s = c.flush_s;
         o.last_rows = std::max<std::size_t>(c.last_rows, 1);
-        scratch_.reserve(o.last_rows);
+        std::size_t widest = 1;
+        for (const LastPv& l : last_) widest = std::max(widest, l.width);
+        scratch_.reserve(o.last_rows * widest);
         o.log = [](bool error, const std::string& m) {
             if (error) LOG_ERR(lg, m);
             else LOG_INFO(lg, m);
@@ -608,6 +637,10 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
     }
     stage_ = std::make_unique<Stage>(*this);
     engine.add_stage(rt::StageOrder::Triggers, *stage_);
+}
+
+const std::vector<std::string>* IocFlyScan::samples_of(const std::string& name) const {
+    return memmaps_ ? memmaps_->elements(name) : nullptr;
 }
 
 std::string IocFlyScan::next_file() const {
@@ -710,15 +743,15 @@ void IocFlyScan::publish() {
     set_text(status_, s.message);
     writer_->last_cycles(scratch_);
     set_array(db_, *last_cycle_, scratch_.data(), uint32_t(scratch_.size()));
-    for (std::size_t c = 0; c < last_.size(); ++c) {
-        writer_->last_rows(c, scratch_);
-        if (c < last_uint64_.size() && last_uint64_[c])
+    for (const LastPv& l : last_) {
+        writer_->last_rows(l.col, scratch_, l.width);
+        if (l.u64)
             for (double& d : scratch_) { // bit patterns -> their values (ns; the PV is a double)
                 uint64_t raw;
                 std::memcpy(&raw, &d, sizeof raw);
                 d = double(raw);
             }
-        set_array(db_, *last_[c], scratch_.data(), uint32_t(scratch_.size()));
+        set_array(db_, *l.r, scratch_.data(), uint32_t(scratch_.size()));
     }
 }
 

@@ -10,7 +10,9 @@
 //     CAPTURE (number of the last capture), ROWS_CAPTURED, ROWS_WRITTEN, ROWS_DROPPED, FILES,
 //     STATUS (text), ERROR, LAST:<column> and LAST:CYCLE (the last rows, for live plots)
 // Signals: pcomp<n>.out, .active, .produced (records and capture fields read them); capture fields
-// and triggers also take pcomp<n>.rose (1 in the cycle OUT rose).
+// and triggers also take pcomp<n>.rose (1 in the cycle OUT rose). A capture field may name a memory
+// map (ec0.s7.mm.analogInputArray01: an oversampled channel's n samples a cycle): n values a row,
+// one [rows, n] dataset in the file.
 // Threading: construction and bind() before the cycle starts; the stage on the RT thread; puts,
 // publish() and stop() on the IOC loop; the capture's HDF5 writing on its own writer thread.
 #pragma once
@@ -22,6 +24,7 @@
 #include "daq/pcomp.hpp"
 #include "daq/timed_output.hpp"
 #include "ethercat/bus.hpp"
+#include "ioc/memmaps.hpp"
 #include "motion/axis_group.hpp"
 #include "plc/program.hpp"
 #include "pv/database.hpp"
@@ -49,8 +52,9 @@ struct ValueSource {
 
 class IocFlyScan {
 public:
-    // Declares the blocks' signals and makes their records (loaded into `db`).
-    IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db);
+    // Declares the blocks' signals and makes their records (loaded into `db`); `memmaps`: the
+    // IOC's memory maps, which capture fields may name.
+    IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db, const IocMemMaps* memmaps = nullptr);
     ~IocFlyScan();
     IocFlyScan(const IocFlyScan&) = delete;
     IocFlyScan& operator=(const IocFlyScan&) = delete;
@@ -124,10 +128,13 @@ private:
     bool arm();
     void set_text(pv::Record* r, const std::string& text);
     std::string text(pv::Record* r) const;
+    // The elements of memory map `name` (a capture field of n samples a cycle); nullptr if none.
+    const std::vector<std::string>* samples_of(const std::string& name) const;
 
     config::IocConfig cfg_;
     registry::Registry& reg_;
     pv::Database& db_;
+    const IocMemMaps* memmaps_ = nullptr;
     motion::AxisGroup* axes_ = nullptr;
     std::vector<std::unique_ptr<Block>> blocks_;
     // capture
@@ -148,8 +155,14 @@ private:
     pv::Record *arm_ = nullptr, *disarm_ = nullptr, *cap_active_ = nullptr, *file_path_ = nullptr, *file_name_ = nullptr,
                *full_name_ = nullptr, *capture_no_ = nullptr, *rows_captured_ = nullptr, *rows_written_ = nullptr,
                *rows_dropped_ = nullptr, *files_ = nullptr, *status_ = nullptr, *error_ = nullptr, *last_cycle_ = nullptr;
-    std::vector<pv::Record*> last_;
-    std::vector<bool> last_uint64_; // a column of uint64 bit patterns
+    // LAST:<column>, one per file column: Capture columns col .. col + width - 1 (a memory map's
+    // samples, row by row); u64: bit patterns of uint64 values
+    struct LastPv {
+        pv::Record* r = nullptr;
+        std::size_t col = 0, width = 1;
+        bool u64 = false;
+    };
+    std::vector<LastPv> last_;
     uint64_t status_version_ = ~uint64_t(0);
     std::vector<double> scratch_;
     std::unique_ptr<Stage> stage_;

@@ -299,7 +299,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     storages_ = std::make_unique<IocStorages>(cfg_, db_);
     memmaps_ = std::make_unique<IocMemMaps>(cfg_, catalog_, db_);
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
-    flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_);
+    flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get());
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);

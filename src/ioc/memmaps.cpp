@@ -145,6 +145,12 @@ std::vector<registry::MemMap*> IocMemMaps::memmaps() {
     return v;
 }
 
+const std::vector<std::string>* IocMemMaps::elements(const std::string& name) const {
+    for (const Item& it : items_)
+        if (it.map.name == name) return &it.elements;
+    return nullptr;
+}
+
 bool IocMemMaps::fresh(const Item& it, const ethercat::BusSnapshot& s, std::size_t& slave_index) const {
     if (!s.link_up || !s.wkc_ok) return false;
     const auto& sl = buses_[it.bus]->slaves();

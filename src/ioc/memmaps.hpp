@@ -40,6 +40,9 @@ public:
     void publish(double now_s);
 
     std::vector<registry::MemMap*> memmaps(); // by ECMC id
+    // The registry names of map `name`'s elements ("ec0.s7.mm.analogInputArray01" ->
+    // ec0.s7.analogInputArray01_1 .. _n, in time order); nullptr if there is no such map.
+    const std::vector<std::string>* elements(const std::string& name) const;
     std::size_t size() const { return items_.size(); }
 
 private:

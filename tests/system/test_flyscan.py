@@ -18,8 +18,9 @@ from conftest import RunServer, acquire_port, connect, forget_pvs, release_port,
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
-def start(tmp_path, prefix, example="ioc.yaml"):
+def start(tmp_path, prefix, example="ioc.yaml", before_pcomp=""):
     text = (EXAMPLES / "flyscan" / example).read_text()
+    text = text.replace("\npcomp:\n", "\n" + before_pcomp + "pcomp:\n", 1)
     assert "ioc: {name: FLY}" in text
     text = text.replace("ioc: {name: FLY}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
     text = text.replace("file: ../", f"file: {EXAMPLES}/").replace("include: [../", f"include: [{EXAMPLES}/")
@@ -145,10 +146,19 @@ def test_bad_puts_are_refused_and_change_nothing(tmp_path, prefix):
 
 def test_timestamped_output_switches_between_frames(tmp_path, prefix):
     require_binary()
-    srv, port = start(tmp_path, prefix, "timestamped.yaml")
+    data = tmp_path / "data"
+    data.mkdir()
+    # every cycle's 10 EL3702 samples (the EL4732 read back) and the EL4732's own, into the file
+    capture = ("capture:\n  trigger: cycle\n  fields:\n"
+               "    - {signal: ec0.s7.mm.analogInputArray01, name: ai}\n"
+               "    - {signal: ec0.s6.mm.analogOutputArray01, name: ao}\n"
+               f"  last_rows: 50\n  file_path: {data}\n  file_name: samples_%03d.h5\n")
+    srv, port = start(tmp_path, prefix, "timestamped.yaml", capture)
     try:
         p = prefix
         assert text(p + "PCOMP3:INP") == "ax3.traj.setpos"
+        put(p + "PCAP:ARM", 1)
+        assert wait_for(lambda: get(p + "PCAP:ACTIVE") == 1, 5)
         put(p + "PCOMP1:ENABLE", 1)
         put(p + "PCOMP3:ENABLE", 1)
         put(p + "PCOMP4:ENABLE", 1)
@@ -175,6 +185,21 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
         assert after[0] != before[0] and after[1] != before[1]
         lead_ns = after[0] - after[1]
         assert 0 < lead_ns <= 2_000_000, lead_ns
+        # the capture: a [rows, 10] dataset of each channel; the input is the output two cycles
+        # later, sample by sample, steps inside a cycle included
+        live = epics.caget(p + "PCAP:LAST:ai", timeout=5)
+        assert len(live) == 500 and set(live) <= {0, 16384}, live
+        put(p + "PCAP:DISARM", 1)
+        assert wait_for(lambda: get(p + "PCAP:ACTIVE") == 0 and get(p + "PCAP:FILES") == 1, 10)
+        assert get(p + "PCAP:ROWS_DROPPED") == 0
+        with h5py.File(data / "samples_001.h5", "r") as f:
+            ai, ao = f["entry/data/ai"][()], f["entry/data/ao"][()]
+            assert f["entry/data/ai"].attrs["samples_per_row"] == 10
+            assert f["entry/data/ai"].attrs["source"] == "ec0.s7.mm.analogInputArray01"
+        assert ai.shape[1] == 10 and ao.shape == ai.shape and ai.shape[0] > 1000, ai.shape
+        assert (ai[2:] == ao[:-2]).all()
+        steps_inside = [r for r in range(len(ao)) if 0 < np.count_nonzero(ao[r]) < 10]
+        assert len(steps_inside) >= 2, steps_inside  # of the 5 edges
         assert srv.alive()
     finally:
         srv.stop()

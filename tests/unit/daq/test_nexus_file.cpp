@@ -367,6 +367,9 @@ TEST(NexusFile, BadColumnsAndOptionsAreRefusedBeforeTheFileExists) {
               path + ": column 0 name \"time\" is reserved (cycle, time and timestamp_ns are "
                      "always written)");
     EXPECT_EQ(error({}), path + ": no columns (at least one is needed)");
+    NexusColumn empty{"ai", "", "", "Value"};
+    empty.width = 0;
+    EXPECT_EQ(error({empty}), path + ": column 0 name \"ai\" has width 0 (at least one value a row)");
     NexusOptions opt;
     opt.axis = "ax2";
     EXPECT_EQ(error(three_columns(), opt), path + ": axis \"ax2\" is not a dataset of /entry/data");
@@ -381,6 +384,56 @@ TEST(NexusFile, BadColumnsAndOptionsAreRefusedBeforeTheFileExists) {
     opt.chunk_rows = 0;
     EXPECT_EQ(error(three_columns(), opt), path + ": chunk_rows 0 should be >= 1");
     EXPECT_FALSE(std::filesystem::exists(path));
+}
+
+// A column of width w (an oversampled input's samples a cycle) is one [rows, w] dataset that takes
+// w consecutive values of each row, in order; the columns after it keep theirs.
+TEST(NexusFile, AWideColumnIsATwoDimensionalDataset) {
+    TempDir dir;
+    const std::string path = dir.file("wide.h5");
+    std::vector<NexusColumn> columns = three_columns();
+    NexusColumn ai{"ai", "counts", "ec0.s7.mm.analogInputArray01", "Value"};
+    ai.width = 4;
+    columns.insert(columns.begin() + 1, ai);
+    NexusOptions opt;
+    opt.chunk_rows = 8; // 2 rows a chunk of the wide dataset
+    NexusFile f(path, columns, opt);
+    EXPECT_EQ(f.columns(), 3u + 4u);
+    append_rows(f, 0, 5);
+    append_rows(f, 5, 6);
+    f.close();
+    Id file{H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose};
+    ASSERT_GE(file.id, 0);
+    Id ds{H5Dopen2(file.id, "/entry/data/ai", H5P_DEFAULT), H5Dclose};
+    ASSERT_GE(ds.id, 0);
+    Id space{H5Dget_space(ds.id), H5Sclose};
+    ASSERT_EQ(H5Sget_simple_extent_ndims(space.id), 2);
+    hsize_t dims[2] = {}, max[2] = {}, chunk[2] = {};
+    H5Sget_simple_extent_dims(space.id, dims, max);
+    EXPECT_EQ(dims[0], 11u);
+    EXPECT_EQ(dims[1], 4u);
+    EXPECT_EQ(max[0], H5S_UNLIMITED);
+    EXPECT_EQ(max[1], 4u);
+    Id dcpl{H5Dget_create_plist(ds.id), H5Pclose};
+    ASSERT_EQ(H5Pget_chunk(dcpl.id, 2, chunk), 2);
+    EXPECT_EQ(chunk[0], 2u);
+    EXPECT_EQ(chunk[1], 4u);
+    std::vector<double> v(11 * 4);
+    ASSERT_GE(H5Dread(ds.id, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()), 0);
+    for (uint64_t r = 0; r < 11; ++r)
+        for (std::size_t k = 0; k < 4; ++k) EXPECT_EQ(v[r * 4 + k], value(r, 1 + k)) << r << "," << k;
+    EXPECT_EQ(attr(file.id, "/entry/data/ai", "source"), "ec0.s7.mm.analogInputArray01");
+    Id spr{H5Aopen_by_name(file.id, "/entry/data/ai", "samples_per_row", H5P_DEFAULT, H5P_DEFAULT), H5Aclose};
+    int32_t n = 0;
+    ASSERT_GE(H5Aread(spr.id, H5T_NATIVE_INT32, &n), 0);
+    EXPECT_EQ(n, 4);
+    // the 1-D columns around it
+    for (auto [name, j] : {std::pair{"ax1_enc_actpos", 0}, {"i0", 5}, {"ax1_velocity", 6}}) {
+        Id d{H5Dopen2(file.id, (std::string("/entry/data/") + name).c_str(), H5P_DEFAULT), H5Dclose};
+        std::vector<double> c = read_all<double>(d.id, H5T_NATIVE_DOUBLE);
+        ASSERT_EQ(c.size(), 11u) << name;
+        for (uint64_t r = 0; r < 11; ++r) EXPECT_EQ(c[r], value(r, std::size_t(j))) << name << " row " << r;
+    }
 }
 
 TEST(NexusFile, CloseIsIdempotentAndAppendAfterItThrows) {

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <set>
 #include <thread>
 
@@ -76,6 +77,29 @@ template <class T> std::vector<T> read_column(const std::string& file, const std
 }
 
 std::vector<double> read_dataset(const std::string& file, const std::string& name) { return read_column<double>(file, name, H5T_NATIVE_DOUBLE); }
+
+// A [rows, width] dataset of /entry/data, row-major; width 0 if it is not 2-D.
+std::vector<double> read_matrix(const std::string& file, const std::string& name, std::size_t& width) {
+    hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    if (f < 0) throw std::runtime_error("cannot open " + file);
+    hid_t d = H5Dopen2(f, ("/entry/data/" + name).c_str(), H5P_DEFAULT);
+    std::vector<double> v;
+    width = 0;
+    if (d >= 0) {
+        hid_t s = H5Dget_space(d);
+        hsize_t dims[2] = {};
+        if (H5Sget_simple_extent_ndims(s) == 2) {
+            H5Sget_simple_extent_dims(s, dims, nullptr);
+            width = dims[1];
+            v.resize(dims[0] * dims[1]);
+            if (!v.empty()) H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+        }
+        H5Sclose(s);
+        H5Dclose(d);
+    }
+    H5Fclose(f);
+    return v;
+}
 
 // examples/flyscan/timestamped.yaml with `edits` (every occurrence of each first replaced by its
 // second) and its relative paths made absolute, written to `path`.
@@ -495,6 +519,99 @@ TEST(IocFlyScan, ATimeStampIsCapturedAsItsValueOnly) {
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("diff.yaml:"), std::string::npos) << e.what();
         EXPECT_NE(std::string(e.what()).find("value only, not 'diff'"), std::string::npos) << e.what();
+    }
+}
+
+// EL4732 -> EL3702 at 10 samples a cycle, both channels' memory maps captured every cycle: each row
+// of the EL3702's [rows, 10] dataset holds the samples that cycle received, in order, and equals the
+// EL4732's samples a fixed number of cycles earlier (the loop's latency) sample by sample: an edge
+// the oversampled output placed comes back in the same sample.
+TEST(IocFlyScan, OversampledSamplesAreCapturedInTheirSlots) {
+    TempDir dir;
+    const std::string path = (dir.path / "samples.yaml").string();
+    write_timestamped_variant(path, {{"pcomp:\n", "capture:\n  trigger: cycle\n  fields:\n"
+                                                  "    - {signal: ec0.s7.mm.analogInputArray01, name: ai}\n"
+                                                  "    - {signal: ec0.s6.mm.analogOutputArray01, name: ao}\n"
+                                                  "    - {signal: ax3.traj.setpos, name: arc, units: mm}\n"
+                                                  "  last_rows: 100\n  file_path: " + dir.path.string() + "\n  file_name: os_%03d.h5\npcomp:\n"}});
+    FlyIoc v(path);
+    v.run(100);
+    ASSERT_EQ(v.put("FLY:PCAP:ARM", 1), pv::PutStatus::Ok);
+    ASSERT_TRUE(v.run_until([&] { return v.ioc->flyscan().capture()->armed(); })) << v.text("FLY:PCAP:STATUS");
+    ASSERT_EQ(v.put("FLY:PCOMP4:ENABLE", 1), pv::PutStatus::Ok);
+    v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 5.5});
+    constexpr unsigned kN = 10;
+    std::string why;
+    std::vector<registry::BoundSignal> in;
+    for (unsigned i = 1; i <= kN; ++i) in.push_back(v.ioc->signals().bind("ec0.s7.analogInputArray01_" + std::to_string(i), why));
+    ASSERT_TRUE(in.back().bound()) << why;
+    std::map<uint64_t, std::vector<double>> seen; // engine cycle -> the EL3702 samples it received
+    for (int k = 0; k < 8000; ++k) {
+        v.cycles(1);
+        std::vector<double>& s = seen[v.ioc->engine().stats().cycles - 1];
+        for (unsigned i = 0; i < kN; ++i) s.push_back(double(in[i].get()));
+        if (k % 10 == 0) v.ioc->publish();
+    }
+    ASSERT_EQ(v.put("FLY:PCAP:DISARM", 1), pv::PutStatus::Ok);
+    ASSERT_TRUE(v.run_until([&] { return v.get("FLY:PCAP:ACTIVE") == 0 && v.get("FLY:PCAP:FILES") == 1; }));
+    EXPECT_EQ(v.get("FLY:PCAP:ROWS_DROPPED"), 0);
+    const std::string file = (dir.path / "os_001.h5").string();
+    const std::vector<uint64_t> cycle = read_column<uint64_t>(file, "cycle", H5T_NATIVE_UINT64);
+    std::size_t wi = 0, wo = 0;
+    const std::vector<double> ai = read_matrix(file, "ai", wi), ao = read_matrix(file, "ao", wo);
+    ASSERT_EQ(wi, kN);
+    ASSERT_EQ(wo, kN);
+    ASSERT_GE(cycle.size(), 8000u);
+    ASSERT_EQ(ai.size(), cycle.size() * kN);
+    ASSERT_EQ(ao.size(), cycle.size() * kN);
+    // every row: the samples of its cycle, in order
+    std::size_t checked = 0;
+    for (std::size_t r = 0; r < cycle.size(); ++r) {
+        auto it = seen.find(cycle[r]);
+        if (it == seen.end()) continue; // the cycles run by run_until / run, not watched
+        for (unsigned i = 0; i < kN; ++i) ASSERT_EQ(ai[r * kN + i], it->second[i]) << "row " << r << " sample " << i;
+        ++checked;
+    }
+    EXPECT_EQ(checked, 8000u);
+    // the steps the output placed: 6 pulses (0.8 .. 4.8 mm, each 0.4 mm wide), 12 edges, in several different samples
+    std::vector<std::size_t> out_steps, in_steps; // flattened sample index of each change
+    for (std::size_t j = 1; j < ao.size(); ++j) {
+        if (ao[j] != ao[j - 1]) out_steps.push_back(j);
+        if (ai[j] != ai[j - 1]) in_steps.push_back(j);
+    }
+    ASSERT_EQ(out_steps.size(), 12u);
+    ASSERT_EQ(in_steps.size(), 12u);
+    std::set<std::size_t> slots;
+    for (std::size_t j : out_steps) slots.insert(j % kN);
+    EXPECT_GE(slots.size(), 3u) << "the crossings fall anywhere in the cycle";
+    // the input is the output `lag` rows later, every sample of every row
+    const std::size_t lag = (in_steps[0] - out_steps[0]) / kN;
+    EXPECT_EQ(in_steps[0] - out_steps[0], lag * kN) << "an edge came back in another sample";
+    // written in cycle c, sent with its frame and played across the next cycle, where the EL3702
+    // samples it; the frame after carries those samples back, received at the start of c + 2
+    EXPECT_EQ(lag, 2u);
+    for (std::size_t k = 0; k < 12; ++k) EXPECT_EQ(in_steps[k], out_steps[k] + lag * kN) << "edge " << k;
+    for (std::size_t r = lag; r < cycle.size(); ++r)
+        for (unsigned i = 0; i < kN; ++i) ASSERT_EQ(ai[r * kN + i], ao[(r - lag) * kN + i]) << "row " << r << " sample " << i;
+    // the live waveform: the last 100 rows' samples, row by row
+    v.run(20);
+    const std::size_t last = cycle.size() - 1;
+    for (unsigned i = 0; i < kN; ++i) EXPECT_EQ(v.get("FLY:PCAP:LAST:ai", 99 * kN + i), ai[last * kN + i]) << i;
+    EXPECT_EQ(v.ioc->database().find("FLY:PCAP:LAST:ai")->elements(*v.ioc->database().find("FLY:PCAP:LAST:ai")->type().find("VAL")).count, 100 * kN);
+}
+
+TEST(IocFlyScan, AMemoryMapIsCapturedAsItsValuesOnly) {
+    TempDir dir;
+    const std::string path = (dir.path / "mm.yaml").string();
+    write_timestamped_variant(path, {{"pcomp:\n", "capture:\n  trigger: cycle\n  fields:\n"
+                                                  "    - {signal: ec0.s7.mm.analogInputArray01, name: ai, modes: [value, max]}\n"
+                                                  "pcomp:\n"}});
+    try {
+        VirtualIoc v(path);
+        FAIL() << "a max of a memory map was taken";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("mm.yaml:"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("10 samples a cycle) is captured as its values only, not 'max'"), std::string::npos) << e.what();
     }
 }
 
