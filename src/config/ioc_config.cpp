@@ -3,6 +3,7 @@
 #include "config/yaml_reader.hpp"
 #include "core/error.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -388,7 +389,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             cfg.pcomp.push_back(std::move(e));
         }
     }
-    if (YamlNode c = root["capture"]; c && c.keys({"trigger", "gate", "fields", "ring_rows", "last_rows", "file_path", "file_name", "flush_s"})) {
+    if (YamlNode c = root["capture"]; c && c.keys({"trigger", "gate", "fields", "storages", "ring_rows", "last_rows", "file_path", "file_name", "flush_s"})) {
         CaptureEntry e;
         e.where = c.where();
         if (YamlNode t = c["trigger"]; t && t.is_list()) {
@@ -426,6 +427,15 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
                 if (!names.insert(col).second) f.error(SB() << "column '" << col << "' is captured twice");
             }
             e.fields.push_back(std::move(cf));
+        }
+        for (const YamlNode& d : c["storages"].list()) { // data storages whose appends go into the file
+            auto id = d.integer(between(0, 31));
+            if (!id) continue;
+            bool exists = false;
+            for (const StorageEntry& st : cfg.storages) exists = exists || st.id == *id;
+            if (!exists) d.error(SB() << "ds" << *id << " is not in storages:");
+            else if (std::find(e.storages.begin(), e.storages.end(), int(*id)) != e.storages.end()) d.error(SB() << "ds" << *id << " is listed twice");
+            else e.storages.push_back(int(*id));
         }
         e.ring_rows = std::size_t(c["ring_rows"].unsigned_integer(1u << 26).value_or(e.ring_rows));
         if (e.ring_rows < 16) c["ring_rows"].error("should be at least 16 rows");

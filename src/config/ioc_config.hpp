@@ -223,6 +223,9 @@ struct CaptureEntry {
     std::vector<std::string> triggers = {"cycle"};
     std::string gate;              // a signal: accumulate while nonzero ("": always)
     std::vector<CaptureField> fields;
+    // Data storages (ids of `storages:`) whose appended values the file gets, as they come: an
+    // NXlog /entry/ds<id> each; ring_rows values of room between the cycle and the writer.
+    std::vector<int> storages;
     std::size_t ring_rows = 1 << 16; // rows between the cycle and the writer thread
     std::size_t last_rows = 1000;    // rows served as live waveforms
     std::string file_path = "/tmp";  // FILE_PATH at start

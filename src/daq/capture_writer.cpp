@@ -27,6 +27,11 @@ CaptureWriter::CaptureWriter(Capture& capture, Options opt) : capture_(capture),
     if (values != capture_.columns().size())
         throw Error(SB() << "capture writer: " << values << " values a row in the file for " << capture_.columns().size()
                          << " capture columns");
+    if (opt_.storages.size() != opt_.nexus.logs.size())
+        throw Error(SB() << "capture writer: " << opt_.storages.size() << " storages for " << opt_.nexus.logs.size() << " logs");
+    for (DataStorage* ds : opt_.storages)
+        if (!ds || !ds->tapped()) throw Error("capture writer: a data storage without its capture tap");
+    tap_dropped_at_arm_.assign(opt_.storages.size(), 0);
     last_.assign(values, std::vector<double>(opt_.last_rows, 0.0));
     last_cycle_.assign(opt_.last_rows, 0.0);
     thread_ = std::thread([this] { thread_main(); });
@@ -58,6 +63,8 @@ CaptureWriter::Status CaptureWriter::status() const {
     Status s = st_;
     s.armed = capture_.armed() && capture_.capture() == s.capture && s.capture != 0;
     s.dropped = capture_.capture() == s.capture ? capture_.dropped() : 0;
+    if (s.capture)
+        for (std::size_t i = 0; i < opt_.storages.size(); ++i) s.dropped += opt_.storages[i]->tap_dropped() - tap_dropped_at_arm_[i];
     return s;
 }
 
@@ -90,6 +97,8 @@ void CaptureWriter::finish(NexusFile& f) {
     try {
         f.close();
         msg = SB() << "wrote " << f.rows() << " rows to " << f.path();
+        for (std::size_t k = 0; k < opt_.nexus.logs.size(); ++k)
+            msg += SB() << (k ? ", " : " and ") << f.log_rows(k) << " " << opt_.nexus.logs[k].name << " values";
     } catch (const std::exception& e) {
         msg = e.what();
         error = true;
@@ -98,6 +107,15 @@ void CaptureWriter::finish(NexusFile& f) {
     uint64_t dropped = capture_.dropped();
     if (dropped) {
         msg += SB() << "; " << dropped << " rows were dropped (the ring was full: the disk did not keep up)";
+        error = true;
+    }
+    uint64_t values_dropped = 0;
+    {
+        std::lock_guard<std::mutex> l(mu_);
+        for (std::size_t i = 0; i < opt_.storages.size(); ++i) values_dropped += opt_.storages[i]->tap_dropped() - tap_dropped_at_arm_[i];
+    }
+    if (values_dropped) {
+        msg += SB() << "; " << values_dropped << " data-storage values were dropped (their queue was full)";
         error = true;
     }
     if (opt_.log) opt_.log(error, msg);
@@ -117,6 +135,8 @@ void CaptureWriter::thread_main() {
     std::vector<RowHeader> heads(batch);
     std::vector<double> vals(batch * std::max<std::size_t>(cols, 1));
     std::vector<uint64_t> cycles(batch), times(batch);
+    std::vector<uint64_t> log_cycles(batch), log_times(batch); // a storage's values
+    std::vector<double> log_vals(batch);
     std::unique_ptr<NexusFile> file;
     uint64_t capture_no = 0, dropped_logged = 0;
     std::size_t pending = 0; // rows gathered in the batch, not yet appended
@@ -150,7 +170,7 @@ void CaptureWriter::thread_main() {
             set_status([&](Status& s) {
                 s.capture = capture_no;
                 s.file = path;
-                s.rows = s.bytes = 0;
+                s.rows = s.bytes = s.values = 0;
                 s.write_s = 0;
                 s.error = false;
                 s.message = SB() << "capturing to " << path;
@@ -158,6 +178,7 @@ void CaptureWriter::thread_main() {
             {
                 std::lock_guard<std::mutex> l(mu_);
                 last_head_ = last_count_ = 0;
+                for (std::size_t i = 0; i < opt_.storages.size(); ++i) tap_dropped_at_arm_[i] = opt_.storages[i]->tap_dropped();
             }
             if (opt_.log) opt_.log(false, SB() << "capture " << capture_no << ": writing " << path);
             pending = 0;
@@ -218,6 +239,39 @@ void CaptureWriter::thread_main() {
                 pending = 0;
             }
             if (!full) break;
+        }
+        // The storages' values of this capture, as they came (all of them once it has ended).
+        for (std::size_t k = 0; k < opt_.storages.size(); ++k) {
+            for (;;) {
+                std::size_t m = 0;
+                DataStorage::TapEntry e;
+                while (m < batch && opt_.storages[k]->tap_pop(e)) {
+                    if (e.capture != capture_no) continue; // an earlier capture's
+                    log_cycles[m] = e.cycle;
+                    log_times[m] = e.t_ns;
+                    log_vals[m++] = e.value;
+                }
+                if (m == 0) break;
+                total += m;
+                double t0 = thread_cpu_s();
+                try {
+                    file->append_log(k, log_cycles.data(), log_times.data(), log_vals.data(), m);
+                } catch (const std::exception& e) {
+                    if (opt_.log) opt_.log(true, e.what());
+                    set_status([&](Status& s) {
+                        s.error = true;
+                        s.message = e.what();
+                    });
+                    break;
+                }
+                write_s += thread_cpu_s() - t0;
+                set_status([&](Status& s) {
+                    s.values += m;
+                    s.bytes = file->bytes();
+                    s.write_s = write_s;
+                });
+                if (m < batch) break;
+            }
         }
         const double now = now_s();
         if (uint64_t d = capture_.capture() == capture_no ? capture_.dropped() : 0; d > dropped_logged && now - last_drop_log >= 1.0) {

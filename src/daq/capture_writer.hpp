@@ -13,6 +13,7 @@
 #pragma once
 
 #include "daq/capture.hpp"
+#include "daq/data_storage.hpp"
 #include "daq/nexus_file.hpp"
 
 #include <condition_variable>
@@ -30,6 +31,9 @@ class CaptureWriter {
 public:
     struct Options {
         std::vector<NexusColumn> columns; // the Capture's columns in order (one of width w takes w)
+        // Data storages whose appended values go into the file (their taps enabled), storage i as
+        // the log nexus.logs[i].
+        std::vector<DataStorage*> storages;
         NexusOptions nexus;
         double flush_s = 1.0;         // [s] SWMR flush period while capturing
         std::size_t last_rows = 1000; // rows kept for the live waveforms
@@ -56,7 +60,9 @@ public:
         uint64_t capture = 0;       // number of the last capture started (1, 2, ...)
         uint64_t rows = 0;          // rows written into its file so far
         uint64_t bytes = 0;         // row bytes handed to HDF5 in it
-        uint64_t dropped = 0;       // rows of it the ring had no room for
+        uint64_t dropped = 0;       // rows of it the ring had no room for, and storage values
+                                    // their taps had none for
+        uint64_t values = 0;        // data-storage values written into its file
         uint64_t files = 0;         // files completed
         std::string file;           // its file
         std::string message;        // last news: "capturing to F", "wrote N rows to F", an error
@@ -86,6 +92,7 @@ private:
     std::vector<std::vector<double>> last_;
     std::vector<double> last_cycle_;
     std::size_t last_head_ = 0, last_count_ = 0;
+    std::vector<uint64_t> tap_dropped_at_arm_; // per storage (under mu_)
     std::thread thread_;
 };
 

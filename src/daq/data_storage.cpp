@@ -60,7 +60,14 @@ uint32_t DataStorage::append(const double* v, std::size_t n) noexcept {
     }
     appended_ += n;
     dirty_ = true;
+    if (tap_ && tap_capture_)
+        for (std::size_t i = 0; i < n; ++i)
+            if (!tap_->push({tap_cycle_, tap_t_ns_, tap_capture_, v[i]})) tap_dropped_.fetch_add(1, std::memory_order_relaxed);
     return 0;
+}
+
+void DataStorage::enable_tap(std::size_t capacity) {
+    tap_ = std::make_unique<SpscQueue<TapEntry>>(std::max<std::size_t>(capacity, 1));
 }
 
 void DataStorage::clear() noexcept {

@@ -16,8 +16,12 @@
 // period passed, or at once after ds_push_asyn (publish()); the IOC loop reads the latest copy.
 // Requests from the IOC loop (clear, set the index, write the data: the DSnn-ClrCmd, -DataIdAct,
 // -DataSet PVs) go through a bounded queue and are applied by the cycle in publish().
-// Threading: the constructor before the cycle starts; the RT methods on the RT thread; update(),
-// snapshot() and the request_*() methods on ONE non-RT thread (the IOC loop).
+// Capture tap (docs/flyscan.md "Data storages in the capture"): while a capture runs, every value
+// appended is also queued, with its cycle, time and capture number, for the capture's writer
+// thread, which writes them into the capture file; a full queue drops the value and counts it.
+// Threading: the constructor and enable_tap() before the cycle starts; the RT methods on the RT
+// thread; update(), snapshot() and the request_*() methods on ONE non-RT thread (the IOC loop);
+// tap_pop() on ONE other thread (the capture's writer).
 #pragma once
 
 #include "core/spsc_queue.hpp"
@@ -26,6 +30,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string_view>
 #include <vector>
 
@@ -58,6 +63,27 @@ public:
 
     int id() const noexcept { return id_; }
     std::size_t capacity() const noexcept { return buf_.size(); }
+
+    // ---- capture tap ---------------------------------------------------------------------------
+    struct TapEntry {
+        uint64_t cycle = 0, t_ns = 0; // the cycle that appended the value and its time [ns]
+        uint64_t capture = 0;         // the capture it belongs to (1, 2, ...)
+        double value = 0;
+    };
+    // Configuration: a queue of `capacity` values for the capture path.
+    void enable_tap(std::size_t capacity);
+    bool tapped() const noexcept { return tap_ != nullptr; }
+    // RT, once a cycle, before the next cycle's PLCs: the values appended from now on belong to
+    // `capture` (0: none, not queued) and carry that cycle and time.
+    void tap_next(uint64_t cycle, uint64_t t_ns, uint64_t capture) noexcept {
+        tap_cycle_ = cycle;
+        tap_t_ns_ = t_ns;
+        tap_capture_ = capture;
+    }
+    // Values the tap had no room for, since the start.
+    uint64_t tap_dropped() const noexcept { return tap_dropped_.load(std::memory_order_relaxed); }
+    // The writer thread: the next queued value; false when none.
+    bool tap_pop(TapEntry& e) noexcept { return tap_ && tap_->pop(e); }
 
     // ---- RT (the cycle's thread) -------------------------------------------------------------
     // Appends n values (ECMC appendData); 0 or the error id (also latched in error()).
@@ -129,6 +155,10 @@ private:
         enum class Op : uint8_t { Clear, Index, Data } op = Op::Clear;
         std::size_t index = 0;
     };
+    std::unique_ptr<SpscQueue<TapEntry>> tap_;
+    uint64_t tap_cycle_ = 0, tap_t_ns_ = 0, tap_capture_ = 0;
+    std::atomic<uint64_t> tap_dropped_{0};
+
     SpscQueue<Request> requests_{16};
     std::vector<double> incoming_;        // request_data's values (capacity long)
     std::size_t incoming_n_ = 0;

@@ -151,6 +151,10 @@ void validate(const std::string& path, const std::vector<NexusColumn>& columns, 
         if (!names.insert(n).second) throw bad("appears twice");
         if (columns[i].width == 0) throw bad("has width 0 (at least one value a row)");
     }
+    std::set<std::string> logs{"data", "title"};
+    for (const NexusLog& l : opt.logs)
+        if (l.name.empty() || l.name == "." || l.name.find('/') != std::string::npos || !logs.insert(l.name).second)
+            throw Error(SB() << path << ": log name \"" << l.name << "\" is not a new group name under /entry");
     std::set<std::string> attributes{"NX_class", "default"};
     for (const auto& [name, value] : opt.attributes)
         if (name.empty() || !attributes.insert(name).second)
@@ -185,14 +189,21 @@ struct NexusFile::Impl {
     std::vector<double> time_s;
     std::size_t capacity_rows = 0;
 
-    // n rows of dataset k (w values each, row-major in buf).
-    void write(std::size_t k, hid_t mem_type, const void* buf, hsize_t n, hsize_t w = 1);
+    // The logs: their first dataset (value, time, cycle, timestamp_ns follow) and rows.
+    struct Log {
+        std::size_t first = 0;
+        std::uint64_t rows = 0, t0_ns = 0;
+    };
+    std::vector<Log> logs;
+
+    // n rows of dataset k after its first `at` (w values each, row-major in buf).
+    void write(std::size_t k, hsize_t at, hid_t mem_type, const void* buf, hsize_t n, hsize_t w = 1);
 };
 
-void NexusFile::Impl::write(std::size_t k, hid_t mem_type, const void* buf, hsize_t n, hsize_t w) {
+void NexusFile::Impl::write(std::size_t k, hsize_t at, hid_t mem_type, const void* buf, hsize_t n, hsize_t w) {
     hid_t ds = datasets[k].get();
     const int rank = w > 1 ? 2 : 1;
-    const hsize_t new_extent[2] = {rows + n, w}, start[2] = {rows, 0}, count[2] = {n, w};
+    const hsize_t new_extent[2] = {at + n, w}, start[2] = {at, 0}, count[2] = {n, w};
     if (H5Dset_extent(ds, new_extent) < 0) fail(path, "cannot extend a dataset");
     Handle file_space = check(H5Dget_space(ds), H5Sclose, path, "dataspace");
     if (H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, count, nullptr) < 0)
@@ -241,8 +252,10 @@ NexusFile::NexusFile(const std::string& path, std::vector<NexusColumn> columns, 
 
     // Empty, growing without limit in rows, chunk_rows rows a chunk (of a [rows, w] dataset
     // chunk_rows / w rows: every chunk the same size, within HDF5's default 1 MiB chunk cache).
+    // A dataset `name` of the group `data` holds (at `group`, for messages).
+    std::string group = "/entry/data";
     auto dataset = [&](const std::string& name, hid_t type, hsize_t w = 1) {
-        const std::string where = "/entry/data/" + name;
+        const std::string where = group + "/" + name;
         const int rank = w > 1 ? 2 : 1;
         const hsize_t zero[2] = {0, w}, max[2] = {H5S_UNLIMITED, w},
                       chunk[2] = {std::max<hsize_t>(1, opt.chunk_rows / w), w};
@@ -266,6 +279,21 @@ NexusFile::NexusFile(const std::string& path, std::vector<NexusColumn> columns, 
     string_attribute(dataset("time", H5T_IEEE_F64LE), "units", "s", path, "/entry/data/time");
     string_attribute(dataset("timestamp_ns", H5T_STD_U64LE), "units", "ns", path,
                      "/entry/data/timestamp_ns");
+    data.reset();
+    for (const NexusLog& l : opt.logs) {
+        const std::string where = group = "/entry/" + l.name;
+        data = check(H5Gcreate2(entry.get(), l.name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+                     H5Gclose, path, "cannot create " + where);
+        string_attribute(data.get(), "NX_class", "NXlog", path, where);
+        string_attribute(data.get(), "source", l.source, path, where);
+        m.logs.push_back({m.datasets.size()});
+        hid_t v = dataset("value", H5T_IEEE_F64LE);
+        if (!l.units.empty()) string_attribute(v, "units", l.units, path, where + "/value");
+        string_attribute(dataset("time", H5T_IEEE_F64LE), "units", "s", path, where + "/time");
+        dataset("cycle", H5T_STD_U64LE);
+        string_attribute(dataset("timestamp_ns", H5T_STD_U64LE), "units", "ns", path, where + "/timestamp_ns");
+        data.reset();
+    }
 
     // No attribute may be open here; groups and datasets may.
     entry.reset();
@@ -323,12 +351,37 @@ void NexusFile::append(const uint64_t* cycle, const uint64_t* t_ns, const double
     const hsize_t rows = n;
     m.broken = true; // until every dataset has its rows
     for (std::size_t d = 0; d < nds; ++d) // a uint64 column: the doubles' bytes are its values
-        m.write(d, m.uint64[d] ? H5T_NATIVE_UINT64 : H5T_NATIVE_DOUBLE, out + m.offset[d] * n, rows, m.width[d]);
-    m.write(nds, H5T_NATIVE_UINT64, cycle, rows);
-    m.write(nds + 1, H5T_NATIVE_DOUBLE, m.time_s.data(), rows);
-    m.write(nds + 2, H5T_NATIVE_UINT64, t_ns, rows);
+        m.write(d, m.rows, m.uint64[d] ? H5T_NATIVE_UINT64 : H5T_NATIVE_DOUBLE, out + m.offset[d] * n, rows, m.width[d]);
+    m.write(nds, m.rows, H5T_NATIVE_UINT64, cycle, rows);
+    m.write(nds + 1, m.rows, H5T_NATIVE_DOUBLE, m.time_s.data(), rows);
+    m.write(nds + 2, m.rows, H5T_NATIVE_UINT64, t_ns, rows);
     m.rows += n;
     m.broken = false;
+}
+
+void NexusFile::append_log(std::size_t k, const uint64_t* cycle, const uint64_t* t_ns, const double* values, std::size_t n) {
+    if (!impl_) throw Error("append_log on a moved-from NexusFile");
+    Impl& m = *impl_;
+    if (!m.file.valid()) throw Error(SB() << m.path << ": append after close");
+    if (m.broken) throw Error(SB() << m.path << ": append after a failed write");
+    if (k >= m.logs.size()) throw Error(SB() << m.path << ": no log " << k);
+    if (n == 0) return;
+    quiet_hdf5();
+    Impl::Log& l = m.logs[k];
+    if (l.rows == 0) l.t0_ns = t_ns[0];
+    if (n > m.time_s.size()) m.time_s.resize(n);
+    for (std::size_t i = 0; i < n; ++i) m.time_s[i] = double(int64_t(t_ns[i] - l.t0_ns)) * 1e-9;
+    m.broken = true;
+    m.write(l.first, l.rows, H5T_NATIVE_DOUBLE, values, n);
+    m.write(l.first + 1, l.rows, H5T_NATIVE_DOUBLE, m.time_s.data(), n);
+    m.write(l.first + 2, l.rows, H5T_NATIVE_UINT64, cycle, n);
+    m.write(l.first + 3, l.rows, H5T_NATIVE_UINT64, t_ns, n);
+    l.rows += n;
+    m.broken = false;
+}
+
+std::uint64_t NexusFile::log_rows(std::size_t k) const noexcept {
+    return impl_ && k < impl_->logs.size() ? impl_->logs[k].rows : 0;
 }
 
 void NexusFile::flush() {
@@ -359,7 +412,10 @@ std::uint64_t NexusFile::rows() const noexcept {
     return impl_ ? impl_->rows : 0;
 }
 std::uint64_t NexusFile::bytes() const noexcept {
-    return impl_ ? impl_->rows * 8 * (impl_->ncol + 3) : 0;
+    if (!impl_) return 0;
+    std::uint64_t b = impl_->rows * 8 * (impl_->ncol + 3);
+    for (const Impl::Log& l : impl_->logs) b += l.rows * 8 * 4;
+    return b;
 }
 const std::string& NexusFile::path() const noexcept {
     static const std::string none;

@@ -11,6 +11,9 @@
 //   /entry/data/cycle      uint64: the engine cycle of the row
 //   /entry/data/time       float64 [s] since the first row
 //   /entry/data/timestamp_ns  uint64 [ns], absolute
+//   /entry/<log>           NX_class="NXlog", source: values that come one by one rather than a row
+//                          a cycle (a data storage's appends): value float64 (units), time
+//                          float64 [s] since its first value, cycle uint64, timestamp_ns uint64
 // The layout is fixed at construction: SWMR allows no new objects or attributes afterwards.
 // Rows become visible to readers at flush() (and close()), not at append().
 //
@@ -40,6 +43,12 @@ struct NexusColumn {
                            // samples a cycle of an oversampled input, in time order)
 };
 
+// A log of values written as they come (NXlog under /entry): name (not "data" nor "title"),
+// units of the values, the engine source it records.
+struct NexusLog {
+    std::string name, units, source;
+};
+
 struct NexusOptions {
     std::size_t chunk_rows = 4096; // chunk size of every dataset [rows] (>= 1)
     std::string title;             // /entry/title (string dataset); none if empty
@@ -48,6 +57,7 @@ struct NexusOptions {
                         // or the first if it is the only one)
     // Extra string attributes on /entry (IOC name, ISO 8601 start time).
     std::vector<std::pair<std::string, std::string>> attributes;
+    std::vector<NexusLog> logs; // /entry/<name> each
 };
 
 class NexusFile {
@@ -67,13 +77,16 @@ public:
     // dataset; its own buffers grow only when n exceeds every earlier n (HDF5 mallocs inside).
     // After an Error the file takes no more rows (close it).
     void append(const uint64_t* cycle, const uint64_t* t_ns, const double* values, std::size_t n);
+    // Appends n values to log k (of NexusOptions::logs): cycle[n], t_ns[n], values[n].
+    void append_log(std::size_t k, const uint64_t* cycle, const uint64_t* t_ns, const double* values, std::size_t n);
+    std::uint64_t log_rows(std::size_t k) const noexcept;
     // Makes the rows appended so far visible to SWMR readers (H5Dflush of every dataset; no fsync).
     void flush();
     // Flushes and closes; idempotent. Throws Error on failure (the handles are released anyway).
     void close();
 
     std::uint64_t rows() const noexcept;
-    // Row data handed to HDF5 so far [bytes]: 8 * (columns() + 3) a row.
+    // Row data handed to HDF5 so far [bytes]: 8 * (columns() + 3) a row, 32 a log value.
     std::uint64_t bytes() const noexcept;
     const std::string& path() const noexcept;
     std::size_t columns() const noexcept; // values a row: the columns' widths summed

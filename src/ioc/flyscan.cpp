@@ -163,6 +163,9 @@ public:
         }
         const bool gate = f_.gate_.kind == ValueSource::Kind::None || f_.gate_.read(c.t_ns) != 0;
         f_.capture_->sample(c.cycle, c.t_ns, in_.data(), gate, trigger, t);
+        // the next cycle's appends belong to the capture running now (none after a DISARM)
+        const uint64_t running = f_.capture_->armed() ? f_.capture_->capture() : 0;
+        for (daq::DataStorage* ds : f_.taps_) ds->tap_next(c.cycle + 1, c.t_ns + c.period_ns, running);
     }
 
 private:
@@ -524,7 +527,8 @@ ValueSource IocFlyScan::resolve(const std::string& name, std::string& why) const
     return v;
 }
 
-void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::vector<ethercat::Bus*>& buses) {
+void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::vector<ethercat::Bus*>& buses,
+                      const std::vector<daq::DataStorage*>& storages) {
     if (!enabled()) return;
     axes_ = axes;
     for (auto& bp : blocks_) {
@@ -622,6 +626,14 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
         o.nexus.title = SB() << cfg_.name << " capture";
         o.nexus.attributes = {{"ioc", cfg_.name}, {"trigger", join(c.triggers)}, {"gate", c.gate.empty() ? "always" : c.gate},
                               {"engine_rate_hz", std::string(SB() << cfg_.rate_hz)}};
+        for (int id : c.storages) // checked by the configuration: each one exists
+            for (daq::DataStorage* ds : storages)
+                if (ds->id() == id) {
+                    ds->enable_tap(c.ring_rows);
+                    taps_.push_back(ds);
+                    o.storages.push_back(ds);
+                    o.nexus.logs.push_back({std::string(SB() << "ds" << id), "", std::string(SB() << "ds" << id << " (data storage: the values PLC code appended)")});
+                }
         o.flush_s = c.flush_s;
         o.last_rows = std::max<std::size_t>(c.last_rows, 1);
         std::size_t widest = 1;

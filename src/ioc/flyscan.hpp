@@ -12,7 +12,8 @@
 // Signals: pcomp<n>.out, .active, .produced (records and capture fields read them); capture fields
 // and triggers also take pcomp<n>.rose (1 in the cycle OUT rose). A capture field may name a memory
 // map (ec0.s7.mm.analogInputArray01: an oversampled channel's n samples a cycle): n values a row,
-// one [rows, n] dataset in the file.
+// one [rows, n] dataset in the file. The data storages of capture.storages write every value PLC
+// code appends while a capture runs into its file (/entry/ds<n>, NXlog).
 // Threading: construction and bind() before the cycle starts; the stage on the RT thread; puts,
 // publish() and stop() on the IOC loop; the capture's HDF5 writing on its own writer thread.
 #pragma once
@@ -63,7 +64,9 @@ public:
     // Bring-up: binds inputs, outputs, capture fields; adds the stage. Throws Error (file:line:col).
     // An output on an EL2252 channel (a slave with startTime and activate) gets its edges at their
     // predicted DC times (daq::TimedPcompOutput); it needs a bus this IOC masters (`buses`).
-    void bind(rt::Engine& engine, motion::AxisGroup* axes, const std::vector<ethercat::Bus*>& buses = {});
+    // `storages`: the IOC's data storages (capture.storages names some of them).
+    void bind(rt::Engine& engine, motion::AxisGroup* axes, const std::vector<ethercat::Bus*>& buses = {},
+              const std::vector<daq::DataStorage*>& storages = {});
     // IOC loop: the blocks' and the capture's state into the PVs.
     void publish();
     // Clean stop: ends a running capture (its file is completed).
@@ -151,6 +154,7 @@ private:
         bool level = false; // RT: the signal's last level
     };
     std::vector<Trigger> triggers_;
+    std::vector<daq::DataStorage*> taps_; // capture.storages: told each cycle which capture runs
     std::vector<std::string> columns_;
     pv::Record *arm_ = nullptr, *disarm_ = nullptr, *cap_active_ = nullptr, *file_path_ = nullptr, *file_name_ = nullptr,
                *full_name_ = nullptr, *capture_no_ = nullptr, *rows_captured_ = nullptr, *rows_written_ = nullptr,

@@ -689,7 +689,7 @@ void Ioc::bring_up() {
     memmaps_->bind(registry_, buses);
     plcs_->bind(*engine_, axes_->group(), std::move(bus_ok), storages_->storages(), memmaps_->memmaps(),
                 [this](const std::string& name) { return flyscan_->plc_cell(name); });
-    flyscan_->bind(*engine_, axes_->group(), buses);
+    flyscan_->bind(*engine_, axes_->group(), buses, storages_->storages());
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {

@@ -18,9 +18,11 @@ from conftest import RunServer, acquire_port, connect, forget_pvs, release_port,
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
-def start(tmp_path, prefix, example="ioc.yaml", before_pcomp=""):
+def start(tmp_path, prefix, example="ioc.yaml", before_pcomp="", before_plcs=""):
     text = (EXAMPLES / "flyscan" / example).read_text()
     text = text.replace("\npcomp:\n", "\n" + before_pcomp + "pcomp:\n", 1)
+    if before_plcs:  # ends with "plcs:\n" and entries of its own, before the example's
+        text = text.replace("\nplcs:\n", "\n" + before_plcs, 1)
     assert "ioc: {name: FLY}" in text
     text = text.replace("ioc: {name: FLY}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
     text = text.replace("file: ../", f"file: {EXAMPLES}/").replace("include: [../", f"include: [{EXAMPLES}/")
@@ -152,8 +154,13 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
     capture = ("capture:\n  trigger: cycle\n  fields:\n"
                "    - {signal: ec0.s7.mm.analogInputArray01, name: ai}\n"
                "    - {signal: ec0.s6.mm.analogOutputArray01, name: ao}\n"
+               "  storages: [2]\n"
                f"  last_rows: 50\n  file_path: {data}\n  file_name: samples_%03d.h5\n")
-    srv, port = start(tmp_path, prefix, "timestamped.yaml", capture)
+    # and a data storage a PLC appends the arc to at each EL4732 edge: those values into the file too
+    (tmp_path / "edges.plc").write_text(
+        "if (pcomp4.out <> static.was) { ds_append_data(2, ax3.traj.setpos); };\nstatic.was := pcomp4.out;\n")
+    plc = f"storages:\n  - {{id: 2, size: 3, type: ring}}\nplcs:\n  - {{id: 1, file: {tmp_path / 'edges.plc'}}}\n"
+    srv, port = start(tmp_path, prefix, "timestamped.yaml", capture, plc)
     try:
         p = prefix
         assert text(p + "PCOMP3:INP") == "ax3.traj.setpos"
@@ -198,6 +205,13 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
             assert f["entry/data/ai"].attrs["source"] == "ec0.s7.mm.analogInputArray01"
         assert ai.shape[1] == 10 and ao.shape == ai.shape and ai.shape[0] > 1000, ai.shape
         assert (ai[2:] == ao[:-2]).all()
+        # the 5 edges' arc positions (the storage itself keeps 3): 0.8, 1.2, ... 2.4 mm, just past
+        with h5py.File(data / "samples_001.h5", "r") as f:
+            assert f["entry/ds2"].attrs["NX_class"] == "NXlog"
+            arc = f["entry/ds2/value"][()]
+            assert f["entry/ds2/cycle"].shape == arc.shape
+        assert len(arc) == 5, arc
+        assert np.all(arc >= [0.8, 1.2, 1.6, 2.0, 2.4]) and np.all(arc < np.array([0.8, 1.2, 1.6, 2.0, 2.4]) + 0.01), arc
         steps_inside = [r for r in range(len(ao)) if 0 < np.count_nonzero(ao[r]) < 10]
         assert len(steps_inside) >= 2, steps_inside  # of the 5 edges
         assert srv.alive()

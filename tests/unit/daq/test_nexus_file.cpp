@@ -381,6 +381,11 @@ TEST(NexusFile, BadColumnsAndOptionsAreRefusedBeforeTheFileExists) {
     EXPECT_EQ(error(three_columns(), opt),
               path + ": /entry attribute \"NX_class\" is given twice or reserved");
     opt = {};
+    opt.logs = {{"data", "", ""}};
+    EXPECT_EQ(error(three_columns(), opt), path + ": log name \"data\" is not a new group name under /entry");
+    opt.logs = {{"ds0", "", ""}, {"ds0", "", ""}};
+    EXPECT_EQ(error(three_columns(), opt), path + ": log name \"ds0\" is not a new group name under /entry");
+    opt = {};
     opt.chunk_rows = 0;
     EXPECT_EQ(error(three_columns(), opt), path + ": chunk_rows 0 should be >= 1");
     EXPECT_FALSE(std::filesystem::exists(path));

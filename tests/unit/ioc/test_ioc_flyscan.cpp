@@ -51,12 +51,12 @@ struct FlyIoc : VirtualIoc {
     }
 };
 
-// A dataset of /entry/data read as T (memory type `mem`); `is` (if given) says whether the
-// dataset's own type is `file_type`.
+// A dataset of /entry/data (or at `name` if it starts with '/') read as T (memory type `mem`);
+// `is` (if given) says whether the dataset's own type is `file_type`.
 template <class T> std::vector<T> read_column(const std::string& file, const std::string& name, hid_t mem, hid_t file_type = -1, bool* is = nullptr) {
     hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
     if (f < 0) throw std::runtime_error("cannot open " + file);
-    hid_t d = H5Dopen2(f, ("/entry/data/" + name).c_str(), H5P_DEFAULT);
+    hid_t d = H5Dopen2(f, (name[0] == '/' ? name : "/entry/data/" + name).c_str(), H5P_DEFAULT);
     std::vector<T> v;
     if (d >= 0) {
         if (is) {
@@ -612,6 +612,86 @@ TEST(IocFlyScan, AMemoryMapIsCapturedAsItsValuesOnly) {
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("mm.yaml:"), std::string::npos) << e.what();
         EXPECT_NE(std::string(e.what()).find("10 samples a cycle) is captured as its values only, not 'max'"), std::string::npos) << e.what();
+    }
+}
+
+// A data storage listed in capture.storages: every value PLC code appends while the capture runs
+// goes into the file (/entry/ds3, NXlog) with the cycle that appended it, none lost though the
+// storage's own buffer (a ring of 4) keeps only the last few, none from before ARM or after DISARM.
+TEST(IocFlyScan, DataStorageValuesGoIntoTheCaptureFile) {
+    TempDir dir;
+    std::ofstream(dir.path / "ds.plc") << "static.n += 1;\nif (static.n % 7 == 0) { ds_append_data(3, static.n); };\n";
+    const std::string path = (dir.path / "ds.yaml").string();
+    write_timestamped_variant(path, {{"plcs:\n", "storages:\n  - {id: 3, size: 4, type: ring}\nplcs:\n  - {id: 1, file: " + (dir.path / "ds.plc").string() + "}\n"},
+                                     {"pcomp:\n", "capture:\n  trigger: cycle\n  fields:\n"
+                                                   "    - {signal: ax3.traj.setpos, name: arc, units: mm}\n"
+                                                   "  storages: [3]\n"
+                                                   "  file_path: " + dir.path.string() + "\n  file_name: ds_%03d.h5\npcomp:\n"}});
+    FlyIoc v(path);
+    v.run(100);
+    ASSERT_EQ(v.put("FLY:PCAP:ARM", 1), pv::PutStatus::Ok);
+    ASSERT_TRUE(v.run_until([&] { return v.ioc->flyscan().capture()->armed(); })) << v.text("FLY:PCAP:STATUS");
+    v.cycles(3000);
+    ASSERT_EQ(v.put("FLY:PCAP:DISARM", 1), pv::PutStatus::Ok);
+    ASSERT_TRUE(v.run_until([&] { return v.get("FLY:PCAP:ACTIVE") == 0 && v.get("FLY:PCAP:FILES") == 1; }));
+    v.cycles(500); // appends after the DISARM stay out of the file
+    EXPECT_EQ(v.get("FLY:PCAP:ROWS_DROPPED"), 0);
+    EXPECT_EQ(v.get("FLY:DS03-Count"), 4); // the storage's own ring holds 4
+    const std::string file = (dir.path / "ds_001.h5").string();
+    const std::vector<uint64_t> rows = read_column<uint64_t>(file, "cycle", H5T_NATIVE_UINT64);
+    const std::vector<uint64_t> row_t = read_column<uint64_t>(file, "timestamp_ns", H5T_NATIVE_UINT64);
+    ASSERT_GT(rows.size(), 3000u);
+    const std::vector<double> value = read_column<double>(file, "/entry/ds3/value", H5T_NATIVE_DOUBLE),
+                              time = read_column<double>(file, "/entry/ds3/time", H5T_NATIVE_DOUBLE);
+    const std::vector<uint64_t> cycle = read_column<uint64_t>(file, "/entry/ds3/cycle", H5T_NATIVE_UINT64),
+                                t_ns = read_column<uint64_t>(file, "/entry/ds3/timestamp_ns", H5T_NATIVE_UINT64);
+    ASSERT_GE(value.size(), rows.size() / 7 - 1);
+    ASSERT_LE(value.size(), rows.size() / 7 + 1);
+    ASSERT_EQ(cycle.size(), value.size());
+    ASSERT_EQ(t_ns.size(), value.size());
+    ASSERT_EQ(time.size(), value.size());
+    for (std::size_t i = 0; i < value.size(); ++i) {
+        EXPECT_EQ(std::fmod(value[i], 7.0), 0.0) << i;
+        if (i) EXPECT_EQ(value[i] - value[i - 1], 7.0) << "value " << i << " lost or repeated";
+        // the PLC counts the cycles: the appending cycle is the count plus a constant
+        EXPECT_EQ(double(cycle[i]) - value[i], double(cycle[0]) - value[0]) << i;
+        EXPECT_NEAR(time[i], double(t_ns[i] - t_ns[0]) * 1e-9, 1e-9) << i;
+        // within the capture: a row of the same cycle has the same time stamp
+        ASSERT_GE(cycle[i], rows.front());
+        ASSERT_LE(cycle[i], rows.back() + 1);
+        if (cycle[i] <= rows.back()) EXPECT_EQ(t_ns[i], row_t[cycle[i] - rows.front()]) << i;
+    }
+    hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    char cls[16] = {};
+    hid_t a = H5Aopen_by_name(f, "/entry/ds3", "NX_class", H5P_DEFAULT, H5P_DEFAULT);
+    hid_t t = H5Aget_type(a);
+    char* pc = nullptr;
+    hid_t mt = H5Tcopy(H5T_C_S1);
+    H5Tset_size(mt, H5T_VARIABLE);
+    H5Tset_cset(mt, H5T_CSET_UTF8);
+    if (H5Aread(a, mt, &pc) >= 0 && pc) {
+        std::snprintf(cls, sizeof cls, "%s", pc);
+        H5free_memory(pc);
+    }
+    H5Tclose(mt);
+    H5Tclose(t);
+    H5Aclose(a);
+    H5Fclose(f);
+    EXPECT_STREQ(cls, "NXlog");
+    EXPECT_NE(v.text("FLY:PCAP:STATUS").find(std::to_string(value.size()) + " ds3 values"), std::string::npos) << v.text("FLY:PCAP:STATUS");
+}
+
+TEST(IocFlyScan, ACapturedStorageMustExist) {
+    TempDir dir;
+    const std::string path = (dir.path / "nods.yaml").string();
+    write_timestamped_variant(path, {{"pcomp:\n", "capture:\n  trigger: cycle\n  fields:\n    - {signal: ax3.traj.setpos, name: arc}\n"
+                                                  "  storages: [5]\npcomp:\n"}});
+    try {
+        config::IocConfig::load(path);
+        FAIL() << "a storage that does not exist was taken";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("nods.yaml:"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("ds5 is not in storages:"), std::string::npos) << e.what();
     }
 }
 
