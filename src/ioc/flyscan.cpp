@@ -651,6 +651,73 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
     engine.add_stage(rt::StageOrder::Triggers, *stage_);
 }
 
+namespace {
+// Device support "beamctl" on pcomp<n>.out, .active, .produced: the block's state as the cycle last
+// published it. An I/O Intr record on .out is processed for every pulse, one that rose and fell
+// between two looks of the IOC loop included (PRODUCED moved). IOC loop only.
+class PcompItemDevice : public pv::LinkDevice {
+public:
+    enum class Item { Out, Active, Produced };
+    PcompItemDevice(const std::atomic<uint32_t>& value, const std::atomic<uint32_t>& produced, Item item, int bit, std::string name)
+        : value_(value), produced_(produced), item_(item), bit_(bit), name_(std::move(name)) {}
+    bool read(double& v) override {
+        v = value();
+        last_ = v;
+        return true;
+    }
+    bool write(double) override { return false; }
+    bool changed() override {
+        const double v = value();
+        bool c = v != last_;
+        last_ = v;
+        const uint32_t p = produced_.load(std::memory_order_relaxed);
+        if (item_ == Item::Out && p != last_produced_) c = true;
+        last_produced_ = p;
+        return c;
+    }
+    std::string describe() const override { return name_; }
+
+private:
+    double value() const {
+        const uint32_t v = value_.load(std::memory_order_relaxed);
+        return bit_ >= 0 ? double((v >> bit_) & 1u) : double(v);
+    }
+    const std::atomic<uint32_t>& value_;
+    const std::atomic<uint32_t>& produced_;
+    Item item_;
+    int bit_;
+    std::string name_;
+    double last_ = -1;
+    uint32_t last_produced_ = 0;
+};
+} // namespace
+
+std::unique_ptr<pv::LinkDevice> IocFlyScan::make_device(std::string_view name, int bit, bool output, std::string& why) {
+    for (auto& bp : blocks_) {
+        Block& b = *bp;
+        const std::string owner = SB() << "pcomp" << b.cfg.id;
+        if (name.size() <= owner.size() || name.compare(0, owner.size(), owner) != 0 || name[owner.size()] != '.') continue;
+        const std::string_view item = name.substr(owner.size() + 1);
+        using Item = PcompItemDevice::Item;
+        const std::string pvs = SB() << cfg_.prefix << "PCOMP" << b.cfg.id << ":";
+        if (output) {
+            why = SB() << "'" << name << "' is the block's; an output link writes its parameters through " << pvs << "ENABLE, START, STEP, ... (link to those PVs)";
+            return nullptr;
+        }
+        if ((bit > 0 && item != "produced") || bit >= 32) {
+            why = SB() << "'" << name << "' is 0 or 1; it has no bit " << bit;
+            return nullptr;
+        }
+        if (item == "out") return std::make_unique<PcompItemDevice>(b.st_out, b.st_produced, Item::Out, bit, std::string(name));
+        if (item == "active") return std::make_unique<PcompItemDevice>(b.st_active, b.st_produced, Item::Active, bit, std::string(name));
+        if (item == "produced") return std::make_unique<PcompItemDevice>(b.st_produced, b.st_produced, Item::Produced, bit, std::string(name));
+        why = SB() << "'" << name << "': records read " << owner << ".out, .active and .produced (the parameters are the PVs " << pvs << "*)";
+        return nullptr;
+    }
+    why = SB() << "no position-compare block for '" << name << "'";
+    return nullptr;
+}
+
 const std::vector<std::string>* IocFlyScan::samples_of(const std::string& name) const {
     return memmaps_ ? memmaps_->elements(name) : nullptr;
 }

@@ -29,6 +29,7 @@
 #include "motion/axis_group.hpp"
 #include "plc/program.hpp"
 #include "pv/database.hpp"
+#include "pv/link.hpp"
 #include "registry/registry.hpp"
 #include "rt/engine.hpp"
 
@@ -82,6 +83,9 @@ public:
     // PLC code's names of the blocks (pcomp<n>.enable, .start, ... .out, .state): the cells the
     // cycle reads before and writes after each block's evaluation; nullopt for other names.
     std::optional<plc::Binding> plc_cell(const std::string& name);
+    // Device support "beamctl" on a block's signals (INP "@pcomp1.out", ".active", ".produced"):
+    // read in the IOC loop; nullptr with `why` for anything else (writes: the PCOMP PVs).
+    std::unique_ptr<pv::LinkDevice> make_device(std::string_view name, int bit, bool output, std::string& why);
     // The path the next ARM writes (FILE_PATH/FILE_NAME with the capture number).
     std::string next_file() const;
 

@@ -609,8 +609,15 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         devices_.push_back(std::move(dev));
         return devices_.back().get();
     }
+    if (sig->owner_kind == registry::OwnerKind::Engine && sig->owner.rfind("pcomp", 0) == 0) { // a PCOMP block's out, active, produced
+        std::string reason;
+        auto dev = flyscan_->make_device(sig->name, bit, output, reason);
+        if (!dev) return fail(reason);
+        devices_.push_back(std::move(dev));
+        return devices_.back().get();
+    }
     if (sig->owner_kind != registry::OwnerKind::Bus)
-        return fail(SB() << "'" << name << "' is a signal of " << sig->owner << "; device support reads and writes bus entries, axis and PLC items");
+        return fail(SB() << "'" << name << "' is a signal of " << sig->owner << "; device support reads and writes bus entries, axis, PLC and PCOMP items");
     std::string reason;
     auto entry = entry_pvs_.find(r.name());
     bool entry_pv = entry != entry_pvs_.end() && entry->second == sig->name; // the entry's own PV

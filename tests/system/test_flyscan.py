@@ -160,6 +160,10 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
     (tmp_path / "edges.plc").write_text(
         "if (pcomp4.out <> static.was) { ds_append_data(2, ax3.traj.setpos); };\nstatic.was := pcomp4.out;\n")
     plc = f"storages:\n  - {{id: 2, size: 3, type: ring}}\nplcs:\n  - {{id: 1, file: {tmp_path / 'edges.plc'}}}\n"
+    # and a record of a .db file on the block's pulse count (device support "@pcomp1.produced")
+    (tmp_path / "made.db").write_text(
+        'record(longin, "$(P)Made") { field(DTYP, "beamctl") field(INP, "@pcomp1.produced") field(SCAN, "I/O Intr") }\n')
+    capture += f"db:\n  - {{file: {tmp_path / 'made.db'}, macros: {{P: '{prefix}'}}}}\n"
     srv, port = start(tmp_path, prefix, "timestamped.yaml", capture, plc)
     try:
         p = prefix
@@ -181,6 +185,7 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
         assert get(p + "PCOMP3:PRODUCED") == 3
         assert get(p + "PCOMP3:LATE") == 0
         assert get(p + "PCOMP1:TIMED") == 0  # the EL2808 block: plain
+        assert wait_for(lambda: get(p + "Made") == 3, 5)
         # the EL4732 block placed the same 5 edges; the EL3702 reads its 10 samples per cycle back
         assert get(p + "PCOMP4:TIMED") == 5
         assert get(p + "PCOMP4:PRODUCED") == 3

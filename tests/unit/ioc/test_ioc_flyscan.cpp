@@ -695,4 +695,42 @@ TEST(IocFlyScan, ACapturedStorageMustExist) {
     }
 }
 
+// Records read a block's signals with device support (INP "@pcomp1.out"): an I/O Intr bi is
+// processed once for every pulse, even one cycle wide, shorter than the IOC loop's look.
+TEST(IocFlyScan, RecordsReadTheBlocksThroughDeviceSupport) {
+    TempDir dir;
+    std::ofstream(dir.path / "p.db")
+        << "record(bi, \"FLY:Pulse\") { field(DTYP, \"beamctl\") field(INP, \"@pcomp1.out\") field(SCAN, \"I/O Intr\") field(FLNK, \"FLY:Seen\") }\n"
+           "record(calc, \"FLY:Seen\") { field(INPA, \"FLY:Seen\") field(CALC, \"A+1\") }\n"
+           "record(longin, \"FLY:Made\") { field(DTYP, \"beamctl\") field(INP, \"@pcomp1.produced\") field(SCAN, \"I/O Intr\") }\n";
+    const std::string path = (dir.path / "dev.yaml").string();
+    write_timestamped_variant(path, {{"pcomp:\n", "db:\n  - {file: " + (dir.path / "p.db").string() + "}\npcomp:\n"}});
+    FlyIoc v(path);
+    v.run(100);
+    const double seen0 = v.get("FLY:Seen");
+    ASSERT_EQ(v.put("FLY:PCOMP1:WIDTH", 0.0005), pv::PutStatus::Ok); // one cycle at 1 mm/s (1 um a cycle)
+    ASSERT_EQ(v.put("FLY:PCOMP1:ENABLE", 1), pv::PutStatus::Ok);
+    v.send("SpiralL", motion::AxisCommand{motion::CommandType::MoveAbsolute, 3.3});
+    int high = 0;
+    for (int k = 0; k < 700; ++k) {
+        v.run(10);
+        high += v.get("FLY:Pulse") != 0;
+    }
+    EXPECT_EQ(v.ioc->flyscan().pcomp(0).produced(), 4u); // 0.8, 1.6, 2.4, 3.2 mm
+    EXPECT_EQ(v.get("FLY:Made"), 4);
+    // a pulse the loop saw high processed the record twice (rise, fall); one that came and went
+    // between two looks once (PRODUCED moved)
+    EXPECT_LT(high, 4);
+    EXPECT_EQ(v.get("FLY:Seen") - seen0, 4 + high);
+    // an output link cannot write the block
+    std::ofstream(dir.path / "p.db") << "record(bo, \"FLY:Force\") { field(DTYP, \"beamctl\") field(OUT, \"@pcomp1.out\") }\n";
+    try {
+        VirtualIoc bad(path);
+        FAIL() << "an output link on pcomp1.out was taken";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("p.db:"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("FLY:PCOMP1:ENABLE, START, STEP"), std::string::npos) << e.what();
+    }
+}
+
 } // namespace
