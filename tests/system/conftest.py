@@ -9,6 +9,7 @@ before anything imports `epics`.
 """
 
 import contextlib
+import ctypes
 import os
 import shutil
 import random
@@ -396,6 +397,31 @@ def connect(name, timeout=5.0):
     ok = epics.ca.connect_channel(chid, timeout=timeout)
     assert ok, f"channel {name} did not connect within {timeout} s"
     return chid
+
+
+ECA_NORMAL, ECA_PUTFAIL = 1, 160
+
+
+@ctypes.CFUNCTYPE(None, epics.dbr.event_handler_args)
+def _put_done(args):
+    args.usr.append(args.status)
+
+
+def put_status(name, value, timeout=5.0):
+    """Puts a double (or a string) with a put-callback (ca_array_put_callback of the real libca) and returns the
+    status the server's WRITE_NOTIFY reply carried: ECA_NORMAL, or ECA_PUTFAIL for a refused put.
+    pyepics' caput(wait=True) cannot tell: it returns 1 once the callback came, whatever its status."""
+    chid = connect(name, timeout)
+    got = []
+    if isinstance(value, str):  # DBR_STRING
+        dtype, data = 0, ctypes.create_string_buffer(value.encode(), 40)
+    else:  # DBR_DOUBLE
+        dtype, data = 6, (ctypes.c_double * 1)(value)
+    ret = epics.ca.libca.ca_array_put_callback(dtype, 1, chid, data, _put_done, ctypes.py_object(got))
+    assert ret == ECA_NORMAL, f"ca_array_put_callback({name}) returned {ret}"
+    epics.ca.flush_io()
+    assert wait_for(lambda: got, timeout), f"no put-callback from {name} within {timeout} s"
+    return got[0]
 
 
 def not_connecting(name, timeout=2.0):

@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 from epics import ca
 
-from conftest import RunServer, acquire_port, connect, forget_pvs, release_port, require_binary, wait_for
+from conftest import ECA_NORMAL, ECA_PUTFAIL, RunServer, acquire_port, connect, forget_pvs, put_status, release_port, require_binary, wait_for
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -40,7 +40,7 @@ def get(name):
 
 
 def put(name, value):
-    assert ca.put(connect(name), value, wait=True) == 1, name
+    assert put_status(name, value) == ECA_NORMAL, name
 
 
 def text(name):
@@ -61,6 +61,7 @@ def test_fly_scan_on_the_spiral_writes_a_nexus_file(tmp_path, prefix):
         assert text(p + "PCOMP1:INP") == "ax3.enc.actpos"
         put(p + "PCAP:ARM", 1)
         assert wait_for(lambda: get(p + "PCAP:ACTIVE") == 1, 5)
+        assert put_status(p + "PCAP:ARM", 1) == ECA_PUTFAIL  # refused while a capture runs
         put(p + "PCOMP1:ENABLE", 1)
         put(p + "PCOMP2:ENABLE", 1)
         assert wait_for(lambda: get(p + "PCOMP1:STATE") == 3, 5)  # WAIT_RISING: below START
@@ -125,9 +126,10 @@ def test_bad_puts_are_refused_and_change_nothing(tmp_path, prefix):
     try:
         p = prefix
         # an INP that names nothing: refused, the old one kept
-        assert ca.put(connect(p + "PCOMP1:INP"), "ax9.enc.actpos", wait=True) != 1 or text(p + "PCOMP1:INP") == "ax3.enc.actpos"
+        # (the put-callback reports the refusal: a `caput -c` sees it fail)
+        assert put_status(p + "PCOMP1:INP", "ax9.enc.actpos") == ECA_PUTFAIL
         assert text(p + "PCOMP1:INP") == "ax3.enc.actpos"
-        assert ca.put(connect(p + "PCOMP1:PRE_START"), -1.0, wait=True) != 1 or get(p + "PCOMP1:PRE_START") == 0
+        assert put_status(p + "PCOMP1:PRE_START", -1.0) == ECA_PUTFAIL
         assert get(p + "PCOMP1:PRE_START") == 0
         # an INP the block can compare (while it is disabled) is taken
         put(p + "PCOMP1:INP", "ax1.enc.actpos")
