@@ -75,9 +75,10 @@ struct SignalInfo {
     uint32_t bit_offset = 0; // in the process image
     uint8_t bits = 0;
     bool output = false;
-    std::string datatype;   // ETG.1020 name: UINT, DINT, BOOL, ...
+    std::string datatype;   // ETG.1020 name (UINT, DINT, BOOL, ...) or the catalog's CoE name (INT32, REAL64, ...)
     bool is_signed = false; // two's complement (from datatype, set once at registration)
-    registry::ImageEntry entry() const { return {bit_offset, bits, is_signed}; }
+    uint8_t real = 0;       // 32/64: an IEEE float (from datatype, set with is_signed)
+    registry::ImageEntry entry() const { return {bit_offset, bits, is_signed, real}; }
 };
 
 struct SlaveInfo {

@@ -263,7 +263,10 @@ void Master::layout_process_image() {
             }
         }
     }
-    for (auto& sig : signals_) sig.is_signed = registry::datatype_is_signed(sig.datatype);
+    for (auto& sig : signals_) {
+        sig.is_signed = registry::datatype_is_signed(sig.datatype);
+        sig.real = registry::datatype_float_bits(sig.datatype);
+    }
 }
 
 std::string Master::identity_error(const SlaveInfo& s) const {

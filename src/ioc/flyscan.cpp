@@ -518,9 +518,8 @@ ValueSource IocFlyScan::resolve(const std::string& name, std::string& why) const
     if (s->owner_kind == registry::OwnerKind::Bus) {
         v.entry = reg_.bind(name, why);
         if (!v.entry.bound()) return v;
-        v.kind = bit < 0 && s->type == "REAL" ? ValueSource::Kind::Float32
-                 : bit < 0 && s->type == "LREAL" ? ValueSource::Kind::Float64
-                                                 : ValueSource::Kind::Integer;
+        const uint8_t real = bit < 0 ? registry::datatype_float_bits(s->type) : 0;
+        v.kind = real == 32 ? ValueSource::Kind::Float32 : real == 64 ? ValueSource::Kind::Float64 : ValueSource::Kind::Integer;
         return v;
     }
     why = SB() << "'" << name << "' is a signal of " << s->owner << "; position compare and capture read bus entries, axis variables, pcomp<n>.* and time";

@@ -69,7 +69,7 @@ public:
             raw = v != 0 ? raw | (uint64_t(1) << bit_) : raw & ~(uint64_t(1) << bit_);
             return bus_.write(sig_, raw);
         }
-        return bus_.write(sig_, registry::double_to_raw(v, sig_.bits));
+        return bus_.write(sig_, registry::double_to_raw(v, sig_.entry()));
     }
     std::string describe() const override {
         return bit_ >= 0 ? std::string(SB() << sig_.name << "." << bit_) : sig_.name;
@@ -489,7 +489,7 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
                     if (pd.index != pdo) continue;
                     for (const auto& e : pd.entries) {
                         if (e.name.empty() || e.index == 0) continue;
-                        bool analog = e.name.rfind("analog", 0) == 0 || e.bits > 32 || e.datatype == "REAL" || e.datatype == "LREAL";
+                        bool analog = e.name.rfind("analog", 0) == 0 || e.bits > 32 || registry::datatype_float_bits(e.datatype) != 0;
                         const char* type = e.bits == 1 ? (out ? "bo" : "bi") : analog ? (out ? "ao" : "ai") : (out ? "longout" : "longin");
                         PvRow row{keep("-" + entry_pv_suffix(e.name)), type, keep(e.name),
                                   {{"DESC", keep((s.type + " " + e.name).substr(0, 40))}}, out};

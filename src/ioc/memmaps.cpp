@@ -98,7 +98,7 @@ IocMemMaps::IocMemMaps(const config::IocConfig& cfg, const ethercat::Catalog& ca
             for (uint32_t i = 0; i < n; ++i) {
                 double v = 0;
                 pv::get_element(r, fd, e, i, pv::Prim::Double, &v);
-                if (!bus.write(*self->sig[i], registry::double_to_raw(v, self->sig[i]->bits))) {
+                if (!bus.write(*self->sig[i], registry::double_to_raw(v, self->sig[i]->entry()))) {
                     LOG_WARN(lg, r.name() << ": refused, the cycle has not taken the last writes yet");
                     return pv::PutStatus::Failed;
                 }

@@ -29,9 +29,11 @@ std::string read_text(const std::string& path, const std::string& where) {
 }
 
 plc::EcEntry::Kind kind_of(const std::string& datatype) {
-    if (datatype == "REAL") return plc::EcEntry::Kind::Float32;
-    if (datatype == "LREAL") return plc::EcEntry::Kind::Float64;
-    return plc::EcEntry::Kind::Integer;
+    switch (registry::datatype_float_bits(datatype)) {
+    case 32: return plc::EcEntry::Kind::Float32;
+    case 64: return plc::EcEntry::Kind::Float64;
+    default: return plc::EcEntry::Kind::Integer;
+    }
 }
 
 

@@ -10,11 +10,13 @@
 
 namespace beamctl::registry {
 
-// Where an entry sits: its first bit in the image, its width and whether it is two's complement.
+// Where an entry sits: its first bit in the image, its width and whether it is two's complement
+// or an IEEE float (real: 32 for REAL32/REAL, 64 for REAL64/LREAL, 0 for an integer).
 struct ImageEntry {
     uint32_t bit_offset = 0;
     uint8_t bits = 0;
     bool is_signed = false;
+    uint8_t real = 0;
 };
 
 // The raw entry, zero-extended. Byte-aligned whole bytes are a memcpy (little-endian host, as EtherCAT).
@@ -47,8 +49,19 @@ inline int64_t sign_extend(uint64_t raw, uint8_t bits) noexcept {
     return int64_t(raw);
 }
 
-// The entry as a number: signed entries sign-extended.
+// The entry as a number: signed entries sign-extended, floats as their value.
 inline double raw_to_double(uint64_t raw, const ImageEntry& e) noexcept {
+    if (e.real == 32) {
+        float f;
+        const uint32_t r = uint32_t(raw);
+        std::memcpy(&f, &r, sizeof f);
+        return f;
+    }
+    if (e.real == 64) {
+        double d;
+        std::memcpy(&d, &raw, sizeof d);
+        return d;
+    }
     return e.is_signed ? double(sign_extend(raw, e.bits)) : double(raw);
 }
 
@@ -58,6 +71,28 @@ inline uint64_t double_to_raw(double v, uint8_t bits) noexcept {
     uint64_t raw = v < 0 ? uint64_t(int64_t(v)) : uint64_t(v);
     if (bits < 64) raw &= (uint64_t(1) << bits) - 1;
     return raw;
+}
+
+// A number as the raw bits of entry `e`: a float entry gets the IEEE value, others as above.
+inline uint64_t double_to_raw(double v, const ImageEntry& e) noexcept {
+    if (e.real == 32) {
+        const float f = float(v);
+        uint32_t r;
+        std::memcpy(&r, &f, sizeof r);
+        return r;
+    }
+    if (e.real == 64) {
+        uint64_t r;
+        std::memcpy(&r, &v, sizeof r);
+        return r;
+    }
+    return double_to_raw(v, e.bits);
+}
+
+// The float width of a data type name, ETG.1020 or CoE spelling (the catalog's): 32 for REAL and
+// REAL32, 64 for LREAL and REAL64; 0 for every other (integer) type.
+inline uint8_t datatype_float_bits(std::string_view t) noexcept {
+    return t == "REAL" || t == "REAL32" ? 32 : t == "LREAL" || t == "REAL64" ? 64 : 0;
 }
 
 // Whether an EtherCAT (ETG.1020) data type name is two's complement: SINT, INT, DINT, LINT and

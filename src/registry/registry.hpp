@@ -30,7 +30,7 @@ const char* owner_kind_name(OwnerKind k);
 
 struct Signal {
     std::string name;
-    std::string type; // ETG.1020 data type of a bus entry (UINT, DINT, BOOL, REAL, ...); LREAL for engine variables
+    std::string type; // data type of a bus entry, ETG.1020 (UINT, DINT, REAL, ...) or the catalog's CoE name (INT32, REAL64, ...); LREAL for engine variables
     Direction direction = Direction::Input;
     OwnerKind owner_kind = OwnerKind::Bus;
     std::string owner;  // "ec0", "axis 1 (SampleX)", "plc0"

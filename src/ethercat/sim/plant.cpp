@@ -169,6 +169,7 @@ void Plant::step(Segment& seg) noexcept {
     if (dt > 0)
         for (auto& c : cycle_counters) c.update(seg);
     for (auto& l : latches) l.update(seg);
+    for (auto& b : bridges) b->step(seg);
 }
 
 bool Plant::apply_fault(const Fault& f) noexcept {

@@ -10,6 +10,7 @@
 // never allocates. Units: positions in stage units (mm unless you say otherwise), s, kg, N.
 #pragma once
 
+#include "ethercat/sim/bridge.hpp"
 #include "ethercat/sim/io_point.hpp"
 #include "ethercat/sim/terminals.hpp"
 
@@ -109,6 +110,7 @@ public:
     std::vector<CycleCounter> cycle_counters;
     std::vector<LatchInput> latches;
     std::vector<std::unique_ptr<TimedOutputs>> timed_outputs; // EL2252s
+    std::vector<std::unique_ptr<BridgeSide>> bridges;         // EL6692 sides
     uint64_t steps = 0; // frames that advanced time
 
     static constexpr double kMaxSubstep = 100e-6; // [s]

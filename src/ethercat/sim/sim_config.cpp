@@ -217,8 +217,8 @@ SimConfig SimConfig::parse(const std::string& text, const std::string& file, con
     SimConfig c;
     YamlNode root = rd.root();
     if (root && !root.is_null() && !root.is_map())
-        rd.error(rd.loc(root.yaml()), "expected a mapping with slaves:, wiring:, stages:, signals:");
-    else if (root.keys({"slaves", "wiring", "stages", "signals"}) && !root.is_null()) {
+        rd.error(rd.loc(root.yaml()), "expected a mapping with slaves:, wiring:, stages:, signals:, bridges:");
+    else if (root.keys({"slaves", "wiring", "stages", "signals", "bridges"}) && !root.is_null()) {
         for (const YamlNode& item : root["slaves"].list()) {
             if (!item.keys({"position", "type"})) continue;
             auto pos = item.required("position").integer(between(0, 65534));
@@ -249,6 +249,15 @@ SimConfig SimConfig::parse(const std::string& text, const std::string& file, con
         }
         for (const YamlNode& item : root["signals"].list())
             if (auto sg = parse_signal(item)) c.signals.push_back(std::move(*sg));
+        for (const YamlNode& item : root["bridges"].list()) {
+            if (!item.keys({"slave", "pair"})) continue;
+            auto slave = item.required("slave").integer(between(0, 65534));
+            auto pair = item.required("pair", " (the name both sides' plants give the EL6692)").string();
+            if (pair && pair->empty()) item["pair"].error("should name the pair");
+            for (const BridgeConfig& other : c.bridges)
+                if (slave && other.slave == *slave) item["slave"].error(SB() << "slave " << *slave << " is bridged twice (first at " << other.where << ")");
+            if (slave && pair && !pair->empty()) c.bridges.push_back(BridgeConfig{int(*slave), *pair, item.where()});
+        }
     }
     const bool ok = rd.ok();
     rd.take_errors(errors);
@@ -444,6 +453,25 @@ std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog, Er
             }
         }
     }
+    // EL6692 sides: joined to their pair by name; one not in bridges: has no other side
+    auto is_el6692 = [](const DeviceDesc& d) { return d.vendor == 0x2 && d.product == 0x1a243052; };
+    std::vector<bool> bridged(seg.size(), false);
+    for (const BridgeConfig& bc : bridges)
+        errors.capture([&] {
+            if (bc.slave < 0 || std::size_t(bc.slave) >= seg.size())
+                throw Error(SB() << bc.where << ": no slave " << bc.slave << " on this segment (" << seg.size() << " slaves)");
+            const DeviceDesc& d = seg.slave(std::size_t(bc.slave)).desc();
+            if (!is_el6692(d)) throw Error(SB() << bc.where << ": slave " << bc.slave << " is a " << d.type << ", not an EL6692 side");
+            try {
+                plant->bridges.push_back(std::make_unique<BridgeSide>(seg, bc.slave, bc.pair, BridgeSide::side_of(d.revision)));
+            } catch (const Error& e) {
+                throw Error(SB() << bc.where << ": " << e.what());
+            }
+            bridged[std::size_t(bc.slave)] = true;
+        });
+    for (std::size_t p = 0; p < seg.size(); ++p)
+        if (!bridged[p] && is_el6692(seg.slave(p).desc()))
+            plant->bridges.push_back(std::make_unique<BridgeSide>(seg, int(p), "", BridgeSide::side_of(seg.slave(p).desc().revision)));
     plant->steps = 0;
     seg.on_frame = [plant](Segment& s) { plant->step(s); };
     seg.on_plant_fault = [plant](const Fault& f) { return plant->apply_fault(f); };

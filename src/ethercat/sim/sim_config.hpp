@@ -4,6 +4,8 @@
 //   wiring:  [{from: s3.binaryOutput01, to: s1.binaryInput01}, ...]            outputs -> inputs
 //   stages:  [{name: x, drive: s11, travel: [-50, 50], limits: {...}, home: {...}, encoders: [...]}]
 //   signals: [{to: s5.analogInput01, shape: sine, amplitude: 5, frequency: 1}, {to: ..., stage: x, gain: 0.1}]
+//   bridges: [{slave: 4, pair: gap_mono}]  an EL6692 side joined to the other side of that name
+//            (on another segment of this process: bridge.hpp)
 // Every drive terminal (EL70x1 stepper, EL72x1 servo) that no stage names moves a default stage
 // (no hard stops, no switches), so a bus can be tried before anyone writes a plant.
 #pragma once
@@ -31,6 +33,12 @@ struct EntryRef {
 
 struct Wire {
     EntryRef from, to;
+};
+
+struct BridgeConfig {
+    int slave = -1;   // the EL6692 side's position
+    std::string pair; // its pair's name, the same on the other side's segment
+    std::string where;
 };
 
 struct StageConfig {
@@ -73,6 +81,7 @@ struct SimConfig {
     std::vector<Wire> wiring;
     std::vector<StageConfig> stages;
     std::vector<SignalConfig> signals;
+    std::vector<BridgeConfig> bridges;
     // Loads SIM.yaml with config::YamlReader; throws one MultiError with every error of the file
     // (file:line:col, key path). Unknown keys are errors. With slaves:, the whole plant is also
     // checked against them (entries exist, inputs driven once, ...) once the file itself is

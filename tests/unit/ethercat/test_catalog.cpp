@@ -78,6 +78,7 @@ const std::vector<SpecTerminal> kSpecTable = {
     {"EL2808", 0x0AF83052}, {"EL2252", 0x08CC3052}, {"EL3102", 0x0C1E3052}, {"EL3104", 0x0C203052},
     {"EL3702", 0x0E763052}, {"EL4102", 0x10063052}, {"EL4134", 0x10263052}, {"EL4732", 0x127C3052},
     {"EL5042", 0x13B23052}, {"EL5101", 0x13ED3052}, {"EL7041", 0x1B813052}, {"EL7211", 0x1C2B3052},
+    {"EL6692", 0x1A243052},
 };
 
 const Catalog& builtin() {
@@ -148,17 +149,19 @@ TEST(CatalogFiles, EveryFileLoadsOnItsOwn) {
         EXPECT_EQ(entry.path().stem().string(), type) << "one file per terminal, named by type";
         types.insert(type);
     }
-    // the 16 terminals of the spec table, plus operating-mode variants (ecmccfg HW_DESC names)
-    EXPECT_EQ(files, 17);
+    // the 17 terminals of the spec table, plus operating-mode variants (ecmccfg HW_DESC names) and
+    // the EL6692's secondary side (the same product, another revision)
+    EXPECT_EQ(files, 19);
     std::set<std::string> expected;
     for (const SpecTerminal& t : kSpecTable) expected.insert(t.type);
     expected.insert("EL7211-0010_CSP");
+    expected.insert("EL6692-0002");
     EXPECT_EQ(types, expected);
 }
 
 TEST(CatalogFiles, BuiltinHasEveryTerminalOnce) {
-    EXPECT_EQ(builtin().size(), kSpecTable.size() + 1); // + EL7211-0010_CSP (a variant)
-    EXPECT_EQ(builtin().types().size(), kSpecTable.size() + 1);
+    EXPECT_EQ(builtin().size(), kSpecTable.size() + 2); // + EL7211-0010_CSP (a variant), EL6692-0002
+    EXPECT_EQ(builtin().types().size(), kSpecTable.size() + 2);
     for (const std::string& t : builtin().types())
         EXPECT_EQ(builtin().source(builtin().find(t)),
                   (fs::path(Catalog::builtin_dir()) / (t + ".yaml")).string());
@@ -175,7 +178,8 @@ TEST(CatalogFiles, IdentitiesMatchSpecTable) {
         EXPECT_FALSE(d.name.empty());
         EXPECT_EQ(d.name.rfind(t.type, 0), 0u) << "name starts with the type: " << d.name;
         EXPECT_EQ(builtin().find(d.vendor, d.product, d.revision), &d);
-        EXPECT_EQ(builtin().find_latest(d.vendor, d.product), &d);
+        // (the EL6692's two sides share the product: the latest revision is its secondary side)
+        EXPECT_EQ(builtin().find_latest(d.vendor, d.product), t.type == std::string("EL6692") ? &device("EL6692-0002") : &d);
         // Product code = model number << 16 | 0x3052 (EL) or 0x2C52 (EK).
         int model = std::stoi(std::string(t.type).substr(2));
         EXPECT_EQ(d.product >> 16, static_cast<uint32_t>(model));
@@ -300,6 +304,17 @@ TEST(CatalogFiles, MailboxLayout) {
         EXPECT_EQ(mbx, d.coe);
         if (!mbx) continue;
         ASSERT_GE(d.sms.size(), 4u);
+        if (t.type == std::string("EL6692")) { // spec table: mbx 0x1000/0x1400, PDO 0x1800/0x1E00 (both sides)
+            for (const DeviceDesc* side : {&d, &device("EL6692-0002")}) {
+                EXPECT_EQ(side->sms[0].start, 0x1000);
+                EXPECT_EQ(side->sms[0].default_size, 256);
+                EXPECT_EQ(side->sms[1].start, 0x1400);
+                EXPECT_EQ(side->sms[2].start, 0x1800);
+                EXPECT_EQ(side->sms[3].start, 0x1e00);
+                EXPECT_EQ(side->revision & 0xFFFF, side == &d ? 0x0000u : 0x0002u); // primary / secondary
+            }
+            continue;
+        }
         EXPECT_EQ(d.sms[0].start, 0x1000);
         EXPECT_EQ(d.sms[0].control, 0x26);
         EXPECT_EQ(d.sms[0].default_size, 128);

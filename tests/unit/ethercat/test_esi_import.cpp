@@ -212,8 +212,9 @@ TEST(EsiImportFixtures, EveryHandWrittenTerminalHasAFixture) {
         EXPECT_TRUE(have.count(t)) << t;
     Catalog all;
     all.load_dir(kCatalog.string());
+    // (not the EL6692's sides: their user PDOs are declared by the user, the ESI has no entries)
     for (const std::string& t : all.types())
-        if (all.find(t)->variant_of.empty()) {
+        if (all.find(t)->variant_of.empty() && t.rfind("EL6692", 0) != 0) {
             EXPECT_TRUE(have.count(t)) << "no ESI fixture for " << t;
         }
 }

@@ -118,7 +118,7 @@ void expect_same_pdos(const std::vector<Pdo>& a, const std::vector<Pdo>& b) {
 } // namespace
 
 TEST(Sii, RoundTripEveryCatalogDevice) {
-    ASSERT_EQ(catalog().types().size(), 17u); // 16 terminals + the EL7211 CSP variant
+    ASSERT_EQ(catalog().types().size(), 19u); // 17 terminals + the EL7211 CSP variant + the EL6692's secondary side
     uint32_t serial = 1000;
     for (const std::string& type : catalog().types()) {
         SCOPED_TRACE(type);

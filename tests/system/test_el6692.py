@@ -1,0 +1,50 @@
+"""Two EtherCAT buses in one IOC bridged by a simulated EL6692 (examples/el6692/ioc.yaml), through
+Channel Access (pyepics): the undulator's PLC sends the gap on bus 0, the monochromator's PLC reads
+it on bus 1 and answers with an energy; the entries' PVs show both REAL64 values as numbers."""
+
+from pathlib import Path
+
+import epics
+from epics import ca
+
+from conftest import RunServer, acquire_port, connect, forget_pvs, release_port, require_binary, wait_for
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+
+def get(name):
+    return ca.get(connect(name))
+
+
+def test_a_value_crosses_the_bridge_both_ways(tmp_path, prefix):
+    require_binary()
+    text = (EXAMPLES / "el6692" / "ioc.yaml").read_text()
+    text = text.replace("ioc: {name: BRIDGE}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
+    text = text.replace("file: ../", f"file: {EXAMPLES}/")
+    for f in ("undulator_plant.yaml", "mono_plant.yaml", "undulator.plc", "mono.plc"):
+        text = text.replace(f" {f}", f" {EXAMPLES / 'el6692' / f}")
+    cfg = tmp_path / "ioc.yaml"
+    cfg.write_text(text)
+    port = acquire_port()
+    srv = RunServer(tmp_path, cfg, port).start()
+    try:
+        p = prefix
+        assert wait_for(lambda: get(p + "m0-Stat-OK") == 1 and get(p + "m1-Stat-OK") == 1, 10)
+        assert wait_for(lambda: get(p + "m1s001-externalDeviceNotConnected01") == 0, 5)
+        assert get(p + "m0s002-externalDeviceNotConnected01") == 0
+        motor = epics.Motor(p + "Gap")
+        motor.put("CNEN", 1, wait=True)
+        assert wait_for(lambda: get(p + "Gap.CNEN") == 1, 5)
+        assert motor.move(2.5, wait=True, timeout=30) == 0
+        rbv = get(p + "Gap.RBV")
+        assert abs(rbv - 2.5) < 0.01
+        # bus 1 has the gap (a REAL64 entry, read as a number), bus 0 the energy made of it
+        assert wait_for(lambda: abs(get(p + "m1s001-inLreal01") - rbv) < 1e-3, 5)
+        assert wait_for(lambda: abs(get(p + "m0s002-inLreal01") - (1000 + 100 * rbv)) < 0.1, 5)
+        assert get(p + "m1s001-inLreal01") != round(get(p + "m1s001-inLreal01"))  # not an integer
+        assert srv.alive()
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)
