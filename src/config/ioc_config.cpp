@@ -51,10 +51,18 @@ std::vector<BusConfig> read_bus_list(const YamlNode& buses, const std::string& d
     const auto items = buses.list();
     for (std::size_t i = 0; i < items.size(); ++i) {
         const YamlNode& b = items[i];
-        if (!b.keys({"id", "link", "slaves", "strict"})) continue;
+        if (!b.keys({"id", "link", "slaves", "strict", "rate_hz"})) continue;
         BusConfig bc;
         bc.id = int_of(b["id"], int(i), 0, 15);
         bc.strict = b["strict"].boolean().value_or(false);
+        if (b.has("rate_hz")) {
+            if (scanner_file)
+                b["rate_hz"].error("the scanner runs its buses in one cycle: its file's engine.rate_hz");
+            else if (auto r = b["rate_hz"].number(between(1, 20000))) {
+                bc.rate_hz = *r;
+                bc.rate_where = b["rate_hz"].where();
+            }
+        }
         if (!ids.insert(bc.id).second) b.error(SB() << "bus id " << bc.id << " used twice");
         if (YamlNode l = b["link"]; l.keys({"type", "plant", "host", "port", "iface", "busy_poll", "faults", "socket", "slaves", "tick_timeout_ms", "claims"}) && l) {
             bc.link.where = l.where();
@@ -278,7 +286,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         const auto plcs = root["plcs"].list();
         for (std::size_t i = 0; i < plcs.size(); ++i) {
             const YamlNode& p = plcs[i];
-            if (!p.keys({"id", "file", "rate_ms", "enable", "macros", "include", "libraries", "strict"}))
+            if (!p.keys({"id", "file", "rate_ms", "enable", "macros", "include", "libraries", "strict", "bus"}))
                 continue;
             PlcEntry e;
             e.id = int_of(p["id"], int(i), 0, 99);
@@ -293,6 +301,16 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             }
             e.enable = p["enable"].boolean().value_or(true);
             e.strict = p["strict"].boolean().value_or(false);
+            if (p.has("bus")) {
+                e.bus_where = p["bus"].where();
+                int id = int_of(p["bus"], -1, 0, 15);
+                bool known = false;
+                for (const auto& bc : cfg.buses) known |= bc.id == id;
+                if (!known && id >= 0)
+                    p["bus"].error(SB() << "no bus " << id << " in buses: (a PLC runs in the cycle of one of them)");
+                else
+                    e.bus = id;
+            }
             e.macros = macros_of(p["macros"]);
             e.include = paths_of(p["include"], dir);
             e.libraries = paths_of(p["libraries"], dir);

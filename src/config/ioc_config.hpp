@@ -58,6 +58,9 @@ struct LinkConfig {
 struct BusConfig {
     int id = 0;
     bool strict = false; // refuse to start with a slave missing, wrong or failing
+    // Its own cycle (own RT thread) at this rate [Hz]; unset: the IOC's cycle (engine.rate_hz).
+    std::optional<double> rate_hz;
+    std::string rate_where; // file:line:col of rate_hz
     LinkConfig link;
     std::vector<SlaveEntry> slaves;
 };
@@ -96,6 +99,8 @@ struct PlcEntry {
     double rate_ms = -1;     // scan period [ms]; -1 = every cycle
     bool enable = true;
     bool strict = false;     // refuse what ECMC's ExprTk would refuse (plc::CompileOptions::strict)
+    std::optional<int> bus;  // runs in the cycle of this bus (one with its own rate_hz); unset: the IOC's
+    std::string bus_where;
     MacroMap macros;
     std::vector<std::string> include;   // resolved directories searched by `include`
     std::vector<std::string> libraries; // resolved files of `function` definitions

@@ -21,15 +21,16 @@ const PvTable& bus_table() {
         {"-MissedFrames", "longin", "$(BUS)framesmissed", {{"DESC", "Cyclic frames that did not come back"}}},
         {"-LateFrames", "longin", "$(BUS)frameslate", {{"DESC", "Cyclic frames back after the time-out"}}},
         {"-WkcErrors", "longin", "$(BUS)wkcerrors", {{"DESC", "Cycles with a wrong working counter"}}},
-        // the engine's statistics, served under every bus as ecmccfg's thread PVs
-        {"-ThdLatMax", "ai", "ecmc.thread.latency.max", {{"DESC", "RT wake-up latency max"}, {"EGU", "us"}, {"PREC", "1"}}},
-        {"-ThdExeMax", "ai", "ecmc.thread.execute.max", {{"DESC", "RT cycle execution time max"}, {"EGU", "us"}, {"PREC", "1"}}},
-        {"-ThdLatMean", "ai", "ecmc.thread.latency.mean", {{"DESC", "RT wake-up latency mean"}, {"EGU", "us"}, {"PREC", "1"}}},
+        // the statistics of the cycle the bus runs in (the IOC's, or its own: buses[].rate_hz), as
+        // ecmccfg's thread PVs
+        {"-ThdLatMax", "ai", "$(BUS)thread.latency.max", {{"DESC", "RT wake-up latency max"}, {"EGU", "us"}, {"PREC", "1"}}},
+        {"-ThdExeMax", "ai", "$(BUS)thread.execute.max", {{"DESC", "RT cycle execution time max"}, {"EGU", "us"}, {"PREC", "1"}}},
+        {"-ThdLatMean", "ai", "$(BUS)thread.latency.mean", {{"DESC", "RT wake-up latency mean"}, {"EGU", "us"}, {"PREC", "1"}}},
         {"-ThdLatHist", "waveform", "", {{"DESC", "RT wake-up latency: cycles per bucket"}, {"FTVL", "LONG"}, {"NELM", "$(NB)"}}},
         {"-ThdLatHistEdges", "waveform", "", {{"DESC", "Lower edges of the ThdLatHist buckets"}, {"FTVL", "DOUBLE"}, {"NELM", "$(NB)"}, {"EGU", "us"}}},
-        {"-ThdCycles", "longin", "ecmc.thread.cycles", {{"DESC", "RT cycles measured since the reset"}}},
-        {"-ThdMissedCycles", "longin", "ecmc.thread.missed", {{"DESC", "RT cycle slots missed since the reset"}}},
-        {"-ThdStat-Reset", "bo", "ecmc.thread.reset", {{"DESC", "Clear RT max times, counters, histogram"}, {"ZNAM", "Done"}, {"ONAM", "Reset"}}, true},
+        {"-ThdCycles", "longin", "$(BUS)thread.cycles", {{"DESC", "RT cycles measured since the reset"}}},
+        {"-ThdMissedCycles", "longin", "$(BUS)thread.missed", {{"DESC", "RT cycle slots missed since the reset"}}},
+        {"-ThdStat-Reset", "bo", "$(BUS)thread.reset", {{"DESC", "Clear RT max times, counters, histogram"}, {"ZNAM", "Done"}, {"ONAM", "Reset"}}, true},
     }};
     return t;
 }
@@ -69,7 +70,7 @@ enum class Item { Ok, LinkUp, SlaveCounter, SlavesResponding, SlavesOp, Wc, WcEx
                   FramesLate, WkcErrors, SlaveStatus, SlaveState, SlaveLost, SlaveReconf, SlaveErrorId, LatMax, ExeMax,
                   LatMean, Cycles, Missed, Reset, ScnConn, ScnCycle, ScnMissed, ScnDrops, ScnAttaches };
 struct ItemName {
-    const char* name; // after "ec<m>." (bus), "ec<m>.s<k>." (slave) or "ecmc.thread." (engine)
+    const char* name; // after "ec<m>." (bus), "ec<m>.s<k>." (slave) or "ecmc.thread." and "ec<m>.thread." (engine)
     Item item;
 };
 constexpr ItemName kBus[] = {{"ok", Item::Ok}, {"linkup", Item::LinkUp}, {"slavecounter", Item::SlaveCounter},
@@ -197,6 +198,8 @@ private:
 void declare_bus_items(registry::Registry& r, int id, const std::vector<int>& slave_positions) {
     std::string bus = SB() << "ec" << id;
     for (const ItemName& n : kBus) declare(r, bus + "." + n.name, registry::OwnerKind::Bus, bus, false);
+    for (const ItemName& n : kEngine) // ec0.thread.latency.max: the statistics of the bus's cycle
+        declare(r, bus + ".thread." + n.name, registry::OwnerKind::Bus, bus, n.item == Item::Reset);
     for (int p : slave_positions)
         for (const ItemName& n : kSlave) declare(r, SB() << bus << ".s" << p << "." << n.name, registry::OwnerKind::Bus, bus, false);
 }
@@ -230,6 +233,8 @@ std::unique_ptr<pv::LinkDevice> make_bus_item_device(const std::string& name, in
         std::string rest = name.substr(std::min(name.size(), pre.size()));
         for (const ItemName& n : kBus)
             if (rest == n.name) return make(n.item, -1);
+        for (const ItemName& n : kEngine)
+            if (rest == std::string("thread.") + n.name) return make(n.item, -1);
         for (std::size_t i = 0; i < slave_positions.size(); ++i)
             for (const ItemName& n : kSlave)
                 if (rest == std::string(SB() << "s" << slave_positions[i] << "." << n.name)) return make(n.item, int(i));

@@ -7,7 +7,8 @@
 //     and beamctl's ec<m>.s<k>.state (Master SlaveState: 0 OP, 1 MISSING, 2 WRONG_ID, 3 ERROR,
 //     4 LOST, 5 CONFIGURING), .lostcounter, .reconfigcounter, .errorid (ECMC's slave error ids)
 //   the engine's: ecmc.thread.latency.max, .latency.mean, .execute.max, .cycles, .missed (µs,
-//     counts) and ecmc.thread.reset (a write of 1 clears them; reads 1 until the cycle did)
+//     counts) and ecmc.thread.reset (a write of 1 clears them; reads 1 until the cycle did): the
+//     IOC's cycle; ec<m>.thread.* the same of the cycle bus m runs in (its own with rate_hz)
 // $(P)m<m>-Stat-OK -LinkUp -SlvCntr -Dom-WC -Dom-WC-Exp -Dom-WC-Complete -MissedFrames
 // -LateFrames -WkcErrors -ThdLatMax -ThdExeMax -ThdLatMean -ThdCycles -ThdMissedCycles
 // -ThdStat-Reset -SlvRsp -SlvOP; $(P)m<m>s<kkk>-Online -Operational -HWType -Valid -State -LostCntr
@@ -29,7 +30,7 @@
 
 namespace beamctl::ioc {
 
-const PvTable& bus_table();   // $(P) = "<prefix>m<m>", signals "ec<m>." (and "ecmc.thread.")
+const PvTable& bus_table();   // $(P) = "<prefix>m<m>", signals "ec<m>." (the thread PVs: "ec<m>.thread.")
 const PvTable& slave_table(); // $(P) = "<prefix>m<m>s<kkk>", signals "ec<m>.s<k>."
 // A scanner link's bus (ec<m>.scanner.attached, .cycle, .missed, .drops, .attaches):
 // $(P)m<m>-ScnConn -ScnCycle -ScnMissed -ScnDrops -ScnAttaches.

@@ -285,11 +285,20 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
             b.plant = std::move(lb.plant);
             b.sim_stage = std::move(lb.sim_stage);
             b.bus = std::move(lb.bus);
-            if (b.sim_stage) engine_->add_stage(rt::StageOrder::BusSend, *b.sim_stage);
         }
-        b.bus->add_stages(*engine_);
+        rt::Engine* e = engine_.get();
+        if (bc.rate_hz) { // its own cycle, on its own RT thread
+            rt::EngineConfig own = ec;
+            own.rate_hz = *bc.rate_hz;
+            own_cycles_.push_back(std::make_unique<rt::Engine>(own, clock_));
+            e = own_cycles_.back().get();
+            b.cycle = own_cycles_.size();
+        }
+        if (b.sim_stage) e->add_stage(rt::StageOrder::BusSend, *b.sim_stage);
+        b.bus->add_stages(*e);
         buses_.push_back(std::move(b));
     }
+    cycle_stats_.resize(cycle_count());
     declare_bus_signals();
     declare_engine_items(registry_);
     for (std::size_t i = 0; i < buses_.size(); ++i) make_bus_pvs(buses_[i], cfg_.buses[i]);
@@ -436,7 +445,13 @@ void Ioc::declare_bus_signals() {
                         if (!e.name.empty() && seen.insert(e.name).second) declare(pre + e.name, e.datatype, out);
         }
         ethercat::Bus* busp = buses_[i].bus.get();
-        registry_.set_binder(bus + ".", [busp](const registry::Signal& s, int bit, std::string& why) {
+        const int cycle = int(buses_[i].cycle);
+        registry_.set_binder(bus + ".", [this, busp, cycle](const registry::Signal& s, int bit, std::string& why) {
+            if (binding_cycle_ >= 0 && cycle != binding_cycle_) {
+                why = SB() << "'" << s.name << "' is on bus " << busp->id() << ", which runs its own cycle (buses[].rate_hz): axes, "
+                           << "position compare and capture run in the IOC's cycle, and read the buses of that cycle only";
+                return registry::BoundSignal{};
+            }
             const ethercat::SignalInfo* si = busp->find_signal(s.name);
             if (!si) {
                 why = SB() << "no signal '" << s.name << "' on bus " << busp->id()
@@ -455,6 +470,22 @@ void Ioc::declare_bus_signals() {
 Ioc::~Ioc() {
     for (auto& b : buses_) b.bus->stop_health();
     engine_->stop();
+    for (auto& e : own_cycles_) e->stop();
+}
+
+void Ioc::run_cycles(uint64_t n) {
+    for (uint64_t i = 0; i < n; ++i) {
+        for (;;) { // the other cycles that fall due before the IOC's next one, earliest first
+            rt::Engine* first = nullptr;
+            for (auto& e : own_cycles_)
+                if (e->next_due_ns() <= engine_->next_due_ns() &&
+                    (!first || e->next_due_ns() < first->next_due_ns()))
+                    first = e.get();
+            if (!first) break;
+            first->run_cycles(1);
+        }
+        engine_->run_cycles(1);
+    }
 }
 
 void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
@@ -583,13 +614,15 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
     if (sig->loop_only) { // a bus's counters or the engine's statistics
         ethercat::Bus* bus = nullptr;
         std::vector<int> positions;
+        std::size_t k = 0; // the cycle whose statistics it shows: its bus's
         for (std::size_t i = 0; i < buses_.size(); ++i)
             if (sig->owner == std::string(SB() << "ec" << buses_[i].bus->id())) {
                 bus = buses_[i].bus.get();
+                k = buses_[i].cycle;
                 for (const auto& sc : cfg_.buses[i].slaves) positions.push_back(sc.position);
             }
         std::string reason;
-        auto dev = make_bus_item_device(sig->name, bit, output, bus, positions, *engine_, engine_stats_, reason);
+        auto dev = make_bus_item_device(sig->name, bit, output, bus, positions, cycle(k), cycle_stats_.at(k), reason);
         if (!dev) return fail(reason);
         devices_.push_back(std::move(dev));
         return devices_.back().get();
@@ -672,6 +705,7 @@ void Ioc::bring_up() {
                     throw Error(SB() << bc.slaves[i].type_where << ": ec" << bc.id << " s" << bc.slaves[i].position << " is "
                                      << bc.slaves[i].type << " in this file, " << bus.slaves()[i].type << " in the scanner's chain");
     }
+    binding_cycle_ = 0; // axes, profile moves, storages, position compare and capture: the IOC's cycle
     axes_->bind(
         [this](const motion::SignalRef& r) {
             std::string name = r.entry == "masterstatus" ? std::string(SB() << "ec" << r.bus << ".masterstatus")
@@ -693,10 +727,26 @@ void Ioc::bring_up() {
     storages_->bind(*engine_);
     std::vector<ethercat::Bus*> buses;
     for (auto& b : buses_) buses.push_back(b.bus.get());
+    binding_cycle_ = -1; // the PLCs check their buses themselves; memory maps are read in the IOC loop
     memmaps_->bind(registry_, buses);
-    plcs_->bind(*engine_, axes_->group(), std::move(bus_ok), storages_->storages(), memmaps_->memmaps(),
+    // The PLCs of each cycle see that cycle's buses and memory maps only.
+    const std::vector<registry::MemMap*> maps = memmaps_->memmaps();
+    std::vector<PlcCycle> plc_cycles(cycle_count());
+    for (std::size_t k = 0; k < plc_cycles.size(); ++k) {
+        plc_cycles[k].engine = &cycle(k);
+        plc_cycles[k].memmaps.assign(maps.size(), nullptr);
+    }
+    for (std::size_t m = 0; m < maps.size(); ++m) plc_cycles[buses_.at(memmaps_->bus_index(m)).cycle].memmaps[m] = maps[m];
+    for (std::size_t i = 0; i < buses_.size(); ++i) {
+        PlcCycle& pc = plc_cycles[buses_[i].cycle];
+        pc.buses.push_back(buses_[i].bus->id());
+        pc.bus_ok.push_back(bus_ok[i]);
+    }
+    plcs_->bind(std::move(plc_cycles), axes_->group(), storages_->storages(),
                 [this](const std::string& name) { return flyscan_->plc_cell(name); });
+    binding_cycle_ = 0;
     flyscan_->bind(*engine_, axes_->group(), buses, storages_->storages());
+    binding_cycle_ = -1;
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
@@ -718,7 +768,7 @@ void Ioc::bring_up() {
         db_.set_restore_hook([this] { autosave_->restore(); });
     }
     db_.init_records();
-    if (plc::PlcRuntime* rt = plcs_->runtime()) rt->set_epics_state(12); // initHookAfterIocBuilt
+    plcs_->set_epics_state(12); // initHookAfterIocBuilt
     brought_up_ = true;
 }
 
@@ -729,11 +779,11 @@ void Ioc::publish() {
     plcs_->publish();
     storages_->publish();
     flyscan_->publish();
-    engine_stats_ = engine_->stats(); // read by the engine items' device support
+    for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
     memmaps_->publish(EventLoop::now_s());
-    const rt::EngineStats& es = engine_stats_;
     for (auto& b : buses_) {
+        const rt::EngineStats& es = cycle_stats_[b.cycle];
         // the status PVs read their items (scan_io_intr below); the histogram is an array
         double hist[rt::kLatencyBuckets], edges[rt::kLatencyBuckets];
         for (std::size_t i = 0; i < rt::kLatencyBuckets; ++i) {
@@ -823,6 +873,7 @@ int Ioc::run() {
         loop.add_fd(b.bus->change_fd(), EPOLLIN, [this, i](uint32_t) { bus_changed(i); });
     }
     engine_->start();
+    for (auto& e : own_cycles_) e->start();
     for (auto& b : buses_) b.bus->start_health();
     std::string acf = cfg_.acf;
     LoopSignals signals(loop, acf.empty() ? std::function<void()>() : [&] { server.reload_access_security(acf); });
@@ -851,10 +902,15 @@ int Ioc::run() {
         [this](const std::vector<std::string>& argv, std::ostream& os) { return sim_fault(argv, os); }};
     pv::DbShell db_shell(db_, shell_hooks);
     auto shell_server = pv::start_shell_server(loop, db_shell, cfg_.name, shell_socket_);
-    if (plc::PlcRuntime* rt = plcs_->runtime()) rt->set_epics_state(16); // initHookAfterIocRunning: epics_get_started()
+    plcs_->set_epics_state(16); // initHookAfterIocRunning: epics_get_started()
     std::string rcp_text = rcp ? std::string(SB() << ", RCP bridge on udp " << cfg_.rcp->listen << ":" << rcp->port()) : std::string();
-    std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)%s\n", server.listen_description().c_str(),
-                db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str(), rcp_text.c_str());
+    std::string own_text; // the buses on their own cycles
+    for (std::size_t i = 0; i < buses_.size(); ++i)
+        if (buses_[i].cycle)
+            own_text += SB() << "; bus " << buses_[i].bus->id() << " its own cycle, " << *cfg_.buses[i].rate_hz << " Hz ("
+                             << cycle(buses_[i].cycle).rt_setup() << ")";
+    std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)%s%s\n", server.listen_description().c_str(),
+                db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str(), own_text.c_str(), rcp_text.c_str());
     std::fflush(stdout);
     loop.run();
     if (autosave_) autosave_->flush(); // a clean stop saves what changed since the last save
@@ -903,8 +959,7 @@ void Ioc::shutdown(LoopSignals* signals) {
             return true;
         };
         if (!wait_until(still, longest + 2.0)) LOG_WARN(lg, "stopping: some axes still moved after " << longest + 2.0 << " s");
-        if (plc::PlcRuntime* rt = plcs_->runtime())
-            for (std::size_t i = 0; i < plcs_->size(); ++i) rt->request_enable(i, false);
+        for (std::size_t i = 0; i < plcs_->size(); ++i) plcs_->request_enable(i, false);
         for (std::size_t i = 0; i < ax.size(); ++i) {
             motion::AxisCommand off{motion::CommandType::Power};
             off.on = false;
@@ -929,12 +984,13 @@ void Ioc::shutdown(LoopSignals* signals) {
     again();
     for (auto& b : buses_) {
         try {
-            if (engine_->running()) b.bus->to_safe_op();
+            if (cycle(b.cycle).running()) b.bus->to_safe_op();
         } catch (const Error& e) {
             LOG_WARN(lg, "stopping: ec" << b.bus->id() << ": " << e.what());
         }
     }
     engine_->stop();
+    for (auto& e : own_cycles_) e->stop();
     LOG_INFO(lg, "stopped");
 }
 

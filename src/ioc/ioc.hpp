@@ -48,7 +48,17 @@ public:
     // A cycle woke the loop through bus i's change_fd: drains it, takes the bus's newest snapshot
     // and processes the I/O Intr records whose entries changed (IOC loop thread).
     void bus_changed(std::size_t i);
+    // The IOC's cycle: axes, general PLCs, position compare, capture, and every bus without a
+    // rate_hz of its own.
     rt::Engine& engine() { return *engine_; }
+    // Cycles: 0 the IOC's (engine()), k >= 1 that of a bus with its own rate_hz (own RT thread).
+    std::size_t cycle_count() const { return 1 + own_cycles_.size(); }
+    rt::Engine& cycle(std::size_t k) { return k == 0 ? *engine_ : *own_cycles_.at(k - 1); }
+    // The cycle bus i runs in.
+    std::size_t cycle_of_bus(std::size_t i) const { return buses_.at(i).cycle; }
+    // Virtual time (tests): n cycles of the IOC's cycle, the other cycles run in between in the
+    // order they fall due, on the one clock.
+    void run_cycles(uint64_t n);
     ethercat::Bus& bus(std::size_t i) { return *buses_.at(i).bus; }
     std::size_t bus_count() const { return buses_.size(); }
     ethercat::sim::Segment* segment(std::size_t i) { return buses_.at(i).segment.get(); }
@@ -93,6 +103,7 @@ private:
         pv::Record *lat_hist = nullptr, *lat_edges = nullptr; // arrays the IOC publishes
         std::vector<pv::Record*> err_msg; // per slave $(P)m0s003-ErrMsg: its last error in words
         uint64_t health_seen = ~uint64_t(0); // Master::health_version() at the last publish
+        std::size_t cycle = 0; // the cycle it runs in (cycle(k))
     };
     void declare_bus_signals();
     // Shell commands (IOC loop): `ethercat [BUS]`, `sim BUS FAULT ...`.
@@ -110,7 +121,12 @@ private:
     pv::Database db_;
     std::unique_ptr<ca::CaLinks> ca_links_; // CA links of db_ to other servers (run() connects them)
     std::unique_ptr<rt::Engine> engine_;
-    rt::EngineStats engine_stats_; // as publish() last read them (the engine items' devices)
+    std::vector<std::unique_ptr<rt::Engine>> own_cycles_; // buses with their own rate_hz, one each
+    // While RT consumers bind (bring_up): the cycle they run in; a bus signal of another cycle is
+    // refused by the registry's binder. -1: any (the IOC loop's readers).
+    int binding_cycle_ = -1;
+    // Per cycle, as publish() last read them (the engine items' devices); sized at bring-up, kept.
+    std::vector<rt::EngineStats> cycle_stats_;
     std::vector<BusRt> buses_;
     registry::Registry registry_;
     std::unique_ptr<IocAxes> axes_;

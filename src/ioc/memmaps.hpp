@@ -40,6 +40,7 @@ public:
     void publish(double now_s);
 
     std::vector<registry::MemMap*> memmaps(); // by ECMC id
+    std::size_t bus_index(std::size_t id) const { return items_.at(id).bus; } // memory map id's bus (index in cfg.buses)
     // The registry names of map `name`'s elements ("ec0.s7.mm.analogInputArray01" ->
     // ec0.s7.analogInputArray01_1 .. _n, in time order); nullptr if there is no such map.
     const std::vector<std::string>* elements(const std::string& name) const;

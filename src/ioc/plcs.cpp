@@ -105,10 +105,14 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
         }
         groups_[std::size_t(it - group_names.begin())].push_back(a.axis.id.value_or(1));
     }
-    for (const auto& e : cfg.plcs) sources_.push_back(plc_source(e));
+    for (const auto& e : cfg.plcs) {
+        sources_.push_back(plc_source(e));
+        bus_of_.push_back(e.bus);
+    }
     // Axis PLCs: the axis file's plc.file (next to the axis file) and plc.code lines.
     for (const auto& a : axes)
         if (auto s = axis_plc_source(a)) sources_.push_back(std::move(*s));
+    bus_of_.resize(sources_.size());
     for (auto& s : sources_) // ecmccfg's GRP_<name>_ID environment, as macros
         for (std::size_t g = 0; g < group_names.size(); ++g) s.macros.emplace("GRP_" + group_names[g] + "_ID", std::to_string(g));
     // Check-compile everything now, so `beamctl check` and `run` report every error before
@@ -158,8 +162,27 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
 }
 
 IocPlcs::~IocPlcs() {
-    if (runtime_) // entered at bind(); the engine has stopped (Ioc's destructor)
+    if (runtime()) // entered at bind(); the engine has stopped (Ioc's destructor)
         for (auto& p : plugins_) (void)p->rt_exit();
+}
+
+std::pair<plc::PlcRuntime*, std::size_t> IocPlcs::at(std::size_t i) const {
+    if (i >= where_.size()) return {nullptr, 0};
+    return {runtimes_[where_[i].first].get(), where_[i].second};
+}
+
+void IocPlcs::request_enable(std::size_t i, bool on) {
+    if (auto [rt, k] = at(i); rt) rt->request_enable(k, on);
+}
+
+void IocPlcs::set_epics_state(int state) {
+    for (auto& rt : runtimes_)
+        if (rt) rt->set_epics_state(state);
+}
+
+const double* IocPlcs::static_variable(std::size_t i, const std::string& name) const {
+    auto [rt, k] = at(i);
+    return rt ? rt->static_variable(k, name) : nullptr;
 }
 
 plc::PlcRuntime::Options IocPlcs::check_options() const {
@@ -259,9 +282,8 @@ public:
         return true;
     }
     bool write(double v) override {
-        plc::PlcRuntime* rt = plcs_.runtime();
-        if (item_ != Item::Enable || !rt) return false;
-        rt->request_enable(i_, v != 0);
+        if (item_ != Item::Enable || !plcs_.at(i_).first) return false;
+        plcs_.request_enable(i_, v != 0);
         return true;
     }
     bool changed() override {
@@ -271,8 +293,8 @@ public:
         last_ = v;
         // a PLC that ran and stopped again between two looks (enabled, one scan, enable := 0)
         // reads disabled both times: its scan count says it ran
-        if (item_ == Item::Enable && plcs_.runtime()) {
-            uint64_t scans = plcs_.runtime()->status(i_).scans;
+        if (auto [rt, k] = plcs_.at(i_); item_ == Item::Enable && rt) {
+            uint64_t scans = rt->status(k).scans;
             if (scans != last_scans_ && v == 0) c = true;
             last_scans_ = scans;
         }
@@ -282,9 +304,9 @@ public:
 
 private:
     bool value(double& v) const {
-        plc::PlcRuntime* rt = plcs_.runtime();
+        auto [rt, k] = plcs_.at(i_);
         if (!rt) return false;
-        plc::PlcRuntime::Status s = rt->status(i_);
+        plc::PlcRuntime::Status s = rt->status(k);
         switch (item_) {
         case Item::Enable: v = s.enabled; break;
         case Item::Error: v = s.error; break;
@@ -333,56 +355,89 @@ std::unique_ptr<pv::LinkDevice> IocPlcs::make_device(std::string_view name, int 
     return nullptr;
 }
 
-void IocPlcs::bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok,
-                   std::vector<daq::DataStorage*> storages, std::vector<registry::MemMap*> memmaps,
+void IocPlcs::bind(std::vector<PlcCycle> cycles, motion::AxisGroup* group, std::vector<daq::DataStorage*> storages,
                    std::function<std::optional<plc::Binding>(const std::string&)> cells) {
     if (sources_.empty() && plugins_.empty()) return;
-    plc::PlcRuntime::Options o;
-    o.cells = std::move(cells);
-    o.storages = std::move(storages);
-    o.memmaps = std::move(memmaps);
-    o.groups = groups_;
-    for (const auto& [id, t] : luts_) o.luts.emplace_back(id, t.get());
-    o.m2m = m2m_.get();
-    o.cycle_s = cycle_s_;
-    o.ec = [this](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
-        const registry::Signal* s = signals_.find(name);
-        if (!s || s->owner_kind != registry::OwnerKind::Bus || s->loop_only) {
-            why = SB() << "no process-data entry '" << name << "' on the configured buses";
-            return std::nullopt;
+    // Each PLC's cycle: that of its bus, or the IOC's.
+    std::vector<std::size_t> cycle_of(sources_.size(), 0);
+    for (std::size_t i = 0; i < sources_.size(); ++i)
+        if (bus_of_[i])
+            for (std::size_t k = 0; k < cycles.size(); ++k)
+                if (std::find(cycles[k].buses.begin(), cycles[k].buses.end(), *bus_of_[i]) != cycles[k].buses.end())
+                    cycle_of[i] = k;
+    runtimes_.resize(cycles.size());
+    where_.assign(sources_.size(), {0, 0});
+    for (std::size_t k = 0; k < cycles.size(); ++k) {
+        PlcCycle& cy = cycles[k];
+        const bool main = k == 0;
+        std::vector<std::size_t> mine;
+        for (std::size_t i = 0; i < sources_.size(); ++i)
+            if (cycle_of[i] == k) mine.push_back(i);
+        if (mine.empty() && !(main && !plugins_.empty())) continue;
+        plc::PlcRuntime::Options o;
+        o.memmaps = std::move(cy.memmaps);
+        for (const auto& [id, t] : luts_) o.luts.emplace_back(id, t.get());
+        o.cycle_s = double(cy.engine->period_ns()) * 1e-9;
+        std::vector<std::string> buses;
+        for (int b : cy.buses) buses.push_back(SB() << "ec" << b);
+        o.ec = [this, buses, main](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
+            const registry::Signal* s = signals_.find(name);
+            if (!s || s->owner_kind != registry::OwnerKind::Bus || s->loop_only) {
+                why = SB() << "no process-data entry '" << name << "' on the configured buses";
+                return std::nullopt;
+            }
+            if (std::find(buses.begin(), buses.end(), s->owner) == buses.end()) {
+                why = SB() << "'" << name << "' is on " << s->owner << ", which runs in another cycle than this PLC's ("
+                           << (main ? std::string("the IOC's") : "that of " + buses.front()) << "): a PLC reads and writes the buses "
+                           << "of its own cycle; plcs[].bus: N runs it in bus N's (buses[].rate_hz)";
+                return std::nullopt;
+            }
+            registry::BoundSignal b = signals_.bind(name, why);
+            if (!b.bound()) return std::nullopt;
+            return plc::EcEntry{b, kind_of(s->type), s->direction == registry::Direction::Output};
+        };
+        o.bus_ok = std::move(cy.bus_ok);
+        if (main) { // what lives in the IOC's cycle: axes, storages, plugins, m2m, PCOMP cells
+            o.cells = cells;
+            o.storages = storages;
+            o.groups = groups_;
+            o.m2m = m2m_.get();
+            if (group)
+                for (std::size_t i = 0; i < group->size(); ++i) o.axes.push_back(&group->axis(i));
+            for (auto& p : plugins_) o.plugins.push_back(p.get());
         }
-        registry::BoundSignal b = signals_.bind(name, why);
-        if (!b.bound()) return std::nullopt;
-        return plc::EcEntry{b, kind_of(s->type), s->direction == registry::Direction::Output};
-    };
-    o.bus_ok = std::move(bus_ok);
-    if (group)
-        for (std::size_t i = 0; i < group->size(); ++i) o.axes.push_back(&group->axis(i));
-    for (auto& p : plugins_) o.plugins.push_back(p.get());
-    runtime_ = std::make_unique<plc::PlcRuntime>(o);
-    for (const auto& s : sources_) runtime_->add(s); // checked already: errors here are bugs
-    for (auto& p : plugins_)
-        if (int rc = p->rt_enter()) throw Error(SB() << p->path() << ": rt_enter() failed with " << rc);
-    engine.add_stage(rt::StageOrder::GeneralPlcs, *runtime_);
-    if (group) group->set_hook(runtime_.get());
+        auto rt = std::make_unique<plc::PlcRuntime>(o);
+        for (std::size_t i : mine) {
+            where_[i] = {k, rt->size()};
+            rt->add(sources_[i]); // checked already; what may fail here: a name of another cycle
+        }
+        if (main)
+            for (auto& p : plugins_)
+                if (int rc = p->rt_enter()) throw Error(SB() << p->path() << ": rt_enter() failed with " << rc);
+        cy.engine->add_stage(rt::StageOrder::GeneralPlcs, *rt);
+        if (main && group) group->set_hook(rt.get());
+        runtimes_[k] = std::move(rt);
+    }
 }
 
 void IocPlcs::publish() {
-    if (!runtime_) return;
     std::string line;
-    while (runtime_->pop_output(line)) std::fputs(line.c_str(), stdout);
+    for (auto& rt : runtimes_)
+        while (rt && rt->pop_output(line)) std::fputs(line.c_str(), stdout);
     std::fflush(stdout);
     // the values are read by the PVs' device support (scan_io_intr)
     // A fault is logged with its place when it differs from the last one logged (a PLC that
     // faults every scan logs once); the place is looked up only when the fault count moved.
     for (std::size_t i = 0; i < sources_.size(); ++i) {
-        std::uint64_t faults = runtime_->status(i).faults;
+        auto [rt, k] = at(i);
+        if (!rt) continue;
+        std::uint64_t faults = rt->status(k).faults;
         if (faults == seen_faults_[i]) continue;
         seen_faults_[i] = faults;
-        std::string f = runtime_->fault(i);
+        std::string f = rt->fault(k);
         if (f.empty() || f == last_fault_[i]) continue;
         last_fault_[i] = f;
-        LOG_ERR(lg, runtime_->prefix(i) << ": run-time fault at " << f);
+        LOG_ERR(lg, rt->prefix(k) << ": run-time fault at " << f);
     }
 }
 

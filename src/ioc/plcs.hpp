@@ -40,6 +40,15 @@ namespace beamctl::ioc {
 // cannot be read.
 std::optional<plc::PlcSource> axis_plc_source(const motion::AxisConfig& axis);
 
+// One cycle's share of the PLCs (IocPlcs::bind): the engine it runs on, the buses it runs (ids),
+// their masterstatus signals, and the memory maps by ECMC id (null: a bus of another cycle).
+struct PlcCycle {
+    rt::Engine* engine = nullptr;
+    std::vector<int> buses;
+    std::vector<registry::BoundSignal> bus_ok;
+    std::vector<registry::MemMap*> memmaps;
+};
+
 class IocPlcs {
 public:
     // Loads the plugins, reads every PLC and compiles it against the bus signals of `signals`
@@ -51,10 +60,12 @@ public:
     ~IocPlcs();
 
     // Bring-up: compiles for real (ec names bound through the registry, after the buses are up;
-    // ax names to the axes), adds the general PLCs' stage and the axis PLCs' hook.
-    // `storages`: the IOC's data storages (ds<n> of PLC code).
-    void bind(rt::Engine& engine, motion::AxisGroup* group, std::vector<registry::BoundSignal> bus_ok,
-              std::vector<daq::DataStorage*> storages = {}, std::vector<registry::MemMap*> memmaps = {},
+    // ax names to the axes), adds the general PLCs' stage and the axis PLCs' hook. `cycles[0]` is
+    // the IOC's cycle: axis PLCs, and general PLCs without `bus:`, with the axes, the data
+    // storages (ds<n>), the plugins and the other blocks' `cells`; a PLC with `bus: N` runs in
+    // the cycle of bus N, on that cycle's buses and memory maps only (one runtime per cycle).
+    // Throws plc::CompileError (a PLC naming a bus of another cycle) or Error.
+    void bind(std::vector<PlcCycle> cycles, motion::AxisGroup* group, std::vector<daq::DataStorage*> storages = {},
               std::function<std::optional<plc::Binding>(const std::string&)> cells = {});
     // IOC loop: statuses into PVs, output lines to stdout, faults to the log.
     void publish();
@@ -63,7 +74,13 @@ public:
     // (`beamctl plc check --ioc`).
     plc::PlcRuntime::Options check_options() const;
     std::size_t size() const { return sources_.size(); }
-    plc::PlcRuntime* runtime() { return runtime_.get(); }
+    // The IOC cycle's runtime (axis PLCs, general PLCs without bus:); null before bind or if none.
+    plc::PlcRuntime* runtime() { return runtimes_.empty() ? nullptr : runtimes_[0].get(); }
+    // PLC i (sources() order) in its cycle's runtime: the runtime (null before bind) and its index there.
+    std::pair<plc::PlcRuntime*, std::size_t> at(std::size_t i) const;
+    void request_enable(std::size_t i, bool on); // plc<n>.enable, in whichever cycle it runs
+    void set_epics_state(int state);             // every runtime's (PlcRuntime::set_epics_state)
+    const double* static_variable(std::size_t i, const std::string& name) const;
     const std::vector<plc::PlcSource>& sources() const { return sources_; }
     // Device support "beamctl" on a PLC item ("plc0.enable", "plc0.scans", ...): reads the
     // runtime's status; a write of <plc>.enable starts or stops it. Null with `why` otherwise.
@@ -83,7 +100,9 @@ private:
     std::unique_ptr<plc::M2m> m2m_; // `m2m:`, or a PLC calls m2m_*
     std::vector<std::unique_ptr<plc::Plugin>> plugins_;
     std::vector<plc::PlcSource> sources_;
-    std::unique_ptr<plc::PlcRuntime> runtime_;
+    std::vector<std::optional<int>> bus_of_; // per source: plcs[].bus (axis PLCs: none)
+    std::vector<std::unique_ptr<plc::PlcRuntime>> runtimes_; // per cycle (null: no PLC there)
+    std::vector<std::pair<std::size_t, std::size_t>> where_; // per source: (cycle, index in its runtime)
     std::vector<std::string> owners_; // "plc0", "ax1.plc": the prefix of each PLC's items
     pv::Database& db_;
     std::vector<std::uint64_t> seen_faults_; // fault counts already looked at, per PLC

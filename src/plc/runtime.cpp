@@ -777,8 +777,9 @@ struct Builtins {
         return ds_result(rt, dst->append(src->data() + from, n));
     }
     // ---- ec_*mm*: memory maps (ECMC's libEc); errors go to ec_get_err -------------------------
+    // (null in the list: the map of a bus that runs in another cycle than this PLC's)
     static registry::MemMap* memmap(PlcRuntime& rt, double id) noexcept {
-        if (!(id >= 0 && id < double(rt.opt_.memmaps.size()))) {
+        if (!(id >= 0 && id < double(rt.opt_.memmaps.size())) || !rt.opt_.memmaps[std::size_t(id)]) {
             rt.ec_error_ = registry::MemMap::kNull;
             return nullptr;
         }

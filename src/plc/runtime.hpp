@@ -95,7 +95,7 @@ public:
         // Cells of other blocks of the cycle the host offers by name (pcomp<n>.enable, ...):
         // asked after the built-in namespaces; nullopt: not one of them.
         std::function<std::optional<Binding>(const std::string& name)> cells;
-        std::vector<registry::MemMap*> memmaps;  // ec_*_mm_*(id): ECMC's memory map ids in order
+        std::vector<registry::MemMap*> memmaps;  // ec_*_mm_*(id): ECMC's memory map ids in order (null: not here)
         std::vector<std::pair<int, const LookupTable*>> luts; // lut_get_value(id, x): id 0..15
         M2m* m2m = nullptr; // m2m_* (null: their calls report 0x2005A, shared memory not valid)
         // check_only: the storage ids that exist (nullopt: any id 0..31)

@@ -135,6 +135,8 @@ public:
 
     EngineStats stats() const; // consistent enough for display (relaxed counters)
     uint64_t period_ns() const { return period_ns_; }
+    // Virtual time, between run_cycles calls: when the next cycle is due [ns, engine clock].
+    uint64_t next_due_ns() const noexcept { return next_ns_ ? next_ns_ : clock_.now_ns(); }
     // What the RT setup achieved ("SCHED_FIFO 80 on CPU 1, memory locked" or the reasons not).
     const std::string& rt_setup() const { return rt_setup_; }
     // Asks the RT thread to clear the statistics (max times, jitter, missed cycles, stage totals,

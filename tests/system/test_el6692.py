@@ -1,6 +1,7 @@
 """Two EtherCAT buses in one IOC bridged by a simulated EL6692 (examples/el6692/ioc.yaml), through
 Channel Access (pyepics): the undulator's PLC sends the gap on bus 0, the monochromator's PLC reads
-it on bus 1 and answers with an energy; the entries' PVs show both REAL64 values as numbers."""
+it on bus 1 (which runs its own cycle) and answers with an energy; the entries' PVs show both
+REAL64 values as numbers."""
 
 from pathlib import Path
 
@@ -42,6 +43,9 @@ def test_a_value_crosses_the_bridge_both_ways(tmp_path, prefix):
         assert wait_for(lambda: abs(get(p + "m1s001-inLreal01") - rbv) < 1e-3, 5)
         assert wait_for(lambda: abs(get(p + "m0s002-inLreal01") - (1000 + 100 * rbv)) < 0.1, 5)
         assert get(p + "m1s001-inLreal01") != round(get(p + "m1s001-inLreal01"))  # not an integer
+        # each master its own cycle: the monochromator's PLC scans in bus 1's (500 Hz)
+        assert abs(get(p + "PLC00-ScanTime") - 0.001) < 1e-6
+        assert abs(get(p + "PLC01-ScanTime") - 0.002) < 1e-6
         assert srv.alive()
     finally:
         srv.stop()

@@ -36,17 +36,25 @@ plcs:
   - {id: 1, file: b.plc}
 )";
 
+// kIoc with bus 1 on its own cycle at `rate_hz`, PLC 1 in it.
+std::string own_cycle(const std::string& rate_hz, const std::string& plc1 = "{id: 1, file: b.plc, bus: 1}") {
+    std::string y = kIoc;
+    y.replace(y.find("  - id: 1\n"), 10, "  - id: 1\n    rate_hz: " + rate_hz + "\n");
+    y.replace(y.find("{id: 1, file: b.plc}"), 20, plc1);
+    return y;
+}
+
 struct Bridged {
     TempDir dir;
     std::unique_ptr<VirtualIoc> v;
-    explicit Bridged(const std::string& plant_b = "bridges:\n  - {slave: 1, pair: gap_mono}\n") {
+    explicit Bridged(const std::string& plant_b = "bridges:\n  - {slave: 1, pair: gap_mono}\n", const std::string& ioc = kIoc) {
         dir.write("a.yaml", "bridges:\n  - {slave: 1, pair: gap_mono}\n");
         dir.write("b.yaml", plant_b);
         // bus 0 counts and sends; bus 1 reads it and answers with the count + 1000
         dir.write("a.plc", "static.n += 1;\nec0.s1.outInt01 := static.n;\nec0.s1.outLreal01 := static.n * 0.25;\n"
                            "static.back := ec0.s1.inInt02;\n");
         dir.write("b.plc", "static.got := ec1.s1.inLreal01;\nec1.s1.outInt02 := ec1.s1.inInt01 + 1000;\n");
-        v = std::make_unique<VirtualIoc>(dir.write("ioc.yaml", kIoc));
+        v = std::make_unique<VirtualIoc>(dir.write("ioc.yaml", ioc));
     }
     double entry(const std::string& name) {
         std::string why;
@@ -87,6 +95,102 @@ TEST(IocBridge, APlcOnOneBusReadsWhatTheOtherBusWrote) {
     v.ioc->publish();
     EXPECT_EQ(v.get("BR:m1s001-inLreal01"), v.stat(1, "got"));
     EXPECT_EQ(std::fmod(v.get("BR:m1s001-inLreal01"), 1.0) != 0 || std::fmod(v.get("BR:m0s001-outLreal01"), 1.0) != 0, true);
+}
+
+// Bus 1 on its own cycle (its own engine, here at 400 Hz against the IOC's 1 kHz), its PLC with
+// it: the two cycles are not in step, the bridge still carries every value the slower side can
+// take, and each PLC scans at its own cycle's rate.
+TEST(IocBridge, EachBusRunsItsOwnCycle) {
+    Bridged b("bridges:\n  - {slave: 1, pair: gap_mono}\n", own_cycle("400"));
+    VirtualIoc& v = *b.v;
+    ASSERT_EQ(v.ioc->cycle_count(), 2u);
+    EXPECT_EQ(v.ioc->cycle_of_bus(0), 0u);
+    EXPECT_EQ(v.ioc->cycle_of_bus(1), 1u);
+    EXPECT_EQ(v.ioc->cycle(1).period_ns(), 2'500'000u);
+    v.cycles(500);
+    const uint64_t c0 = v.ioc->cycle(0).stats().cycles, c1 = v.ioc->cycle(1).stats().cycles;
+    EXPECT_EQ(c0, 500u);
+    EXPECT_NEAR(double(c1), 200.0, 1.0); // 400 Hz over the same 0.5 s
+    // each bus's thread PVs show its own cycle's statistics
+    v.ioc->publish();
+    EXPECT_EQ(v.get("BR:m0-ThdCycles"), double(v.ioc->cycle(0).stats().latency_samples));
+    EXPECT_EQ(v.get("BR:m1-ThdCycles"), double(v.ioc->cycle(1).stats().latency_samples));
+    EXPECT_NEAR(v.get("BR:m1-ThdCycles") / v.get("BR:m0-ThdCycles"), 0.4, 0.01);
+    auto [rt1, k1] = v.ioc->plcs().at(1);
+    ASSERT_NE(rt1, nullptr);
+    EXPECT_NE(rt1, v.ioc->plcs().runtime()); // PLC 1 runs in bus 1's cycle, PLC 0 in the IOC's
+    EXPECT_DOUBLE_EQ(rt1->status(k1).scantime_s, 0.0025);
+    const uint64_t scans0 = v.ioc->plcs().at(0).first->status(0).scans, scans1 = rt1->status(k1).scans;
+    EXPECT_NEAR(double(scans0) / double(scans1), 2.5, 0.1);
+    // bus 1 takes the newest count each of its cycles: a few IOC cycles old, never older than
+    // one bus-1 cycle plus the bridge's frames; it only goes up
+    double last_got = 0;
+    std::set<double> lags;
+    for (int k = 0; k < 400; ++k) {
+        v.cycles(1);
+        const double n = v.stat(0, "n"), got = v.stat(1, "got") / 0.25;
+        EXPECT_GE(got, last_got);
+        last_got = got;
+        lags.insert(n - got);
+    }
+    EXPECT_GE(*lags.begin(), 1);
+    EXPECT_LE(*lags.rbegin(), 2 + 2 * 3); // the bridge's two frames, in the slower cycle's steps
+    EXPECT_GT(lags.size(), 1u); // not in step: the lag moves
+    // the answer comes back through the same bridge
+    EXPECT_GT(v.stat(0, "back"), 1000);
+}
+
+// A PLC of the IOC's cycle cannot touch a bus of another cycle (two threads on one process
+// image): refused at bring-up, naming the entry and what to do.
+TEST(IocBridge, APlcNamingABusOfAnotherCycleIsRefused) {
+    std::string what = "no error";
+    try {
+        Bridged b("bridges:\n  - {slave: 1, pair: gap_mono}\n", own_cycle("500", "{id: 1, file: b.plc}"));
+    } catch (const std::exception& e) {
+        what = e.what();
+    }
+    EXPECT_NE(what.find("b.plc:1:"), std::string::npos) << what;
+    EXPECT_NE(what.find("'ec1.s1.inLreal01' is on ec1, which runs in another cycle than this PLC's"), std::string::npos) << what;
+    EXPECT_NE(what.find("plcs[].bus: N"), std::string::npos) << what;
+}
+
+TEST(IocBridge, OwnCycleKeysAreChecked) {
+    TempDir dir;
+    auto error = [&](const std::string& y) -> std::string {
+        try {
+            config::IocConfig::load(dir.write("ioc.yaml", y));
+        } catch (const Error& e) {
+            return e.what();
+        }
+        return "no error";
+    };
+    EXPECT_NE(error(own_cycle("0")).find("ioc.yaml:10:14: buses[1].rate_hz should be from 1 to 20000, got 0"), std::string::npos) << error(own_cycle("0"));
+    std::string bad_bus = own_cycle("500", "{id: 1, file: b.plc, bus: 7}");
+    EXPECT_NE(error(bad_bus).find("no bus 7 in buses:"), std::string::npos) << error(bad_bus);
+}
+
+// Axes run in the IOC's cycle: a drive on a bus of its own cycle is refused, naming the entry.
+TEST(IocBridge, AnAxisOnABusOfAnotherCycleIsRefused) {
+    TempDir dir;
+    std::string y = R"(ioc: {name: BR}
+buses:
+  - id: 0
+    rate_hz: 500
+    link: {type: sim}
+    slaves:
+      - {position: 0, type: EK1100}
+      - {position: 1, type: EL7041}
+axes:
+  - {file: )" + std::string(BEAMCTL_SOURCE_DIR) + R"(/examples/demo/axes/jack.yaml, macros: {AX_ID: 1, AX_NAME: Gap, DRV_SLAVE: 1}}
+)";
+    std::string what = "no error";
+    try {
+        VirtualIoc v(dir.write("ioc.yaml", y));
+    } catch (const std::exception& e) {
+        what = e.what();
+    }
+    EXPECT_NE(what.find("jack.yaml:"), std::string::npos) << what;
+    EXPECT_NE(what.find("is on bus 0, which runs its own cycle (buses[].rate_hz)"), std::string::npos) << what;
 }
 
 // The primary side loses power: the secondary says so (0x10F4:10, TxPDO state) and holds its

@@ -25,11 +25,11 @@ struct VirtualIoc {
         ioc = std::make_unique<ioc::Ioc>(config::IocConfig::load(path), clock);
         ioc->bring_up();
     }
-    void cycles(int n) { ioc->engine().run_cycles(uint64_t(n)); }
+    void cycles(int n) { ioc->run_cycles(uint64_t(n)); }
     plc::PlcRuntime& plcs() { return *ioc->plcs().runtime(); }
     // A static variable of PLC `plc` (index in the runtime: general PLCs first).
     double stat(std::size_t plc, const std::string& name) {
-        const double* v = plcs().static_variable(plc, name);
+        const double* v = ioc->plcs().static_variable(plc, name);
         if (!v) throw std::runtime_error("no static " + name);
         return *v;
     }
