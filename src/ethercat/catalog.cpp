@@ -110,7 +110,12 @@ DeviceDesc parse_yaml_device(const config::YamlNode& root) {
 
     // PDOs.
     std::set<uint16_t> pdo_indices;
-    std::map<std::string, std::string> entry_names; // name -> path of first use
+    struct NamedEntry {
+        std::string path; // of its first use
+        uint16_t index;
+        uint8_t sub, bits;
+    };
+    std::map<std::string, NamedEntry> entry_names;
     std::vector<std::pair<uint8_t, uint16_t>> rx_assign, tx_assign;
     for (bool rx : {true, false}) {
         for (const config::YamlNode& n : root[rx ? "rx_pdos" : "tx_pdos"].list()) {
@@ -163,11 +168,11 @@ DeviceDesc parse_yaml_device(const config::YamlNode& root) {
                     if (width != 0 && bits && *bits != 0 && width != e.bits)
                         en["bits"].error(SB() << unsigned(e.bits) << " should be " << width
                                               << " for datatype " << e.datatype);
-                    if (!e.name.empty()) {
-                        auto [it, fresh] = entry_names.emplace(e.name, en.path());
-                        if (!fresh)
+                    if (!e.name.empty()) { // one name, one object (alternative PDOs may share an object)
+                        auto [it, fresh] = entry_names.emplace(e.name, NamedEntry{en.path(), e.index, e.sub, e.bits});
+                        if (!fresh && !(it->second.index == e.index && it->second.sub == e.sub && it->second.bits == e.bits))
                             en["name"].error(SB() << "'" << e.name << "' is already used by "
-                                                  << it->second);
+                                                  << it->second.path << " (another object)");
                     }
                 }
                 p.entries.push_back(std::move(e));

@@ -533,8 +533,24 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
         pv::merge_db(f, make_records(entries, slave, registry_));
         name_pvs(entries, slave, registry_);
         for (const PvRow& row : entries.rows) entry_pvs_[p + row.suffix] = slave.signal_prefix + row.signal;
+        auto has = [d](const char* name) {
+            for (const auto& pd : d->tx_pdos)
+                for (const auto& e : pd.entries)
+                    if (e.name == name) return true;
+            return false;
+        };
+        if (has("internalTimestamp01") && has("externalTimestamp01")) { // an EL6692 side
+            f.records.push_back(record("ai", p + "-DcSkew", {{"DESC", "DC time: other segment - this"}, {"EGU", "ns"}, {"PREC", "0"}}));
+            f.records.push_back(record("ai", p + "-DcDrift", {{"DESC", "DC skew rate, last second"}, {"EGU", "ppm"}, {"PREC", "3"}}));
+            b.dc_skews.push_back(BusRt::DcSkew{slave.signal_prefix, p});
+        }
     }
     db_.load(f);
+    for (auto& d : b.dc_skews) {
+        d.skew = db_.find(d.pv + "-DcSkew");
+        d.drift = db_.find(d.pv + "-DcDrift");
+        d.skew->val_read_only = d.drift->val_read_only = true;
+    }
     b.lat_hist = db_.find(m + "-ThdLatHist");
     b.lat_edges = db_.find(m + "-ThdLatHistEdges");
     for (const auto& s : bc.slaves) {
@@ -705,6 +721,12 @@ void Ioc::bring_up() {
                     throw Error(SB() << bc.slaves[i].type_where << ": ec" << bc.id << " s" << bc.slaves[i].position << " is "
                                      << bc.slaves[i].type << " in this file, " << bus.slaves()[i].type << " in the scanner's chain");
     }
+    for (auto& b : buses_)
+        for (auto& d : b.dc_skews) { // the time stamps, if the side's 0x1A02 is assigned
+            d.int_ts = b.bus->find_signal(d.slave + "internalTimestamp01");
+            d.ext_ts = b.bus->find_signal(d.slave + "externalTimestamp01");
+            d.not_connected = b.bus->find_signal(d.slave + "externalDeviceNotConnected01");
+        }
     binding_cycle_ = 0; // axes, profile moves, storages, position compare and capture: the IOC's cycle
     axes_->bind(
         [this](const motion::SignalRef& r) {
@@ -780,7 +802,10 @@ void Ioc::publish() {
     storages_->publish();
     flyscan_->publish();
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
-    for (auto& b : buses_) b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
+    for (auto& b : buses_) {
+        b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
+        for (auto& d : b.dc_skews) publish_dc_skew(b, d, b.bus->looked());
+    }
     memmaps_->publish(EventLoop::now_s());
     for (auto& b : buses_) {
         const rt::EngineStats& es = cycle_stats_[b.cycle];
@@ -813,6 +838,31 @@ void Ioc::publish() {
         }
     }
     db_.scan_io_intr(); // records on engine signals (axis items, bus entries) that changed since the last look
+}
+
+// An EL6692 side's two DC time stamps, latched together: the skew between the two segments' time
+// bases, and how fast it moves (over the last second of time stamps).
+void Ioc::publish_dc_skew(BusRt&, BusRt::DcSkew& d, const ethercat::BusSnapshot& s) {
+    if (!d.int_ts || !d.ext_ts || s.image.empty()) return;
+    const bool gone = !s.link_up || (d.not_connected && ethercat::Bus::get(s.image, *d.not_connected));
+    if (gone) { // the last values stay, INVALID
+        if (d.skew->sevr != pv::kInvalid) {
+            set_value(db_, *d.skew, get_value(*d.skew), true);
+            set_value(db_, *d.drift, get_value(*d.drift), true);
+        }
+        d.history.clear();
+        return;
+    }
+    const uint64_t in = ethercat::Bus::get(s.image, *d.int_ts), ex = ethercat::Bus::get(s.image, *d.ext_ts);
+    if (in == 0 || in == d.last_stamp) return; // no new latch since the last look
+    d.last_stamp = in;
+    const int64_t skew = int64_t(ex - in);
+    d.history.emplace_back(in, skew);
+    while (d.history.size() > 2 && in - d.history[1].first >= 1'000'000'000ull) d.history.pop_front();
+    const auto& [t0, k0] = d.history.front();
+    const double drift = in > t0 ? double(skew - k0) / double(in - t0) * 1e6 : 0.0;
+    set_value(db_, *d.skew, double(skew), false);
+    set_value(db_, *d.drift, drift, false);
 }
 
 void Ioc::bus_changed(std::size_t i) {

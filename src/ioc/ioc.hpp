@@ -25,6 +25,7 @@
 #include "registry/registry.hpp"
 #include "rt/engine.hpp"
 
+#include <deque>
 #include <map>
 #include <memory>
 #include <set>
@@ -104,7 +105,20 @@ private:
         std::vector<pv::Record*> err_msg; // per slave $(P)m0s003-ErrMsg: its last error in words
         uint64_t health_seen = ~uint64_t(0); // Master::health_version() at the last publish
         std::size_t cycle = 0; // the cycle it runs in (cycle(k))
+        // An EL6692 side's distributed-clock skew (its 0x1A02 time stamps): $(P)m<b>s<kkk>-DcSkew
+        // [ns, the other segment's DC time - this one's] and -DcDrift [ppm, over the last second].
+        struct DcSkew {
+            std::string slave; // "ec1.s1."
+            std::string pv;    // "$(P)m1s001"
+            pv::Record *skew = nullptr, *drift = nullptr;
+            const ethercat::SignalInfo *int_ts = nullptr, *ext_ts = nullptr; // null: 0x1A02 not assigned
+            const ethercat::SignalInfo* not_connected = nullptr;
+            uint64_t last_stamp = ~uint64_t(0);
+            std::deque<std::pair<uint64_t, int64_t>> history; // (internal time stamp, skew), a second of it
+        };
+        std::vector<DcSkew> dc_skews;
     };
+    void publish_dc_skew(BusRt& b, BusRt::DcSkew& d, const ethercat::BusSnapshot& s);
     void declare_bus_signals();
     // Shell commands (IOC loop): `ethercat [BUS]`, `sim BUS FAULT ...`.
     bool ethercat_report(const std::vector<std::string>& argv, std::ostream& os);

@@ -37,6 +37,14 @@ plc::EcEntry::Kind kind_of(const std::string& datatype) {
 }
 
 
+// Why a PLC may not name `name` (an entry of bus `owner`, "ec1"): it runs in the cycle of bus
+// `own_bus` ("ec2"), or in the IOC's ("").
+std::string cycle_refusal(const std::string& name, const std::string& owner, const std::string& own_bus) {
+    return SB() << "'" << name << "' is on " << owner << ", which runs in another cycle than this PLC's ("
+                << (own_bus.empty() ? std::string("the IOC's") : "that of " + own_bus)
+                << "): a PLC reads and writes the buses of its own cycle; plcs[].bus: N runs it in bus N's (buses[].rate_hz)";
+}
+
 } // namespace
 
 plc::PlcSource plc_source(const config::PlcEntry& e) {
@@ -117,9 +125,35 @@ IocPlcs::IocPlcs(const config::IocConfig& cfg, const std::vector<motion::AxisCon
         for (std::size_t g = 0; g < group_names.size(); ++g) s.macros.emplace("GRP_" + group_names[g] + "_ID", std::to_string(g));
     // Check-compile everything now, so `beamctl check` and `run` report every error before
     // anything starts.
-    plc::PlcRuntime check(check_options());
+    // ... each in its cycle: the buses it may name (plcs[].bus of a bus with rate_hz: that bus;
+    // otherwise the buses of the IOC's cycle)
+    std::vector<std::string> main_buses;
+    for (const auto& bc : cfg.buses)
+        if (!bc.rate_hz) main_buses.push_back(SB() << "ec" << bc.id);
+    const std::vector<std::string>* allowed = &main_buses;
+    std::vector<std::string> own;
+    plc::PlcRuntime::Options co = check_options();
+    co.ec = [inner = co.ec, reg = &signals, &allowed, &own](const std::string& name, std::string& why) -> std::optional<plc::EcEntry> {
+        auto e = inner(name, why);
+        if (!e) return e;
+        const registry::Signal* s = reg->find(name);
+        if (std::find(allowed->begin(), allowed->end(), s->owner) == allowed->end()) {
+            why = cycle_refusal(name, s->owner, allowed == &own ? own.front() : std::string());
+            return std::nullopt;
+        }
+        return e;
+    };
+    plc::PlcRuntime check(co);
     std::vector<std::string> errors;
-    for (const auto& s : sources_) {
+    for (std::size_t i = 0; i < sources_.size(); ++i) {
+        const auto& s = sources_[i];
+        allowed = &main_buses;
+        if (bus_of_[i])
+            for (const auto& bc : cfg.buses)
+                if (bc.id == *bus_of_[i] && bc.rate_hz) {
+                    own = {std::string(SB() << "ec" << bc.id)};
+                    allowed = &own;
+                }
         try {
             check.add(s);
         } catch (const plc::CompileError& e) {
@@ -387,9 +421,7 @@ void IocPlcs::bind(std::vector<PlcCycle> cycles, motion::AxisGroup* group, std::
                 return std::nullopt;
             }
             if (std::find(buses.begin(), buses.end(), s->owner) == buses.end()) {
-                why = SB() << "'" << name << "' is on " << s->owner << ", which runs in another cycle than this PLC's ("
-                           << (main ? std::string("the IOC's") : "that of " + buses.front()) << "): a PLC reads and writes the buses "
-                           << "of its own cycle; plcs[].bus: N runs it in bus N's (buses[].rate_hz)";
+                why = cycle_refusal(name, s->owner, main ? std::string() : buses.front());
                 return std::nullopt;
             }
             registry::BoundSignal b = signals_.bind(name, why);

@@ -3,6 +3,7 @@ Channel Access (pyepics): the undulator's PLC sends the gap on bus 0, the monoch
 it on bus 1 (which runs its own cycle) and answers with an energy; the entries' PVs show both
 REAL64 values as numbers."""
 
+import time
 from pathlib import Path
 
 import epics
@@ -46,6 +47,18 @@ def test_a_value_crosses_the_bridge_both_ways(tmp_path, prefix):
         # each master its own cycle: the monochromator's PLC scans in bus 1's (500 Hz)
         assert abs(get(p + "PLC00-ScanTime") - 0.001) < 1e-6
         assert abs(get(p + "PLC01-ScanTime") - 0.002) < 1e-6
+        # distributed clocks: bus 1's time base runs 40 ppm fast (mono_plant.yaml's clock); both
+        # sides measure the skew, the other way round
+        assert wait_for(lambda: abs(get(p + "m0s002-DcDrift") - 40) < 2, 10), get(p + "m0s002-DcDrift")
+        assert abs(get(p + "m1s001-DcDrift") + 40) < 2
+        skew = get(p + "m0s002-DcSkew")
+        assert abs(skew) < 50e6, skew  # what the two masters' DC set-up left, then 40 us more a second
+        assert abs(get(p + "m1s001-DcSkew") + skew) < 20e3
+        t = time.monotonic()
+        time.sleep(1.0)
+        later = get(p + "m0s002-DcSkew")
+        grown = (later - skew) / (time.monotonic() - t)  # [ns/s]
+        assert 20e3 < grown < 60e3, grown
         assert srv.alive()
     finally:
         srv.stop()

@@ -4,6 +4,7 @@
 #include "ethercat/sim/segment.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 
 namespace beamctl::ethercat::sim {
@@ -21,21 +22,7 @@ const char* side_name(int me) { return me ? "secondary" : "primary"; }
 } // namespace
 
 BridgeSide::BridgeSide(Segment& seg, int position, const std::string& pair, int me) : position_(position), me_(me) {
-    const DeviceDesc& d = seg.slave(std::size_t(position)).desc();
-    auto bind_user = [&](const std::vector<Pdo>& pdos, uint16_t index, std::vector<IoPoint>& to) {
-        for (const Pdo& p : pdos)
-            for (const PdoEntry& e : p.entries) {
-                if (e.index != index || e.sub == 0 || e.name.empty()) continue;
-                if (to.size() < e.sub) to.resize(e.sub);
-                to[e.sub - 1] = bind_optional(seg, position, e.name); // unassigned PDOs: unbound
-            }
-    };
-    bind_user(d.rx_pdos, 0x7000, out_);
-    bind_user(d.tx_pdos, 0x6000, in_);
-    toggle_ = bind_optional(seg, position, "txPdoToggle01");
-    state_ = bind_optional(seg, position, "txPdoState01");
-    not_connected_ = bind_optional(seg, position, "externalDeviceNotConnected01");
-    scratch_.assign(out_.size(), 0);
+    bind(seg);
     if (pair.empty()) { // a bridge whose other side is nowhere: never connected
         pair_ = std::make_shared<BridgePair>();
     } else {
@@ -54,6 +41,27 @@ BridgeSide::BridgeSide(Segment& seg, int position, const std::string& pair, int 
     s.out.assign(out_.size(), 0);
 }
 
+void BridgeSide::bind(Segment& seg) {
+    const DeviceDesc& d = seg.slave(std::size_t(position_)).desc();
+    auto bind_user = [&](const std::vector<Pdo>& pdos, uint16_t index, std::vector<IoPoint>& to) {
+        for (const Pdo& p : pdos)
+            for (const PdoEntry& e : p.entries) {
+                if (e.index != index || e.sub == 0 || e.name.empty()) continue;
+                if (to.size() < e.sub) to.resize(e.sub);
+                to[e.sub - 1] = bind_assigned(seg, position_, e.name); // unassigned PDOs: unbound
+            }
+    };
+    bind_user(d.rx_pdos, 0x7000, out_);
+    bind_user(d.tx_pdos, 0x6000, in_);
+    toggle_ = bind_assigned(seg, position_, "txPdoToggle01");
+    state_ = bind_assigned(seg, position_, "txPdoState01");
+    not_connected_ = bind_assigned(seg, position_, "externalDeviceNotConnected01");
+    ts_toggle_ = bind_assigned(seg, position_, "timestampToggle01");
+    int_ts_ = bind_assigned(seg, position_, "internalTimestamp01");
+    ext_ts_ = bind_assigned(seg, position_, "externalTimestamp01");
+    scratch_.assign(out_.size(), 0);
+}
+
 BridgeSide::~BridgeSide() {
     std::lock_guard<std::mutex> l(pair_->mu);
     BridgePair::Side& s = pair_->side[me_];
@@ -62,9 +70,17 @@ BridgeSide::~BridgeSide() {
 }
 
 void BridgeSide::step(Segment& seg) noexcept {
-    const bool op = seg.plugged(std::size_t(position_)) && seg.slave(std::size_t(position_)).outputs_valid();
+    const bool plugged = seg.plugged(std::size_t(position_));
+    const uint8_t al = plugged ? seg.slave(std::size_t(position_)).al_state() : 0;
+    if (al != al_seen_) { // SAFEOP: the assignment the master configured holds from now on
+        al_seen_ = al;
+        if (al == kSafeop) bind(seg); // allocates, once per state change (not in the cycle's steady state)
+    }
+    const bool op = plugged && seg.slave(std::size_t(position_)).outputs_valid();
     for (std::size_t k = 0; k < out_.size(); ++k) scratch_[k] = out_[k].bound() ? out_[k].get(seg) : 0;
+    const uint64_t now = seg.time(), dc = seg.dc_system_time();
     bool connected = false, news = false;
+    uint64_t ext = 0;
     {
         std::lock_guard<std::mutex> l(pair_->mu);
         const BridgePair::Side& other = pair_->side[1 - me_];
@@ -76,8 +92,13 @@ void BridgeSide::step(Segment& seg) noexcept {
             seen_seq_ = other.seq;
             news = true;
         }
+        if (connected) // the other segment's DC time now: from its last frame, at its clock's rate
+            ext = other.dc_ns + uint64_t(std::llround(double(int64_t(now - other.t_ns)) * other.rate));
         BridgePair::Side& mine = pair_->side[me_];
         mine.op = op;
+        mine.t_ns = now;
+        mine.dc_ns = dc;
+        mine.rate = seg.clock_rate();
         if (op) {
             std::copy(scratch_.begin(), scratch_.end(), mine.out.begin());
             ++mine.seq;
@@ -87,6 +108,12 @@ void BridgeSide::step(Segment& seg) noexcept {
     toggle_.set(seg, toggled_ ? 1 : 0);
     state_.set(seg, connected ? 0 : 1);
     not_connected_.set(seg, connected ? 0 : 1);
+    if (connected && int_ts_.bound()) { // both time stamps, latched together
+        int_ts_.set(seg, dc);
+        ext_ts_.set(seg, ext);
+        ts_toggled_ = !ts_toggled_;
+        ts_toggle_.set(seg, ts_toggled_ ? 1 : 0);
+    }
 }
 
 } // namespace beamctl::ethercat::sim

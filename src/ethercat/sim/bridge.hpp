@@ -12,6 +12,13 @@
 // in this process); txPdoToggle01 (0x1800:09) flips each time new data arrived. While the other
 // side is not in OP the inputs hold their last values (an assumption: Beckhoff does not document
 // it).
+// Distributed clocks (0x1A02, assigned instead of 0x1A01 by startup SDOs): each side latches its
+// own segment's DC system time (internalTimestamp01, 0x10F4:11) and the other segment's at the
+// same instant (externalTimestamp01, 0x10F4:12) after each frame, and flips timestampToggle01;
+// the other's time is carried from its last frame at its clock's rate (Segment::set_clock), so
+// externalTimestamp01 - internalTimestamp01 is the skew between the two time bases.
+// controlValue01 (0x10F4:13, for TwinCAT's DC master clock control) stays 0: not simulated.
+// The entries are located under the PDO assignment the side has when it enters SAFEOP.
 // Threading: the pair's shared buffers are behind a mutex: the two segments may run on different
 // threads (a simulator process with two UDP segments). Each side is used on its segment's thread.
 #pragma once
@@ -36,6 +43,8 @@ struct BridgePair {
         bool op = false;           // in OP at its last frame
         uint64_t seq = 0;          // counts the outputs it left
         std::vector<uint64_t> out; // raw 0x7000:k values, by k - 1
+        uint64_t t_ns = 0, dc_ns = 0; // at its last frame: simulated time, its segment's DC time
+        double rate = 1;              // its segment's clock rate (DC ns per simulated ns)
     } side[2];
 };
 
@@ -58,12 +67,16 @@ public:
     static int side_of(uint32_t revision) { return (revision & 0xFFFF) == 0x0002 ? 1 : 0; }
 
 private:
+    void bind(Segment& seg); // the entries, under the slave's PDO assignment now
+
     int position_, me_;
     std::shared_ptr<BridgePair> pair_;
     std::vector<IoPoint> out_, in_; // by sub-index - 1 (unbound where the device has none)
     IoPoint toggle_, state_, not_connected_;
+    IoPoint ts_toggle_, int_ts_, ext_ts_; // 0x1A02
+    uint8_t al_seen_ = 0; // the AL state the entries were located in
     uint64_t seen_seq_ = 0;
-    bool toggled_ = false;
+    bool toggled_ = false, ts_toggled_ = false;
     std::vector<uint64_t> scratch_;
 };
 

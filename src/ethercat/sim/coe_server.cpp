@@ -149,6 +149,15 @@ uint32_t CoeServer::sm_bytes(uint8_t sm) const {
     return (bits + 7) / 8;
 }
 
+bool CoeServer::assigned(uint8_t sm, std::vector<uint16_t>& pdos) const {
+    auto it = objects_.find(uint16_t(coe::kObjSmAssignBase + sm));
+    if (sm >= 0x20 || it == objects_.end()) return false;
+    pdos.clear();
+    const auto& subs = it->second.subs;
+    for (uint8_t k = 1, n = subs.at(0)[0]; k <= n; ++k) pdos.push_back(le16(subs.at(k).data()));
+    return true;
+}
+
 std::size_t CoeServer::handle(const uint8_t* req, std::size_t len, uint8_t* reply, std::size_t cap,
                               uint8_t al_state, uint16_t& mbx_error) {
     mbx_error = 0;

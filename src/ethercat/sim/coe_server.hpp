@@ -38,6 +38,8 @@ public:
     // Bytes of process data of SM `sm` under its current PDO assignment (the DeviceDesc default
     // if the SM has no assignment object).
     uint32_t sm_bytes(uint8_t sm) const;
+    // The PDOs assigned to SM `sm` now, in order; false if the SM has no assignment object.
+    bool assigned(uint8_t sm, std::vector<uint16_t>& pdos) const;
 
 private:
     enum class Access : uint8_t { ReadOnly, ReadWrite, PdoAssign };

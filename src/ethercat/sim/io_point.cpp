@@ -1,6 +1,8 @@
 #include "ethercat/sim/io_point.hpp"
 
 #include "core/error.hpp"
+#include "ethercat/sim/coe_server.hpp"
+#include "ethercat/sim/esc.hpp"
 #include "ethercat/sim/segment.hpp"
 
 #include <cstring>
@@ -8,13 +10,14 @@
 namespace beamctl::ethercat::sim {
 
 namespace {
+// Every entry of the PDOs `assign` lists ({sm, pdo}, in order), where it lives.
 template <class F>
-bool for_each_entry(const DeviceDesc& d, F&& f) {
+bool for_each_entry(const DeviceDesc& d, const std::vector<std::pair<uint8_t, uint16_t>>& assign, F&& f) {
     for (const auto& sm : d.sms) {
         if (sm.type != SmType::Outputs && sm.type != SmType::Inputs) continue;
         bool out = sm.type == SmType::Outputs;
         uint32_t bit = 0;
-        for (auto& [smi, pdo_index] : d.pdo_assign) {
+        for (auto& [smi, pdo_index] : assign) {
             if (smi != sm.index) continue;
             for (const auto& p : out ? d.rx_pdos : d.tx_pdos) {
                 if (p.index != pdo_index) continue;
@@ -26,6 +29,10 @@ bool for_each_entry(const DeviceDesc& d, F&& f) {
         }
     }
     return false;
+}
+template <class F>
+bool for_each_entry(const DeviceDesc& d, F&& f) {
+    return for_each_entry(d, d.pdo_assign, f);
 }
 } // namespace
 
@@ -109,6 +116,30 @@ IoPoint bind_optional(Segment& seg, int position, std::string_view entry) {
     if (position < 0 || std::size_t(position) >= seg.size()) return {};
     if (!has_entry(seg.slave(std::size_t(position)).desc(), entry)) return {};
     return bind_io(seg, position, entry);
+}
+
+IoPoint bind_assigned(Segment& seg, int position, std::string_view entry) {
+    if (position < 0 || std::size_t(position) >= seg.size()) return {};
+    Esc& esc = seg.slave(std::size_t(position));
+    const DeviceDesc& d = esc.desc();
+    if (!esc.coe()) return bind_optional(seg, position, entry);
+    std::vector<std::pair<uint8_t, uint16_t>> assign;
+    std::vector<uint16_t> pdos;
+    for (const auto& sm : d.sms) {
+        if (sm.type != SmType::Outputs && sm.type != SmType::Inputs) continue;
+        if (esc.coe()->assigned(sm.index, pdos))
+            for (uint16_t p : pdos) assign.emplace_back(sm.index, p);
+        else
+            for (const auto& a : d.pdo_assign)
+                if (a.first == sm.index) assign.push_back(a);
+    }
+    IoPoint found;
+    for_each_entry(d, assign, [&](const PdoEntry& e, const EntryLocation& l) {
+        if (e.name != entry) return false;
+        found = IoPoint{position, l};
+        return true;
+    });
+    return found;
 }
 
 } // namespace beamctl::ethercat::sim

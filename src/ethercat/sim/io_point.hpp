@@ -54,6 +54,9 @@ IoPoint bind_io(Segment& seg, int position, std::string_view entry);
 // Same, but returns an unbound point when the slave has no such entry (optional entries).
 IoPoint bind_optional(Segment& seg, int position, std::string_view entry);
 
+// Same, under the slave's PDO assignment as it is now (its CoE 0x1C1n objects, which startup SDOs
+// may have changed; the default without CoE): unbound when no assigned PDO has the entry.
+IoPoint bind_assigned(Segment& seg, int position, std::string_view entry);
 // Bit copies between process-data buffers (LSB-first bit order, as EtherCAT maps them).
 uint64_t read_bits(const uint8_t* p, uint32_t bit, uint8_t bits) noexcept;
 void write_bits(uint8_t* p, uint32_t bit, uint8_t bits, uint64_t v) noexcept;

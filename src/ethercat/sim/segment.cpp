@@ -3,6 +3,7 @@
 #include "core/error.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 #include "ethercat/sii.hpp"
 
@@ -25,14 +26,23 @@ Esc& Segment::add(const DeviceDesc& desc) {
     descs_.push_back(std::make_unique<DeviceDesc>(desc));
     const DeviceDesc& d = *descs_.back();
     slaves_.push_back(Slot{std::make_unique<Esc>(d, build_sii(d)), &d, true});
-    slaves_.back().esc->set_local_time(time_ns_);
+    slaves_.back().esc->set_local_time(local_ns_);
     slaves_.back().esc->set_hop_delay(kHopDelayNs * (slaves_.size() - 1));
     return *slaves_.back().esc;
 }
 
 void Segment::set_time(uint64_t ns) noexcept {
     time_ns_ = ns;
-    for (auto& s : slaves_) s.esc->set_local_time(ns);
+    if (!clock_t0_) clock_t0_ = ns;
+    const double since = double(int64_t(ns - clock_t0_));
+    local_ns_ = uint64_t(int64_t(ns) + clock_offset_ns_ + int64_t(std::llround(since * drift_ppm_ * 1e-6)));
+    for (auto& s : slaves_) s.esc->set_local_time(local_ns_);
+}
+
+uint64_t Segment::dc_system_time() noexcept {
+    for (auto& s : slaves_)
+        if (s.plugged && s.desc->dc_assign_activate) return s.esc->system_time();
+    return local_ns_;
 }
 
 void Segment::unplug(std::size_t position) { slaves_.at(position).plugged = false; }
@@ -40,7 +50,7 @@ void Segment::unplug(std::size_t position) { slaves_.at(position).plugged = fals
 void Segment::replug(std::size_t position) {
     Slot& s = slaves_.at(position);
     s.esc = std::make_unique<Esc>(*s.desc, build_sii(*s.desc));
-    s.esc->set_local_time(time_ns_);
+    s.esc->set_local_time(local_ns_);
     s.esc->set_hop_delay(kHopDelayNs * position);
     s.plugged = true;
 }

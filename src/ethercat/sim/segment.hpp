@@ -39,6 +39,17 @@ public:
     // Simulated time [ns since 2000-01-01] that slaves see; advanced by the link or tests.
     void set_time(uint64_t ns) noexcept;
     uint64_t time() const { return time_ns_; }
+    // The segment's own clock (its slaves' local time) against the time set_time gives: `offset_ns`
+    // apart from the first set_time on, running `drift_ppm` fast (the crystals of another
+    // machine). Default 0 and 0: the slaves' local time is set_time's.
+    void set_clock(int64_t offset_ns, double drift_ppm) noexcept {
+        clock_offset_ns_ = offset_ns;
+        drift_ppm_ = drift_ppm;
+    }
+    double clock_rate() const noexcept { return 1.0 + drift_ppm_ * 1e-6; } // local ns per set_time ns
+    // The segment's DC system time now [ns]: that of its first plugged slave with DC (the
+    // reference clock the master picks); the local time if it has none.
+    uint64_t dc_system_time() noexcept;
 
     // Fault injection. An unplugged slave is bypassed (frames pass it untouched); on replug it
     // comes back powered up again: INIT, no station address, SMs/FMMUs cleared.
@@ -83,6 +94,10 @@ private:
     std::vector<Slot> slaves_;
     std::vector<std::unique_ptr<DeviceDesc>> descs_;
     uint64_t time_ns_ = 0;
+    uint64_t local_ns_ = 0;      // the slaves' local time (time_ns_ through the segment's clock)
+    uint64_t clock_t0_ = 0;      // the first set_time (0: none yet)
+    int64_t clock_offset_ns_ = 0;
+    double drift_ppm_ = 0;
     double loss_ = 0, corrupt_ = 0;
     int break_after_ = -1;
     uint32_t answer_delay_us_ = 0;

@@ -217,8 +217,12 @@ SimConfig SimConfig::parse(const std::string& text, const std::string& file, con
     SimConfig c;
     YamlNode root = rd.root();
     if (root && !root.is_null() && !root.is_map())
-        rd.error(rd.loc(root.yaml()), "expected a mapping with slaves:, wiring:, stages:, signals:, bridges:");
-    else if (root.keys({"slaves", "wiring", "stages", "signals", "bridges"}) && !root.is_null()) {
+        rd.error(rd.loc(root.yaml()), "expected a mapping with slaves:, wiring:, stages:, signals:, bridges:, clock:");
+    else if (root.keys({"slaves", "wiring", "stages", "signals", "bridges", "clock"}) && !root.is_null()) {
+        if (YamlNode k = root["clock"]; k.keys({"offset_us", "drift_ppm"}) && k) {
+            c.clock_offset_us = k["offset_us"].number(between(-1e9, 1e9)).value_or(0);
+            c.clock_drift_ppm = k["drift_ppm"].number(between(-1000, 1000)).value_or(0);
+        }
         for (const YamlNode& item : root["slaves"].list()) {
             if (!item.keys({"position", "type"})) continue;
             auto pos = item.required("position").integer(between(0, 65534));
@@ -472,6 +476,7 @@ std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog, Er
     for (std::size_t p = 0; p < seg.size(); ++p)
         if (!bridged[p] && is_el6692(seg.slave(p).desc()))
             plant->bridges.push_back(std::make_unique<BridgeSide>(seg, int(p), "", BridgeSide::side_of(seg.slave(p).desc().revision)));
+    seg.set_clock(int64_t(std::llround(clock_offset_us * 1000)), clock_drift_ppm);
     plant->steps = 0;
     seg.on_frame = [plant](Segment& s) { plant->step(s); };
     seg.on_plant_fault = [plant](const Fault& f) { return plant->apply_fault(f); };

@@ -6,6 +6,8 @@
 //   signals: [{to: s5.analogInput01, shape: sine, amplitude: 5, frequency: 1}, {to: ..., stage: x, gain: 0.1}]
 //   bridges: [{slave: 4, pair: gap_mono}]  an EL6692 side joined to the other side of that name
 //            (on another segment of this process: bridge.hpp)
+//   clock: {offset_us: 120, drift_ppm: 25}  the segment's clock: apart and running fast by that
+//            much (its DC time base against another segment's; default 0, 0)
 // Every drive terminal (EL70x1 stepper, EL72x1 servo) that no stage names moves a default stage
 // (no hard stops, no switches), so a bus can be tried before anyone writes a plant.
 #pragma once
@@ -82,6 +84,9 @@ struct SimConfig {
     std::vector<StageConfig> stages;
     std::vector<SignalConfig> signals;
     std::vector<BridgeConfig> bridges;
+    // `clock: {offset_us, drift_ppm}`: the segment's own clock (Segment::set_clock), as the
+    // crystals of another machine would run it; default the simulated time itself.
+    double clock_offset_us = 0, clock_drift_ppm = 0;
     // Loads SIM.yaml with config::YamlReader; throws one MultiError with every error of the file
     // (file:line:col, key path). Unknown keys are errors. With slaves:, the whole plant is also
     // checked against them (entries exist, inputs driven once, ...) once the file itself is

@@ -193,6 +193,52 @@ axes:
     EXPECT_NE(what.find("is on bus 0, which runs its own cycle (buses[].rate_hz)"), std::string::npos) << what;
 }
 
+// Distributed clocks across the bridge: both sides assign 0x1A02 (startup SDOs, as ecmccfg writes
+// them), the monochromator's segment runs its own clock 40 ppm fast; each side latches both
+// segments' DC times together, and the IOC serves their difference and its rate.
+TEST(IocBridge, TheSkewBetweenTheTwoTimeBasesIsMeasuredAndServed) {
+    const std::string ts = "sdo: [{index: 0x1C13, sub: 0, value: 0, size: 1}, {index: 0x1C13, sub: 1, value: 0x1A00, size: 2}, "
+                           "{index: 0x1C13, sub: 2, value: 0x1A02, size: 2}, {index: 0x1C13, sub: 0, value: 2, size: 1}]";
+    std::string y = own_cycle("500");
+    y.replace(y.find("{position: 1, type: EL6692}"), 27, "{position: 1, type: EL6692, " + ts + "}");
+    y.replace(y.find("{position: 1, type: EL6692-0002}"), 32, "{position: 1, type: EL6692-0002, " + ts + "}");
+    Bridged b("bridges:\n  - {slave: 1, pair: gap_mono}\nclock: {offset_us: 250, drift_ppm: 40}\n", y);
+    VirtualIoc& v = *b.v;
+    v.run(200);
+    EXPECT_EQ(b.entry("ec1.s1.externalDeviceNotConnected01"), 0);
+    const double t0 = b.entry("ec0.s1.internalTimestamp01"); // bus 0's DC time
+    const double skew0 = b.entry("ec0.s1.externalTimestamp01") - t0;
+    // bus 1's time base is bus 1's: ~250 us ahead from the start (the masters configured their
+    // offsets from the same host clock), its own view the other way round
+    EXPECT_NEAR(b.entry("ec1.s1.externalTimestamp01") - b.entry("ec1.s1.internalTimestamp01"), -skew0, 1e3);
+    double toggles = 0, last = b.entry("ec0.s1.timestampToggle01");
+    for (int k = 0; k < 100; ++k) {
+        v.cycles(1);
+        toggles += b.entry("ec0.s1.timestampToggle01") != last;
+        last = b.entry("ec0.s1.timestampToggle01");
+    }
+    EXPECT_EQ(toggles, 100); // a new pair of time stamps every frame
+    v.run(2000); // 2 s more
+    const double t1 = b.entry("ec0.s1.internalTimestamp01");
+    const double skew1 = b.entry("ec0.s1.externalTimestamp01") - t1;
+    EXPECT_NEAR((skew1 - skew0) / (t1 - t0) * 1e6, 40.0, 0.5); // 40 ppm: 80 us over 2 s
+    // served: the skew [ns] and its rate [ppm] on both sides
+    v.ioc->publish();
+    EXPECT_NEAR(v.get("BR:m0s001-DcSkew"), skew1, 50e3); // within the 10 ms between looks at 40 ppm
+    EXPECT_NEAR(v.get("BR:m0s001-DcDrift"), 40.0, 0.5);
+    EXPECT_NEAR(v.get("BR:m1s001-DcDrift"), -40.0, 0.5);
+    EXPECT_NEAR(v.get("BR:m1s001-DcSkew"), -v.get("BR:m0s001-DcSkew"), 2e3);
+}
+
+// Without 0x1A02 the sides latch no time stamps; the skew PVs stay undefined (INVALID).
+TEST(IocBridge, WithoutTheTimeStampPdoThereIsNoSkew) {
+    Bridged b;
+    b.v->run(300);
+    pv::Record* r = b.v->ioc->database().find("BR:m0s001-DcSkew");
+    ASSERT_NE(r, nullptr);
+    EXPECT_EQ(r->sevr, pv::kInvalid);
+}
+
 // The primary side loses power: the secondary says so (0x10F4:10, TxPDO state) and holds its
 // inputs (the master bringing a powered-up slave back to OP: tests/unit/ethercat/test_self_healing.cpp).
 TEST(IocBridge, TheOtherSideGoneIsReportedAndTheInputsHold) {
