@@ -51,10 +51,18 @@ std::vector<BusConfig> read_bus_list(const YamlNode& buses, const std::string& d
     const auto items = buses.list();
     for (std::size_t i = 0; i < items.size(); ++i) {
         const YamlNode& b = items[i];
-        if (!b.keys({"id", "link", "slaves", "strict", "rate_hz"})) continue;
+        if (!b.keys({"id", "link", "slaves", "strict", "rate_hz", "dc_follow"})) continue;
         BusConfig bc;
         bc.id = int_of(b["id"], int(i), 0, 15);
         bc.strict = b["strict"].boolean().value_or(false);
+        if (b.has("dc_follow")) {
+            if (scanner_file)
+                b["dc_follow"].error("belongs to the IOC's file: the IOC's master steers the clock");
+            else if (auto f = b["dc_follow"].integer(between(0, 65534))) {
+                bc.dc_follow = int(*f);
+                bc.dc_follow_where = b["dc_follow"].where();
+            }
+        }
         if (b.has("rate_hz")) {
             if (scanner_file)
                 b["rate_hz"].error("the scanner runs its buses in one cycle: its file's engine.rate_hz");

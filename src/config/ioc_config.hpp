@@ -61,6 +61,10 @@ struct BusConfig {
     // Its own cycle (own RT thread) at this rate [Hz]; unset: the IOC's cycle (engine.rate_hz).
     std::optional<double> rate_hz;
     std::string rate_where; // file:line:col of rate_hz
+    // The position of an EL6692 side on this bus whose other side's DC time base this bus's
+    // distributed clock follows (its 0x1A02 time stamps steer the reference clock).
+    std::optional<int> dc_follow;
+    std::string dc_follow_where;
     LinkConfig link;
     std::vector<SlaveEntry> slaves;
 };

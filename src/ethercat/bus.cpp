@@ -13,6 +13,7 @@ struct Bus::ReceiveStage : rt::Stage {
     const char* name() const noexcept override { return "bus receive"; }
     void run(const rt::CycleInfo& c) noexcept override {
         b.last_ = b.backend_->receive(c);
+        if (b.follow_int_) b.steer();
     }
 };
 
@@ -158,8 +159,32 @@ void Bus::stop_health() {
     if (health_.joinable()) health_.join();
 }
 
+void Bus::follow_dc(const std::string& slave_prefix) {
+    if (!backend_->set_dc_steering(true))
+        throw Error(SB() << "ec" << id_ << ": a bus behind a scanner cannot steer its distributed clock (the scanner runs it)");
+    follow_ = slave_prefix;
+}
+
+// RT (receive stage): a new pair of the EL6692's time stamps, the other side connected: the skew.
+void Bus::steer() noexcept {
+    const uint8_t* img = backend_->image();
+    if (follow_nc_ && registry::image_read(img, follow_nc_->bit_offset, follow_nc_->bits)) return;
+    const uint64_t in = registry::image_read(img, follow_int_->bit_offset, follow_int_->bits);
+    if (in == 0 || in == follow_seen_) return;
+    follow_seen_ = in;
+    backend_->steer_dc(int64_t(registry::image_read(img, follow_ext_->bit_offset, follow_ext_->bits) - in));
+}
+
 void Bus::bring_up() {
     backend_->bring_up();
+    if (!follow_.empty()) {
+        follow_int_ = backend_->find_signal(follow_ + "internalTimestamp01");
+        follow_ext_ = backend_->find_signal(follow_ + "externalTimestamp01");
+        follow_nc_ = backend_->find_signal(follow_ + "externalDeviceNotConnected01");
+        if (!follow_int_ || !follow_ext_)
+            throw Error(SB() << follow_.substr(0, follow_.size() - 1) << ": dc_follow needs the EL6692's time stamps: assign "
+                             << "0x1A02 (startup SDOs 0x1C13 = {0x1A00, 0x1A02}, docs/ethercat.md)");
+    }
     std::size_t n = backend_->image_size(), k = backend_->slaves().size();
     snap_.init([n, k](BusSnapshot& s) {
         s.image.assign(n, 0);

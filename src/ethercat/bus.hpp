@@ -88,6 +88,11 @@ public:
     // RT thread, after receive: the DC reference clock's system time [ns] as the last frame passed
     // it; 0 when this process runs no DC on the bus (no DC slave, or a bus behind a scanner).
     virtual uint64_t dc_time() const noexcept { return 0; }
+    // Before bring_up: whether this bus's DC can follow another time base (Master::set_dc_steering);
+    // false if it cannot (a bus behind a scanner).
+    virtual bool set_dc_steering(bool) { return false; }
+    // RT thread, between receive and send: the other time base minus this one [ns], new.
+    virtual void steer_dc(int64_t) noexcept {}
 };
 
 // The bus master of this process on a link.
@@ -118,6 +123,11 @@ public:
     void sdo_write(int position, uint16_t index, uint8_t sub, const std::vector<uint8_t>& data) override;
     Master* local_master() noexcept override { return master_.get(); }
     uint64_t dc_time() const noexcept override { return master_->dc_reference_time(); }
+    bool set_dc_steering(bool on) override {
+        master_->set_dc_steering(on);
+        return true;
+    }
+    void steer_dc(int64_t skew_ns) noexcept override { master_->steer_dc(skew_ns); }
 
 private:
     std::unique_ptr<Link> link_;
@@ -192,6 +202,11 @@ public:
     BusBackend& backend() { return *backend_; }
     int id() const { return id_; }
     uint64_t dc_time() const noexcept { return backend_->dc_time(); }
+    // Before bring_up: this bus's DC follows the time base on the other side of the EL6692 side
+    // `slave_prefix` ("ec1.s1.", buses[].dc_follow): each new pair of its time stamps (0x1A02)
+    // steers the reference clock by their difference. Throws Error if the bus cannot steer;
+    // bring_up throws if the side has no time stamps assigned.
+    void follow_dc(const std::string& slave_prefix);
     const char* link_kind() const { return backend_->kind(); }
 
     static uint64_t get(const std::vector<uint8_t>& image, const SignalInfo& s) noexcept;
@@ -213,6 +228,11 @@ private:
     std::unique_ptr<SendStage> send_;
     std::unique_ptr<PublishStage> publish_;
     CycleStatus last_ = CycleStatus::Ok;
+    void steer() noexcept; // RT, receive stage
+    // follow_dc: the EL6692 side's time stamps and status, the last internal stamp acted on
+    const SignalInfo *follow_int_ = nullptr, *follow_ext_ = nullptr, *follow_nc_ = nullptr;
+    uint64_t follow_seen_ = 0;
+    std::string follow_; // follow_dc's slave prefix ("": none)
     // The change watches, one array per field (the cycle walks them in order): where the entry is,
     // its value in the previous cycle, the cycles in which it changed. Sized before the cycle starts.
     std::vector<uint32_t> watch_offset_;

@@ -214,6 +214,18 @@ public:
     int dc_reference() const { return dc_ref_; }
     // The reference clock's system time as the last cycle's FRMW 0x0910 returned it [ns].
     uint64_t dc_reference_time() const { return dc_time_.load(std::memory_order_relaxed); }
+    // Before bring_up(): this bus's DC follows another time base (buses[].dc_follow): each
+    // cycle, when steer_dc() gave a skew, the reference clock gets a time written into its
+    // system-time register (FPWR 0x0910, before the FRMW that carries its time on): the time
+    // it will have as the frame passes (the last + one cycle) plus kDcSteerGain of the skew,
+    // which its drift control pulls its clock towards. The rest of the time the datagram is a NOP.
+    void set_dc_steering(bool on) { dc_steer_ = on; }
+    static constexpr double kDcSteerGain = 0.125; // of the skew, per write (stable with 2-3 cycles of lag)
+    // RT thread, between receive and send: the other time base minus this one [ns], newly measured.
+    void steer_dc(int64_t skew_ns) noexcept {
+        steer_skew_ns_ = skew_ns;
+        steer_now_ = true;
+    }
 
     // ---- diagnostics (non-RT) ----
     const std::vector<SignalInfo>& signals() const { return signals_; }
@@ -374,6 +386,11 @@ private:
     int dc_frame_ = -1;             // frame holding the FRMW 0x0910
     uint32_t dc_offset_ = 0;        // its data offset in that frame
     std::atomic<uint64_t> dc_time_{0};
+    bool dc_steer_ = false;    // set_dc_steering
+    int steer_frame_ = -1;     // frame holding the FPWR 0x0910 to the reference (-1: none)
+    uint32_t steer_offset_ = 0; // its data offset in that frame
+    int64_t steer_skew_ns_ = 0; // RT thread
+    bool steer_now_ = false;    // RT thread: a skew to act on in the next send
     uint16_t expected_wkc_ = 0;
     // Written by the RT thread only, read by the health thread.
     std::atomic<uint16_t> wkc_{0};

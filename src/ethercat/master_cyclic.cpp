@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <functional>
 #include <cstring>
 #include <iomanip>
@@ -69,6 +70,13 @@ void Master::build_cyclic_frames() {
     // The reference clock's time travels with the cycle (FRMW 0x0910): read at the reference,
     // written to every later slave, which compares it with its own system time.
     dc_frame_ = -1;
+    steer_frame_ = -1;
+    if (dc_ref_ >= 0 && dc_steer_) { // the time written into the reference (set_dc_steering)
+        if (cyclic_.empty() || cyclic_.back().frame.room() < 8 + 8 + kDatagramOverhead) cyclic_.emplace_back(); // with the FRMW after it
+        int at = cyclic_.back().frame.add(kNop, 0, slaves_[std::size_t(dc_ref_)].station, 0x0910, 8);
+        steer_frame_ = int(cyclic_.size() - 1);
+        steer_offset_ = uint32_t(at);
+    }
     if (dc_ref_ >= 0) {
         if (cyclic_.empty() || cyclic_.back().frame.room() < 8) cyclic_.emplace_back();
         int at = cyclic_.back().frame.add(kFrmw, 0, slaves_[std::size_t(dc_ref_)].station, 0x0910, 8);
@@ -117,6 +125,14 @@ CycleStatus Master::send_process_data() noexcept {
         }
         if (count_frame_ >= 0 && &cf == &cyclic_[std::size_t(count_frame_)]) std::memset(f + count_offset_, 0, 4);
         if (dc_frame_ >= 0 && &cf == &cyclic_[std::size_t(dc_frame_)]) std::memset(f + dc_offset_, 0, 10);
+        if (steer_frame_ >= 0 && &cf == &cyclic_[std::size_t(steer_frame_)]) {
+            const uint64_t last = dc_time_.load(std::memory_order_relaxed);
+            const bool steer = steer_now_ && last != 0;
+            f[steer_offset_ - (kDatagramOverhead - 2)] = steer ? kFpwr : kNop;
+            put_le64(f + steer_offset_, steer ? last + cycle_ns_ + uint64_t(std::llround(double(steer_skew_ns_) * kDcSteerGain)) : 0);
+            put_le16(f + steer_offset_ + 8, 0);
+            steer_now_ = false;
+        }
         if (!link_.send(f, cf.frame.size())) st = CycleStatus::LinkError;
     }
     send_ok_.store(st == CycleStatus::Ok, std::memory_order_relaxed);

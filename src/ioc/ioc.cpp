@@ -286,6 +286,19 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
             b.sim_stage = std::move(lb.sim_stage);
             b.bus = std::move(lb.bus);
         }
+        if (bc.dc_follow) { // an EL6692 side whose other segment's time base this bus's DC follows
+            const config::SlaveEntry* se = nullptr;
+            for (const auto& s : bc.slaves) se = s.position == *bc.dc_follow ? &s : se;
+            const ethercat::DeviceDesc* d = se ? catalog_.find(se->type) : nullptr;
+            if (!d || !(d->vendor == 0x2 && d->product == 0x1a243052))
+                throw Error(SB() << bc.dc_follow_where << ": dc_follow: " << *bc.dc_follow << " should be the position of an EL6692 side on bus "
+                                 << bc.id << (se ? " (it is a " + se->type + ")" : std::string(" (no slave there)")));
+            try {
+                b.bus->follow_dc(SB() << "ec" << bc.id << ".s" << *bc.dc_follow << ".");
+            } catch (const Error& e) {
+                throw Error(SB() << bc.dc_follow_where << ": " << e.what());
+            }
+        }
         rt::Engine* e = engine_.get();
         if (bc.rate_hz) { // its own cycle, on its own RT thread
             rt::EngineConfig own = ec;

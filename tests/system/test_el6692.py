@@ -3,6 +3,7 @@ Channel Access (pyepics): the undulator's PLC sends the gap on bus 0, the monoch
 it on bus 1 (which runs its own cycle) and answers with an energy; the entries' PVs show both
 REAL64 values as numbers."""
 
+import contextlib
 import time
 from pathlib import Path
 
@@ -18,20 +19,40 @@ def get(name):
     return ca.get(connect(name))
 
 
-def test_a_value_crosses_the_bridge_both_ways(tmp_path, prefix):
-    require_binary()
+def example_config(tmp_path, prefix, follow=True):
     text = (EXAMPLES / "el6692" / "ioc.yaml").read_text()
+    if not follow:
+        assert "    dc_follow: 1" in text
+        text = text.replace("    dc_follow: 1", "")
     text = text.replace("ioc: {name: BRIDGE}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
     text = text.replace("file: ../", f"file: {EXAMPLES}/")
     for f in ("undulator_plant.yaml", "mono_plant.yaml", "undulator.plc", "mono.plc"):
         text = text.replace(f" {f}", f" {EXAMPLES / 'el6692' / f}")
     cfg = tmp_path / "ioc.yaml"
     cfg.write_text(text)
+    return cfg
+
+
+@contextlib.contextmanager
+def running_example(tmp_path, prefix, follow=True):
+    """The example IOC on a free port, both buses up; stopped and its PVs forgotten after."""
+    require_binary()
     port = acquire_port()
-    srv = RunServer(tmp_path, cfg, port).start()
+    srv = RunServer(tmp_path, example_config(tmp_path, prefix, follow), port).start()
     try:
+        assert wait_for(lambda: get(prefix + "m0-Stat-OK") == 1 and get(prefix + "m1-Stat-OK") == 1, 10)
+        yield srv
+        assert srv.alive()
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)
+
+
+def test_a_value_crosses_the_bridge_both_ways(tmp_path, prefix):
+    with running_example(tmp_path, prefix):
         p = prefix
-        assert wait_for(lambda: get(p + "m0-Stat-OK") == 1 and get(p + "m1-Stat-OK") == 1, 10)
         assert wait_for(lambda: get(p + "m1s001-externalDeviceNotConnected01") == 0, 5)
         assert get(p + "m0s002-externalDeviceNotConnected01") == 0
         motor = epics.Motor(p + "Gap")
@@ -47,21 +68,26 @@ def test_a_value_crosses_the_bridge_both_ways(tmp_path, prefix):
         # each master its own cycle: the monochromator's PLC scans in bus 1's (500 Hz)
         assert abs(get(p + "PLC00-ScanTime") - 0.001) < 1e-6
         assert abs(get(p + "PLC01-ScanTime") - 0.002) < 1e-6
-        # distributed clocks: bus 1's time base runs 40 ppm fast (mono_plant.yaml's clock); both
-        # sides measure the skew, the other way round
+        # distributed clocks: bus 1's clock runs 40 ppm fast (mono_plant.yaml's clock: 40 us a
+        # second apart) and follows bus 0's (dc_follow): both sides measure the skew, which the
+        # steering keeps within a few us, with no drift left
+        def aligned():
+            return all(abs(get(p + n)) < 5e3 for n in ("m0s002-DcSkew", "m1s001-DcSkew")) and abs(get(p + "m0s002-DcDrift")) < 2
+        assert wait_for(aligned, 15), (get(p + "m0s002-DcSkew"), get(p + "m0s002-DcDrift"))
+        time.sleep(1.0)
+        assert aligned(), (get(p + "m0s002-DcSkew"), get(p + "m0s002-DcDrift"))
+
+
+def test_without_dc_follow_the_drift_is_measured(tmp_path, prefix):
+    """The same buses with bus 1's clock left free: the skew grows by 40 us a second, both sides
+    measure it (the other way round), -DcDrift reads 40 and -40 ppm."""
+    with running_example(tmp_path, prefix, follow=False):
+        p = prefix
         assert wait_for(lambda: abs(get(p + "m0s002-DcDrift") - 40) < 2, 10), get(p + "m0s002-DcDrift")
         assert abs(get(p + "m1s001-DcDrift") + 40) < 2
         skew = get(p + "m0s002-DcSkew")
-        assert abs(skew) < 50e6, skew  # what the two masters' DC set-up left, then 40 us more a second
         assert abs(get(p + "m1s001-DcSkew") + skew) < 20e3
         t = time.monotonic()
         time.sleep(1.0)
-        later = get(p + "m0s002-DcSkew")
-        grown = (later - skew) / (time.monotonic() - t)  # [ns/s]
+        grown = (get(p + "m0s002-DcSkew") - skew) / (time.monotonic() - t)  # [ns/s]
         assert 20e3 < grown < 60e3, grown
-        assert srv.alive()
-    finally:
-        srv.stop()
-        srv.kill()
-        forget_pvs(prefix)
-        release_port(port)

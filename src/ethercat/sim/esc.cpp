@@ -157,6 +157,7 @@ bool Esc::write_phys(uint16_t ado, const uint8_t* data, uint16_t len) noexcept {
         int64_t diff = int64_t(written + le32(&mem_[reg::kDcDelay])) - own;
         uint32_t mag = uint32_t(std::min<int64_t>(diff < 0 ? -diff : diff, 0x7FFFFFFF));
         put_le32(&mem_[reg::kDcDiff], mag | (diff < 0 ? 0x80000000u : 0));
+        system_time_diff_ns = diff;
     }
     if (latch) { // a write to 0x0900 latches the receive time of every port
         uint64_t t = local_time_ns_ + hop_delay_ns_;
@@ -249,8 +250,10 @@ void Esc::process(Datagram& d) noexcept {
         } else if (me) {
             if (d.cmd() == kFprd)
                 wkc = read_phys(d.ado(), d.data, len) ? 1 : 0;
-            else if (d.cmd() == kFpwr)
+            else if (d.cmd() == kFpwr) {
                 wkc = write_phys(d.ado(), d.data, len) ? 1 : 0;
+                if (wkc && d.ado() == reg::kDcSystemTime && len == 8) ++system_time_writes; // a time set for it alone
+            }
             else
                 wkc = read_write(d.ado(), d.data, len, tmp);
         }

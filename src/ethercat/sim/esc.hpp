@@ -84,6 +84,11 @@ public:
 
     // Counters of what the slave saw (for tests and diagnostics).
     uint64_t frames_seen = 0;
+    // Times written into its system-time register 0x0910 by an FPWR (for it alone: not the FRMW
+    // that carries the reference's time), and the last written time's difference to this slave's
+    // own system time [ns] (what its drift control acts on: 0x092C).
+    uint64_t system_time_writes = 0;
+    int64_t system_time_diff_ns = 0;
     uint64_t output_writes = 0; // logical writes that reached an output FMMU
     uint64_t watchdog_trips = 0; // OP -> SAFEOP by the SM watchdog
     uint64_t mailbox_requests = 0, mailbox_rejected_writes = 0;

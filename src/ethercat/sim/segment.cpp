@@ -35,7 +35,7 @@ void Segment::set_time(uint64_t ns) noexcept {
     time_ns_ = ns;
     if (!clock_t0_) clock_t0_ = ns;
     const double since = double(int64_t(ns - clock_t0_));
-    local_ns_ = uint64_t(int64_t(ns) + clock_offset_ns_ + int64_t(std::llround(since * drift_ppm_ * 1e-6)));
+    local_ns_ = uint64_t(int64_t(ns) + clock_offset_ns_ + steer_ns_ + int64_t(std::llround(since * drift_ppm_ * 1e-6)));
     for (auto& s : slaves_) s.esc->set_local_time(local_ns_);
 }
 
@@ -131,6 +131,22 @@ bool Segment::process(uint8_t* frame, std::size_t len) noexcept {
         std::uniform_real_distribution<double>(0, 1)(corrupt_rng_) < corrupt_) {
         ++frames_corrupted;
         frame[1] ^= 0x50; // breaks the header type and length
+    }
+    // The master wrote a time into the reference clock: the segment's clock follows it.
+    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+        if (!slaves_[i].plugged || !slaves_[i].desc->dc_assign_activate) continue;
+        Esc& ref = *slaves_[i].esc;
+        if (ref_seen_ != int(i)) { // a new reference (or a replugged one): count from here
+            ref_seen_ = int(i);
+            ref_writes_seen_ = ref.system_time_writes;
+        } else if (ref.system_time_writes != ref_writes_seen_) {
+            ref_writes_seen_ = ref.system_time_writes;
+            const int64_t pull = std::clamp<int64_t>(ref.system_time_diff_ns, -kMaxSteerNs, kMaxSteerNs);
+            steer_ns_ += pull;
+            local_ns_ = uint64_t(int64_t(local_ns_) + pull);
+            for (auto& s : slaves_) s.esc->set_local_time(local_ns_);
+        }
+        break;
     }
     if (on_frame) on_frame(*this);
     return true;

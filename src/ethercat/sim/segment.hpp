@@ -50,6 +50,12 @@ public:
     // The segment's DC system time now [ns]: that of its first plugged slave with DC (the
     // reference clock the master picks); the local time if it has none.
     uint64_t dc_system_time() noexcept;
+    // Drift control: a time the master writes into the reference clock's system-time register
+    // (FPWR 0x0910; the FRMW that carries the reference's time to the others reads it there) pulls
+    // the segment's clock towards it, by at most kMaxSteerNs per write (the simulator's model of
+    // an ESC's time control loop: the whole segment follows its reference at once).
+    static constexpr int64_t kMaxSteerNs = 1000;
+    int64_t steered_ns() const noexcept { return steer_ns_; } // sum of the pulls so far
 
     // Fault injection. An unplugged slave is bypassed (frames pass it untouched); on replug it
     // comes back powered up again: INIT, no station address, SMs/FMMUs cleared.
@@ -97,6 +103,9 @@ private:
     uint64_t local_ns_ = 0;      // the slaves' local time (time_ns_ through the segment's clock)
     uint64_t clock_t0_ = 0;      // the first set_time (0: none yet)
     int64_t clock_offset_ns_ = 0;
+    int64_t steer_ns_ = 0;
+    uint64_t ref_writes_seen_ = 0; // the reference's system_time_writes already acted on
+    int ref_seen_ = -1;            // the slave they were counted on
     double drift_ppm_ = 0;
     double loss_ = 0, corrupt_ = 0;
     int break_after_ = -1;

@@ -44,6 +44,15 @@ std::string own_cycle(const std::string& rate_hz, const std::string& plc1 = "{id
     return y;
 }
 
+// Both EL6692 sides of `y` with 0x1A02 (the DC time stamps) assigned, as ecmccfg writes it.
+std::string with_time_stamps(std::string y) {
+    const std::string ts = "sdo: [{index: 0x1C13, sub: 0, value: 0, size: 1}, {index: 0x1C13, sub: 1, value: 0x1A00, size: 2}, "
+                           "{index: 0x1C13, sub: 2, value: 0x1A02, size: 2}, {index: 0x1C13, sub: 0, value: 2, size: 1}]";
+    y.replace(y.find("{position: 1, type: EL6692}"), 27, "{position: 1, type: EL6692, " + ts + "}");
+    y.replace(y.find("{position: 1, type: EL6692-0002}"), 32, "{position: 1, type: EL6692-0002, " + ts + "}");
+    return y;
+}
+
 struct Bridged {
     TempDir dir;
     std::unique_ptr<VirtualIoc> v;
@@ -197,11 +206,7 @@ axes:
 // them), the monochromator's segment runs its own clock 40 ppm fast; each side latches both
 // segments' DC times together, and the IOC serves their difference and its rate.
 TEST(IocBridge, TheSkewBetweenTheTwoTimeBasesIsMeasuredAndServed) {
-    const std::string ts = "sdo: [{index: 0x1C13, sub: 0, value: 0, size: 1}, {index: 0x1C13, sub: 1, value: 0x1A00, size: 2}, "
-                           "{index: 0x1C13, sub: 2, value: 0x1A02, size: 2}, {index: 0x1C13, sub: 0, value: 2, size: 1}]";
-    std::string y = own_cycle("500");
-    y.replace(y.find("{position: 1, type: EL6692}"), 27, "{position: 1, type: EL6692, " + ts + "}");
-    y.replace(y.find("{position: 1, type: EL6692-0002}"), 32, "{position: 1, type: EL6692-0002, " + ts + "}");
+    std::string y = with_time_stamps(own_cycle("500"));
     Bridged b("bridges:\n  - {slave: 1, pair: gap_mono}\nclock: {offset_us: 250, drift_ppm: 40}\n", y);
     VirtualIoc& v = *b.v;
     v.run(200);
@@ -228,6 +233,57 @@ TEST(IocBridge, TheSkewBetweenTheTwoTimeBasesIsMeasuredAndServed) {
     EXPECT_NEAR(v.get("BR:m0s001-DcDrift"), 40.0, 0.5);
     EXPECT_NEAR(v.get("BR:m1s001-DcDrift"), -40.0, 0.5);
     EXPECT_NEAR(v.get("BR:m1s001-DcSkew"), -v.get("BR:m0s001-DcSkew"), 2e3);
+}
+
+// The mono bus's distributed clock follows the undulator's (dc_follow: its EL6692 side): its
+// master writes each cycle into its reference clock the time it will have plus an eighth of the
+// measured skew, the reference's drift control pulls its clock along, and the two time bases come
+// together, the 40 ppm drift taken out.
+TEST(IocBridge, ADcFollowingBusAlignsItsClockToTheOther) {
+    std::string y = with_time_stamps(own_cycle("500"));
+    y.replace(y.find("    rate_hz: 500\n"), 17, "    rate_hz: 500\n    dc_follow: 1\n");
+    Bridged b("bridges:\n  - {slave: 1, pair: gap_mono}\nclock: {offset_us: 250, drift_ppm: 40}\n", y);
+    VirtualIoc& v = *b.v;
+    auto skew = [&] { return b.entry("ec0.s1.externalTimestamp01") - b.entry("ec0.s1.internalTimestamp01"); };
+    for (int k = 0; k < 1000 && b.entry("ec0.s1.internalTimestamp01") == 0; ++k) v.cycles(1); // both sides in OP
+    const double first = skew(), t_first = b.entry("ec0.s1.internalTimestamp01");
+    const double pulled_first = double(v.ioc->segment(1)->steered_ns());
+    v.run(3000); // 3 s: 1 us per write at most, 500 writes a second
+    double worst = 0;
+    for (int k = 0; k < 1000; ++k) {
+        v.cycles(1);
+        worst = std::max(worst, std::fabs(skew()));
+    }
+    EXPECT_LT(worst, 1000) << "from " << first; // within 1 us for the last second, drift and all
+    EXPECT_GT(std::fabs(first), 5 * worst);     // and it was not so from the start
+    v.ioc->publish();
+    EXPECT_NEAR(v.get("BR:m0s001-DcDrift"), 0.0, 0.5);
+    EXPECT_LT(std::fabs(v.get("BR:m1s001-DcSkew")), 1000);
+    // what the mono segment's clock was pulled by since: the skew there was, and 40 ppm of the time
+    const double t_end = b.entry("ec0.s1.internalTimestamp01");
+    const double pulled = double(v.ioc->segment(1)->steered_ns()) - pulled_first;
+    EXPECT_NEAR(pulled, -(first - skew()) - 40e-6 * (t_end - t_first), 2000) << pulled;
+}
+
+TEST(IocBridge, DcFollowNamesAnEl6692SideWithTimeStamps) {
+    std::string what = "no error";
+    std::string y = own_cycle("500");
+    y.replace(y.find("    rate_hz: 500\n"), 17, "    rate_hz: 500\n    dc_follow: 0\n");
+    try {
+        Bridged b("{}\n", y);
+    } catch (const std::exception& e) {
+        what = e.what();
+    }
+    EXPECT_NE(what.find("ioc.yaml:11:16: dc_follow: 0 should be the position of an EL6692 side on bus 1 (it is a EK1100)"), std::string::npos)
+        << what;
+    y = own_cycle("500");
+    y.replace(y.find("    rate_hz: 500\n"), 17, "    rate_hz: 500\n    dc_follow: 1\n");
+    try {
+        Bridged b("{}\n", y);
+    } catch (const std::exception& e) {
+        what = e.what();
+    }
+    EXPECT_NE(what.find("ec1.s1: dc_follow needs the EL6692's time stamps: assign 0x1A02"), std::string::npos) << what;
 }
 
 // Without 0x1A02 the sides latch no time stamps; the skew PVs stay undefined (INVALID).
