@@ -13,6 +13,7 @@
 #include "core/log.hpp"
 #include "ioc/rcp_signals.hpp"
 #include "core/signals.hpp"
+#include "feedback/epid_record.hpp"
 #include "ethercat/sim/faults.hpp"
 #include "ethercat/sim/local_bus.hpp"
 #include "scanner/client.hpp"
@@ -240,6 +241,7 @@ std::string entry_pv_suffix(const std::string& e) {
 
 Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     : cfg_(std::move(cfg)), clock_(clock), catalog_(ethercat::Catalog::builtin()) {
+    feedback::register_feedback_records(pv::RecordTypes::global()); // epid (its .db files, `feedback:`)
     rt::EngineConfig ec;
     ec.rate_hz = cfg_.rate_hz;
     ec.cpu = cfg_.cpu;

@@ -151,6 +151,8 @@ public:
     // The clock scan_periodic is given (an IOC: EventLoop::now_s), so that a delay asked for
     // before the first scan counts from the right time.
     void set_clock(std::function<double()> now) { clock_ = std::move(now); }
+    // That clock now (or scan_periodic's last time): what records measure time with (epid's dt).
+    double now() const { return clock_ ? clock_() : now_s_; }
 
     // --- used by Record's link helpers and async_done() ---
     bool link_read(Record& r, Link& l, const FieldDesc& f);
