@@ -240,7 +240,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -470,6 +470,47 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         e.file_name = c["file_name"].string().value_or(e.file_name);
         e.flush_s = c["flush_s"].number(between(0.01, 3600)).value_or(e.flush_s);
         cfg.capture = std::move(e);
+    }
+    {
+        std::set<std::string> names;
+        for (const YamlNode& d : root["feedback"].list()) {
+            if (!d.keys({"name", "input", "input_scale", "input_offset", "output", "output_scale", "output_offset", "dt", "kp", "ki", "kd",
+                         "val", "drvh", "drvl", "fbon", "scan", "hopr", "lopr", "prec", "egu", "desc"}))
+                continue;
+            FeedbackEntry e;
+            e.where = d.where();
+            e.name = d.required("name", " (the epid record's name after the IOC prefix)").string().value_or("");
+            if (!e.name.empty() && e.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_:-") != std::string::npos)
+                d["name"].error(SB() << "'" << e.name << "' should be a plain PV name part (letters, digits, _ : -)");
+            else if (!e.name.empty() && !names.insert(e.name).second)
+                d["name"].error(SB() << "feedback loop '" << e.name << "' is defined twice");
+            e.input = d.required("input", " (an engine value: a bus entry or an axis variable)").string().value_or("");
+            e.input_where = d["input"].where();
+            e.output = d.required("output", " (a bus output entry)").string().value_or("");
+            e.output_where = d["output"].where();
+            e.input_scale = d["input_scale"].number().value_or(1);
+            e.input_offset = d["input_offset"].number().value_or(0);
+            e.output_scale = d["output_scale"].number().value_or(1);
+            if (e.output_scale == 0) d["output_scale"].error("should not be 0 (raw = (OVAL - offset) / scale)");
+            e.output_offset = d["output_offset"].number().value_or(0);
+            e.dt = d["dt"].number(between(0, 3600)).value_or(0);
+            e.kp = d["kp"].number().value_or(0);
+            e.ki = d["ki"].number().value_or(0);
+            e.kd = d["kd"].number().value_or(0);
+            e.val = d["val"].number().value_or(0);
+            e.drvh = d["drvh"].number().value_or(0);
+            e.drvl = d["drvl"].number().value_or(0);
+            if (e.drvl > e.drvh) d["drvl"].error(SB() << "drvl " << e.drvl << " is above drvh " << e.drvh);
+            if (!d["drvh"].present() || !d["drvl"].present()) d.error("needs drvh and drvl: the output's limits (OVAL is clamped to them)");
+            e.fbon = d["fbon"].boolean().value_or(false);
+            if (auto sc = d["scan"].one_of({"Passive", "10 second", "5 second", "2 second", "1 second", ".5 second", ".2 second", ".1 second"})) e.scan = *sc;
+            e.hopr = d["hopr"].number().value_or(0);
+            e.lopr = d["lopr"].number().value_or(0);
+            e.prec = int(d["prec"].integer(between(0, 15)).value_or(3));
+            e.egu = d["egu"].string().value_or("");
+            e.desc = d["desc"].string().value_or(SB() << "EPID " << e.input << " -> " << e.output);
+            cfg.feedback.push_back(std::move(e));
+        }
     }
     {
         std::set<int> ids;

@@ -243,6 +243,25 @@ struct CaptureEntry {
     std::string where, trigger_where, gate_where;
 };
 
+// A fast feedback loop (docs/feedback.md): synApps' EPID in the cycle, `feedback: [{name, input,
+// output, ...}]`; its interface is the epid record $(P)<name> (DTYP "Fast Epid").
+struct FeedbackEntry {
+    std::string name;           // the record $(P)<name>, and INP "@<name>"
+    std::string input;          // an engine value: a bus entry, an axis variable (ax1.enc.actpos)
+    double input_scale = 1, input_offset = 0;   // CVAL = raw * scale + offset
+    std::string output;         // a bus output entry the loop writes (its one writer)
+    double output_scale = 1, output_offset = 0; // raw = (OVAL - offset) / scale, rounded, clamped to the entry
+    double dt = 0;              // DT [s]: time per step (0: every cycle); averages the samples in it
+    double kp = 0, ki = 0, kd = 0, val = 0;
+    double drvh = 0, drvl = 0;  // output limits [output units]
+    bool fbon = false;          // FBON at start
+    std::string scan = ".1 second"; // how often the record exchanges with the loop
+    double hopr = 0, lopr = 0;
+    int prec = 3;
+    std::string egu, desc;
+    std::string where, input_where, output_where;
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -267,6 +286,7 @@ struct IocConfig {
     std::optional<PvtEntry> pvt;
     std::vector<PcompEntry> pcomp;
     std::optional<CaptureEntry> capture;
+    std::vector<FeedbackEntry> feedback;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

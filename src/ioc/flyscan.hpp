@@ -26,6 +26,7 @@
 #include "daq/timed_output.hpp"
 #include "ethercat/bus.hpp"
 #include "ioc/memmaps.hpp"
+#include "ioc/value_source.hpp"
 #include "motion/axis_group.hpp"
 #include "plc/program.hpp"
 #include "pv/database.hpp"
@@ -39,18 +40,6 @@
 #include <vector>
 
 namespace beamctl::ioc {
-
-// An engine value read as a double in the cycle: an axis variable, a process-data entry (integer
-// or REAL/LREAL), the engine clock [s], or a position-compare block's output.
-struct ValueSource {
-    // Uint64Bits: a UINT64 entry (a DC time stamp, ns) carried exactly as its bit pattern in the
-    // double (capture "value" columns only; the file gets a uint64 dataset).
-    enum class Kind : uint8_t { None, Time, Cell, Integer, Uint64Bits, Float32, Float64, PcompOut, PcompActive, PcompProduced, PcompRose } kind = Kind::None;
-    const double* cell = nullptr;
-    registry::BoundSignal entry;
-    const daq::Pcomp* pcomp = nullptr;
-    double read(uint64_t t_ns) const noexcept;
-};
 
 class IocFlyScan {
 public:

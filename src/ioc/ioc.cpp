@@ -324,6 +324,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     memmaps_ = std::make_unique<IocMemMaps>(cfg_, catalog_, db_);
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
     flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get());
+    feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
@@ -605,6 +606,13 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         return nullptr;
     };
     std::string name = l.s().address;
+    if (r.type().name() == "epid") { // "Fast Epid": INP "@<loop>" of feedback:
+        std::string reason;
+        auto dev = feedback_->make_device(name, reason);
+        if (!dev) return fail(reason);
+        devices_.push_back(std::move(dev));
+        return devices_.back().get();
+    }
     int bit = -1;
     const registry::Signal* sig = nullptr;
     std::string asyn_name, asyn_why;
@@ -783,6 +791,7 @@ void Ioc::bring_up() {
                 [this](const std::string& name) { return flyscan_->plc_cell(name); });
     binding_cycle_ = 0;
     flyscan_->bind(*engine_, axes_->group(), buses, storages_->storages());
+    feedback_->bind(*engine_, axes_->group());
     binding_cycle_ = -1;
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
