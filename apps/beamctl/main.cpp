@@ -18,6 +18,7 @@
 #include "core/log.hpp"
 #include "core/macros.hpp"
 #include "core/signals.hpp"
+#include "detector/mca_record.hpp"
 #include "feedback/epid_record.hpp"
 #include "pv/autosave.hpp"
 #include "pv/database.hpp"
@@ -505,8 +506,9 @@ int main(int argc, char** argv) {
     // libca spawns `caRepeater` from PATH; a symlink of that name to beamctl serves it.
     if (argc > 0 && std::filesystem::path(argv[0]).filename() == "caRepeater")
         return ca::ca_repeater_main(argc, argv);
-    // Record types beyond pv's own (synApps' epid): every command that loads a .db sees them.
+    // Record types beyond pv's own (synApps' epid and mca): every command that loads a .db sees them.
     feedback::register_feedback_records(pv::RecordTypes::global());
+    detector::register_detector_records(pv::RecordTypes::global());
     CLI::App app{"beamctl: beamline control engine (EPICS Channel Access server, PV database)"};
     app.set_version_flag("--version", std::string("beamctl ") + BEAMCTL_VERSION);
     app.require_subcommand(1);

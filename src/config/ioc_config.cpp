@@ -240,7 +240,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -470,6 +470,35 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         e.file_name = c["file_name"].string().value_or(e.file_name);
         e.flush_s = c["flush_s"].number(between(0.01, 3600)).value_or(e.flush_s);
         cfg.capture = std::move(e);
+    }
+    if (YamlNode dets = root["detectors"]; dets && dets.keys({"mca"})) {
+        std::set<std::string> names;
+        for (const YamlNode& d : dets["mca"].list()) {
+            if (!d.keys({"name", "channels", "offset", "slope", "lines", "background", "dead_time"})) continue;
+            McaEntry e;
+            e.where = d.where();
+            e.name = d.required("name", " (the mca record's name after the IOC prefix, e.g. mca1)").string().value_or("");
+            if (!e.name.empty() && e.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_:-") != std::string::npos)
+                d["name"].error(SB() << "'" << e.name << "' should be a plain PV name part (letters, digits, _ : -)");
+            else if (!e.name.empty() && !names.insert(e.name).second)
+                d["name"].error(SB() << "mca '" << e.name << "' is defined twice");
+            e.channels = uint32_t(d["channels"].integer(between(1, 1 << 20)).value_or(2048));
+            e.offset = d["offset"].number().value_or(0);
+            e.slope = d["slope"].number().value_or(0.01);
+            if (e.slope == 0) d["slope"].error("should not be 0 (keV per channel)");
+            e.background = d["background"].number(at_least(0)).value_or(50);
+            e.dead_time = d["dead_time"].number(between(0, 1)).value_or(2e-6);
+            for (const YamlNode& l : d["lines"].list()) {
+                if (!l.keys({"name", "energy", "rate", "fwhm"})) continue;
+                McaEntry::Line x;
+                x.name = l["name"].string().value_or("");
+                x.energy = l.required("energy", " [keV]").number(at_least(0)).value_or(0);
+                x.rate = l.required("rate", " [counts/s]").number(at_least(0)).value_or(0);
+                x.fwhm = l["fwhm"].number(between(1e-6, 1000)).value_or(0.15);
+                e.lines.push_back(std::move(x));
+            }
+            cfg.mca.push_back(std::move(e));
+        }
     }
     {
         std::set<std::string> names;

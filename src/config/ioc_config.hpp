@@ -262,6 +262,22 @@ struct FeedbackEntry {
     std::string where, input_where, output_where;
 };
 
+// A simulated energy-dispersive detector behind synApps' mca record (docs/detectors.md):
+// `detectors: {mca: [{name, channels, offset, slope, lines, background, dead_time}]}`.
+struct McaEntry {
+    struct Line {
+        std::string name;
+        double energy = 0, rate = 0, fwhm = 0.15; // keV, counts/s, keV
+    };
+    std::string name;            // the record $(P)<name> and mca.db's $(P)<name>Start, ...
+    uint32_t channels = 2048;
+    double offset = 0, slope = 0.01; // keV = offset + slope * channel (CALO, CALS)
+    std::vector<Line> lines;
+    double background = 50;      // counts/s over the spectrum
+    double dead_time = 2e-6;     // s per event
+    std::string where;
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -287,6 +303,7 @@ struct IocConfig {
     std::vector<PcompEntry> pcomp;
     std::optional<CaptureEntry> capture;
     std::vector<FeedbackEntry> feedback;
+    std::vector<McaEntry> mca; // detectors.mca
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

@@ -13,6 +13,7 @@
 #include "core/log.hpp"
 #include "ioc/rcp_signals.hpp"
 #include "core/signals.hpp"
+#include "detector/mca_record.hpp"
 #include "feedback/epid_record.hpp"
 #include "ethercat/sim/faults.hpp"
 #include "ethercat/sim/local_bus.hpp"
@@ -242,6 +243,7 @@ std::string entry_pv_suffix(const std::string& e) {
 Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     : cfg_(std::move(cfg)), clock_(clock), catalog_(ethercat::Catalog::builtin()) {
     feedback::register_feedback_records(pv::RecordTypes::global()); // epid (its .db files, `feedback:`)
+    detector::register_detector_records(pv::RecordTypes::global()); // mca
     rt::EngineConfig ec;
     ec.rate_hz = cfg_.rate_hz;
     ec.cpu = cfg_.cpu;
@@ -325,6 +327,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
     flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get());
     feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_);
+    detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
@@ -606,9 +609,9 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         return nullptr;
     };
     std::string name = l.s().address;
-    if (r.type().name() == "epid") { // "Fast Epid": INP "@<loop>" of feedback:
+    if (r.type().name() == "epid" || r.type().name() == "mca") { // "Fast Epid": a loop of feedback:; mca: detectors.mca
         std::string reason;
-        auto dev = feedback_->make_device(name, reason);
+        auto dev = r.type().name() == "epid" ? feedback_->make_device(name, reason) : detectors_->make_device(name, reason);
         if (!dev) return fail(reason);
         devices_.push_back(std::move(dev));
         return devices_.back().get();

@@ -605,3 +605,23 @@ def require_netns(netns_unavailable):
     if netns_unavailable:
         pytest.skip(f"network namespaces cannot be made here ({netns_unavailable}); "
                     "this test needs root or CAP_SYS_ADMIN + CAP_NET_ADMIN, outside a plain chroot")
+
+
+@contextlib.contextmanager
+def running_config(tmp_path, prefix, text, ready, timeout=10.0):
+    """`beamctl run` on the IOC file `text` (written to tmp_path/ioc.yaml) on a free port, yielded
+    once `ready()` holds; stopped, its PVs under `prefix` forgotten and its port released after."""
+    require_binary()
+    cfg = tmp_path / "ioc.yaml"
+    cfg.write_text(text)
+    port = acquire_port()
+    srv = RunServer(tmp_path, cfg, port).start()
+    try:
+        assert wait_for(ready, timeout)
+        yield srv
+        assert srv.alive()
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(prefix)
+        release_port(port)

@@ -2,14 +2,13 @@
 a record-made plant through database links, and the fast loop in the cycle behind its epid record
 (DTYP "Fast Epid"), examples/feedback/ioc.yaml."""
 
-import contextlib
 import time
 from pathlib import Path
 
 import epics
 from epics import ca
 
-from conftest import RunServer, acquire_port, connect, forget_pvs, put_status, release_port, require_binary, wait_for
+from conftest import connect, put_status, running_config, wait_for
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -26,26 +25,12 @@ def put(name, value):
     assert put_status(name, value) == 1, name
 
 
-@contextlib.contextmanager
 def running_example(tmp_path, prefix):
-    require_binary()
-    text = (EXAMPLES / "feedback" / "ioc.yaml").read_text()
-    text = text.replace("ioc: {name: FB}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
-    text = text.replace("plant: plant.yaml", f"plant: {EXAMPLES / 'feedback' / 'plant.yaml'}")
-    text = text.replace('{file: soft.db, macros: {P: "FB:"}}', f'{{file: {EXAMPLES / "feedback" / "soft.db"}, macros: {{P: "{prefix}"}}}}')
-    cfg = tmp_path / "ioc.yaml"
-    cfg.write_text(text)
-    port = acquire_port()
-    srv = RunServer(tmp_path, cfg, port).start()
-    try:
-        assert wait_for(lambda: get(prefix + "m0-Stat-OK") == 1, 10)
-        yield srv
-        assert srv.alive()
-    finally:
-        srv.stop()
-        srv.kill()
-        forget_pvs(prefix)
-        release_port(port)
+    cfg = (EXAMPLES / "feedback" / "ioc.yaml").read_text()
+    cfg = cfg.replace("ioc: {name: FB}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
+    cfg = cfg.replace("plant: plant.yaml", f"plant: {EXAMPLES / 'feedback' / 'plant.yaml'}")
+    cfg = cfg.replace('{file: soft.db, macros: {P: "FB:"}}', f'{{file: {EXAMPLES / "feedback" / "soft.db"}, macros: {{P: "{prefix}"}}}}')
+    return running_config(tmp_path, prefix, cfg, lambda: get(prefix + "m0-Stat-OK") == 1)
 
 
 def test_the_soft_epid_holds_its_setpoint_through_links(tmp_path, prefix):

@@ -187,3 +187,35 @@ TEST(IocConfig, AMissingFileAndMacroErrorsAreErrorsToo) {
                                                      "file or directory"});
     EXPECT_THROW(IocConfig::load("/nonexistent/ioc.yaml"), Error);
 }
+
+TEST(IocConfig, FeedbackAndDetectorSections) {
+    const std::string ok = "ioc: {name: T}\n"
+                           "feedback:\n"
+                           "  - {name: f1, input: ax1.enc.actpos, output: ec0.s2.analogOutput01, kp: 1, drvh: 2, drvl: -2, dt: 0.01}\n"
+                           "detectors:\n"
+                           "  mca:\n"
+                           "    - {name: mca1, channels: 1024, slope: 0.02, lines: [{name: Fe Ka, energy: 6.4, rate: 100}]}\n";
+    config::IocConfig c = config::IocConfig::parse(ok, "/cfg/ioc.yaml");
+    ASSERT_EQ(c.feedback.size(), 1u);
+    EXPECT_EQ(c.feedback[0].output, "ec0.s2.analogOutput01");
+    EXPECT_EQ(c.feedback[0].dt, 0.01);
+    ASSERT_EQ(c.mca.size(), 1u);
+    EXPECT_EQ(c.mca[0].channels, 1024u);
+    ASSERT_EQ(c.mca[0].lines.size(), 1u);
+    EXPECT_EQ(c.mca[0].lines[0].fwhm, 0.15);
+    const auto e = errors_of("ioc: {name: T}\n"
+                             "feedback:\n"
+                             "  - {name: f1, input: x, output: y, drvh: 1, drvl: 2}\n"
+                             "  - {name: f1, input: x, output: y}\n"
+                             "detectors:\n"
+                             "  mca:\n"
+                             "    - {name: m, slope: 0, lines: [{energy: 1}]}\n");
+    ASSERT_EQ(e.size(), 5u) << ::testing::PrintToString(e);
+    EXPECT_NE(e[0].find("ioc.yaml:3:"), std::string::npos);
+    EXPECT_NE(e[0].find("drvl 2 is above drvh 1"), std::string::npos) << e[0];
+    EXPECT_NE(e[1].find("ioc.yaml:4:"), std::string::npos);
+    EXPECT_NE(e[1].find("needs drvh and drvl"), std::string::npos) << e[1];
+    EXPECT_NE(e[2].find("defined twice"), std::string::npos) << e[2];
+    EXPECT_NE(e[3].find("should not be 0"), std::string::npos) << e[3];
+    EXPECT_NE(e[4].find("rate"), std::string::npos) << e[4];
+}
