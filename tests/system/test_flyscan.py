@@ -66,6 +66,9 @@ def test_fly_scan_on_the_spiral_writes_a_nexus_file(tmp_path, prefix):
         put(p + "PCOMP2:ENABLE", 1)
         assert wait_for(lambda: get(p + "PCOMP1:STATE") == 3, 5)  # WAIT_RISING: below START
         # 3.3 mm of arc at 1 mm/s (ramps of 2 s): pulses at 0.8, 1.6, 2.4, 3.2 mm
+        # A slot the engine misses (a late wake-up on a loaded VM) lets the stage move on for that
+        # slot as real mechanics would: the bounds below allow for the slots missed during the scan.
+        missed_before = get(p + "m0-ThdMissedCycles")
         motor = epics.Motor(p + "SpiralL")
         assert motor.move(3.3, wait=False) == 0
         assert wait_for(lambda: get(p + "PCOMP1:PRODUCED") >= 2, 20)
@@ -79,6 +82,8 @@ def test_fly_scan_on_the_spiral_writes_a_nexus_file(tmp_path, prefix):
         assert wait_for(lambda: rows_seen() >= 2, 5)
         assert wait_for(lambda: get(p + "SpiralL.DMOV") == 1 and get(p + "SpiralL.MOVN") == 0, 30)
         assert abs(get(p + "SpiralL.RBV") - 3.3) < 0.01
+        missed = get(p + "m0-ThdMissedCycles") - missed_before
+        assert missed >= 0
         assert get(p + "PCOMP1:PRODUCED") == 4
         assert get(p + "PCOMP1:HEALTH") == 0
         captured = get(p + "PCAP:ROWS_CAPTURED")
@@ -103,14 +108,17 @@ def test_fly_scan_on_the_spiral_writes_a_nexus_file(tmp_path, prefix):
             fired = d["distance_trigger"][()] == 1
             points = arc[fired]
             assert len(points) == 4
-            # each distance row: the arc the cycle saw, at or past its point by less than a cycle's move
+            # each distance row: the arc the cycle saw, at or past its point by less than a cycle's
+            # move (1 um at 1 mm/s and 1 kHz), or by the slots missed as well when there were any
+            # (after a miss the PID catches up: half a slot's move more)
+            slack = 0.0011 if missed == 0 else 0.001 * (missed + 1.5)
             for k, x in enumerate(points):
                 ideal = 0.8 * (k + 1)
-                assert ideal - 1e-9 <= x < ideal + 0.0011, (k, x)
-            # the time-based rows: 1.2 s apart (the engine clock of the cycle)
+                assert ideal - 1e-9 <= x < ideal + slack, (k, x, missed)
+            # the time-based rows: 1.2 s apart (the engine clock of the cycle), a missed slot late
             t = d["t"][()][d["time_trigger"][()] == 1]
             assert len(t) >= 3
-            assert np.allclose(np.diff(t), 1.2, atol=1e-6)
+            assert np.all(np.abs(np.diff(t) - 1.2) <= 1e-6 + 0.001 * missed), (np.diff(t), missed)
             assert np.all(np.diff(d["cycle"][()]) > 0)
             assert np.allclose(last[:len(arc)], arc)
     finally:
@@ -178,6 +186,7 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
         plain = p + "m0s005-timestampLatchPositive01"
         timed = p + "m0s005-timestampLatchPositive02"
         before = (get(plain), get(timed))
+        missed_before = get(p + "m0-ThdMissedCycles")
         # 2.5 mm of arc: rises at 0.8, 1.6, 2.4 mm and falls at 1.2, 2.0 mm on both outputs
         motor = epics.Motor(p + "SpiralL")
         assert motor.move(2.5, wait=False) == 0
@@ -194,11 +203,13 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
         samples = epics.caget(p + "m0s007-AI01-Arr", timeout=5)
         assert len(samples) == 10 and set(samples) <= {0, 16384}, samples
         # the last rise (2.4 mm) latched on both: the timestamped edge came first, by less than
-        # two cycles (1 kHz), and is not on the 1 ms frame grid the plain one is on
+        # two cycles (1 kHz) and the slots the engine missed, and is not on the 1 ms frame grid the
+        # plain one is on
         after = (get(plain), get(timed))
         assert after[0] != before[0] and after[1] != before[1]
+        missed = get(p + "m0-ThdMissedCycles") - missed_before
         lead_ns = after[0] - after[1]
-        assert 0 < lead_ns <= 2_000_000, lead_ns
+        assert 0 < lead_ns <= 2_000_000 + 1_000_000 * missed, (lead_ns, missed)
         # the capture: a [rows, 10] dataset of each channel; the input is the output two cycles
         # later, sample by sample, steps inside a cycle included
         live = epics.caget(p + "PCAP:LAST:ai", timeout=5)
