@@ -264,6 +264,17 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
 bool put_element(Record& r, const FieldDesc& f, const Elements& e, uint32_t i, Prim p,
                  const void* src) {
     if (is_link(e.type)) return false; // Database::put re-links them (it resolves the target)
+    if (e.type == Dbf::Menu && f.menu && p != Prim::String) {
+        // A number put to a menu field must index one of its choices. EPICS checks only strings
+        // (dbConvert's putShortEnum stores any number); we refuse the rest as out of range.
+        double v = p == Prim::Short  ? double(*static_cast<const int16_t*>(src))
+                   : p == Prim::Enum ? double(*static_cast<const uint16_t*>(src))
+                   : p == Prim::Char ? double(*static_cast<const uint8_t*>(src))
+                   : p == Prim::Long ? double(*static_cast<const int32_t*>(src))
+                   : p == Prim::Float ? double(*static_cast<const float*>(src))
+                                      : *static_cast<const double*>(src);
+        if (!(v >= 0 && v < double(f.menu->choices.size()))) return false;
+    }
     switch (p) {
     case Prim::String: {
         const char* s = static_cast<const char*>(src);

@@ -15,7 +15,7 @@ import time
 import pytest
 
 import ca_raw as raw
-from conftest import BEAMCTL, acquire_port, connect, release_port, require_binary, subscribe, wait_for
+from conftest import BEAMCTL, ECA_NORMAL, ECA_PUTFAIL, acquire_port, connect, put_status, release_port, require_binary, subscribe, wait_for
 
 import epics
 from epics import ca, dbr
@@ -489,3 +489,16 @@ record(stringin, "$(P)num") { field(VAL, "123") }
     assert ca.get(num, ftype=dbr.LONG) == 123
     with pytest.raises(ca.ChannelAccessGetFailure):  # no string is an enum index
         ca.get(num, ftype=dbr.ENUM)
+
+
+def test_a_number_put_to_a_menu_field_must_index_one_of_its_choices(ioc, prefix):
+    ioc.start('record(ao, "$(P)o") { field(OMSL, "supervisory") }\n')
+    omsl = prefix + "o.OMSL"
+    assert put_status(omsl, 1) == ECA_NORMAL
+    assert get_str(omsl) == "closed_loop"
+    for bad in (2, 7, 65535):  # menuOmsl has two choices
+        assert put_status(omsl, bad) == ECA_PUTFAIL, bad
+        assert get_str(omsl) == "closed_loop"
+    assert put_status(omsl, "supervisory") == ECA_NORMAL
+    assert put_status(omsl, "7") == ECA_PUTFAIL
+    assert get_str(omsl) == "supervisory"

@@ -144,6 +144,24 @@ TEST_F(Fixture, EnumsByStringAndIndex) {
     EXPECT_EQ(getd("b"), 1.0);
 }
 
+TEST_F(Fixture, MenuFieldsTakeOnlyTheirChoices) {
+    // A number put to a menu field must index a choice (EPICS refuses only out-of-range strings;
+    // we refuse numbers too: ao.OMSL 7 would otherwise read back as "Illegal_Value" and act).
+    load(R"(record(ao, "o") { field(OMSL, "closed_loop") })");
+    EXPECT_EQ(put("o.OMSL", 0), PutStatus::Ok);
+    EXPECT_EQ(gets("o.OMSL"), "supervisory");
+    EXPECT_EQ(put("o.OMSL", 7), PutStatus::BadValue);
+    EXPECT_EQ(put("o.OMSL", -1), PutStatus::BadValue);
+    EXPECT_EQ(put("o.OMSL", 2), PutStatus::BadValue);
+    EXPECT_EQ(gets("o.OMSL"), "supervisory"); // unchanged
+    EXPECT_EQ(put("o.OMSL", 1), PutStatus::Ok);
+    EXPECT_EQ(gets("o.OMSL"), "closed_loop");
+    EXPECT_EQ(put("o.HHSV", 3), PutStatus::Ok); // INVALID, the last of menuAlarmSevr
+    EXPECT_EQ(put("o.HHSV", 4), PutStatus::BadValue);
+    EXPECT_EQ(gets("o.HHSV"), "INVALID");
+    EXPECT_EQ(put_str("o.HHSV", "4"), PutStatus::BadValue);
+}
+
 TEST_F(Fixture, StateAlarmsAndChangeOfState) {
     load(R"(record(bi, "b") { field(ZSV, "MAJOR") field(COSV, "MINOR") field(VAL, "0") field(PINI, "YES") })");
     EXPECT_EQ(gets("b.SEVR"), "MAJOR");
