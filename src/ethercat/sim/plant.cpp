@@ -104,6 +104,7 @@ double SignalModel::volts(double t, std::mt19937_64& rng) const noexcept {
     }
     case Shape::Noise: v += amplitude * std::normal_distribution<double>(0, 1)(rng); break;
     case Shape::StagePosition: v += gain * (stage ? stage->position() : 0); break;
+    case Shape::Beam: v += gain * (beam ? beam->diode(diode, t) : 0); break;
     }
     if (noise > 0) v += noise * std::normal_distribution<double>(0, 1)(rng);
     return v;
@@ -151,6 +152,7 @@ void Plant::step(Segment& seg) noexcept {
         for (auto& s : st.switches) s.update(seg, st.position());
     }
     t_ += dt;
+    if (beam) beam->update(seg);
     for (auto& s : signals) {
         // An oversampling channel takes its n samples at its SYNC0 events across the step.
         unsigned n = s.channel->samples(seg);

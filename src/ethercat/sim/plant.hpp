@@ -2,14 +2,16 @@
 //   Stage   a linear (or rotary) axis with mass, Coulomb and viscous friction, hard stops at the
 //           ends of its travel, limit and home switches, driven by a drive terminal's velocity
 //           loop (force-limited: it stalls against a hard stop) and read by encoders;
-//   Signal  a generator (sine, square, ramp, constant, noise) or a sensor (stage position) on an
-//           analog input, in volts;
+//   Signal  a generator (sine, square, ramp, constant, noise) or a sensor (stage position, a diode
+//           under the beam) on an analog input, in volts;
+//   Beam    the photon beam at a monitor (beam.hpp): optics, slit, quadrant diode;
 //   Wire    an output copied to an input of the same width (a cable).
 // Plant::step runs after every frame on the segment's thread (the RT thread for in-process
 // links): it advances the mechanics to the segment's time in sub-steps of at most 100 us and
 // never allocates. Units: positions in stage units (mm unless you say otherwise), s, kg, N.
 #pragma once
 
+#include "ethercat/sim/beam.hpp"
 #include "ethercat/sim/bridge.hpp"
 #include "ethercat/sim/io_point.hpp"
 #include "ethercat/sim/terminals.hpp"
@@ -76,13 +78,15 @@ private:
 };
 
 struct SignalModel {
-    enum class Shape : uint8_t { Constant, Sine, Square, Ramp, Noise, StagePosition };
+    enum class Shape : uint8_t { Constant, Sine, Square, Ramp, Noise, StagePosition, Beam };
     Shape shape = Shape::Constant;
     double amplitude = 0, offset = 0; // [V]
     double frequency = 1, phase = 0;  // [Hz], [deg]
     double gain = 1;                  // sensor: volts per stage unit
     double noise = 0;                 // added Gaussian noise, standard deviation [V]
     const Stage* stage = nullptr;     // sensor: the stage it reads
+    const Beam* beam = nullptr;       // diode: the beam it sees (gain: volts per flux unit)
+    int diode = 0;                    //   0 the whole beam, 1..4 a quadrant (beam.hpp)
     std::unique_ptr<AnalogInputChannel> channel;
     double volts(double t, std::mt19937_64& rng) const noexcept;
 };
@@ -111,7 +115,9 @@ public:
     std::vector<LatchInput> latches;
     std::vector<std::unique_ptr<TimedOutputs>> timed_outputs; // EL2252s
     std::vector<std::unique_ptr<BridgeSide>> bridges;         // EL6692 sides
+    std::unique_ptr<Beam> beam;                               // beam: (nullptr: none)
     uint64_t steps = 0; // frames that advanced time
+    double time() const { return t_; } // simulated seconds since the first frame
 
     static constexpr double kMaxSubstep = 100e-6; // [s]
     static constexpr double kMaxGap = 1.0;        // a longer pause is not simulated [s]

@@ -138,15 +138,20 @@ std::optional<StageConfig> parse_stage(const YamlNode& n) {
 }
 
 std::optional<SignalConfig> parse_signal(const YamlNode& n) {
-    if (!n.keys({"to", "shape", "amplitude", "offset", "frequency", "phase", "stage", "gain",
+    if (!n.keys({"to", "shape", "amplitude", "offset", "frequency", "phase", "stage", "beam", "gain",
                  "noise", "full_scale"}))
         return std::nullopt;
     SignalConfig c;
     c.where = n.where();
     auto to = ref(n.required("to", " (an analog input, e.g. s5.analogInput01)"), true);
-    if (n.has("stage") && n.has("shape"))
-        n["shape"].error("a signal is either a generator (shape:) or a sensor (stage:), not both");
-    if (auto stage = n["stage"].string()) {
+    if (int(n.has("stage")) + int(n.has("shape")) + int(n.has("beam")) > 1)
+        n["shape"].error("a signal is one of a generator (shape:), a sensor (stage:) or a diode (beam:)");
+    if (YamlNode b = n["beam"]) {
+        if (auto d = b.integer(between(0, 4))) {
+            c.beam = int(*d);
+            c.shape = SignalModel::Shape::Beam;
+        }
+    } else if (auto stage = n["stage"].string()) {
         c.stage = *stage;
         c.shape = SignalModel::Shape::StagePosition;
     } else if (auto shape = n["shape"].string()) {
@@ -170,6 +175,59 @@ std::optional<SignalConfig> parse_signal(const YamlNode& n) {
     c.full_scale = num(n, "full_scale", 10, above(0));
     if (!to) return std::nullopt;
     c.to = *to;
+    return c;
+}
+
+// [a, b] into x, y.
+void pair(const YamlNode& n, double& x, double& y, Range r = {}) {
+    if (!n) return;
+    auto items = n.list();
+    if (items.size() != 2) {
+        n.error("should be [x, y]");
+        return;
+    }
+    auto a = items[0].number(r), b = items[1].number(r);
+    if (a && b) x = *a, y = *b;
+}
+
+std::optional<BeamConfig> parse_beam(const YamlNode& n) {
+    if (!n || !n.keys({"flux", "centre", "size", "vibration", "drift", "optics", "slit"})) return std::nullopt;
+    BeamConfig c;
+    c.where = n.where();
+    BeamParams& p = c.params;
+    p.flux = num(n, "flux", p.flux, above(0));
+    pair(n["centre"], p.x0, p.y0);
+    pair(n["size"], p.sigma_x, p.sigma_y, above(0));
+    if (YamlNode v = n["vibration"]; v && v.keys({"amplitude", "frequency"})) {
+        pair(v["amplitude"], p.vibration_x, p.vibration_y, at_least(0));
+        p.vibration_hz = num(v, "frequency", 0, at_least(0));
+    }
+    pair(n["drift"], p.drift_x, p.drift_y);
+    for (const YamlNode& item : n["optics"].list()) {
+        if (!item.keys({"stage", "output", "x", "y", "full_scale"})) continue;
+        BeamConfig::Lever l;
+        l.where = item.where();
+        if (item.has("stage") == item.has("output")) {
+            item.error("a lever names a stage (stage:) or an analog output (output:), one of them");
+            continue;
+        }
+        if (auto st = item["stage"].string()) l.stage = *st;
+        if (YamlNode o = item["output"]) {
+            auto r = ref(o, true);
+            if (!r) continue;
+            l.output = *r;
+        }
+        l.x = num(item, "x", 0);
+        l.y = num(item, "y", 0);
+        l.full_scale = num(item, "full_scale", 10, above(0));
+        c.optics.push_back(std::move(l));
+    }
+    if (YamlNode s = n["slit"]; s && s.keys({"top", "bottom", "left", "right"})) {
+        c.top = s["top"].string().value_or("");
+        c.bottom = s["bottom"].string().value_or("");
+        c.left = s["left"].string().value_or("");
+        c.right = s["right"].string().value_or("");
+    }
     return c;
 }
 
@@ -217,8 +275,9 @@ SimConfig SimConfig::parse(const std::string& text, const std::string& file, con
     SimConfig c;
     YamlNode root = rd.root();
     if (root && !root.is_null() && !root.is_map())
-        rd.error(rd.loc(root.yaml()), "expected a mapping with slaves:, wiring:, stages:, signals:, bridges:, clock:");
-    else if (root.keys({"slaves", "wiring", "stages", "signals", "bridges", "clock"}) && !root.is_null()) {
+        rd.error(rd.loc(root.yaml()), "expected a mapping with slaves:, wiring:, stages:, signals:, beam:, bridges:, clock:");
+    else if (root.keys({"slaves", "wiring", "stages", "signals", "beam", "bridges", "clock"}) && !root.is_null()) {
+        c.beam = parse_beam(root["beam"]);
         if (YamlNode k = root["clock"]; k.keys({"offset_us", "drift_ppm"}) && k) {
             c.clock_offset_us = k["offset_us"].number(between(-1e9, 1e9)).value_or(0);
             c.clock_drift_ppm = k["drift_ppm"].number(between(-1000, 1000)).value_or(0);
@@ -388,6 +447,35 @@ std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog, Er
             plant->stages_.push_back(make_stage(b, d, int(p), sp, MotorParams{}, 0, SB() << "the default stage of s" << p));
         });
     }
+    if (beam)
+        errors.capture([&] {
+            auto bm = std::make_unique<Beam>(beam->params);
+            auto stage = [&](const std::string& name, const std::string& where, const char* what) -> const Stage* {
+                if (name.empty()) return nullptr;
+                const Stage* st = plant->find_stage(name);
+                if (!st) throw Error(SB() << where << ": beam " << what << ": no stage named '" << name << "'");
+                return st;
+            };
+            for (const BeamConfig::Lever& l : beam->optics) {
+                BeamLever lv;
+                lv.x = l.x, lv.y = l.y;
+                if (!l.stage.empty()) {
+                    lv.stage = stage(l.stage, l.where, "lever");
+                } else {
+                    lv.output = b.bind(l.output);
+                    if (!lv.output.loc.output || lv.output.loc.bits != 16)
+                        throw Error(SB() << l.output.where << ": beam lever: s" << l.output.slave << "." << l.output.entry
+                                         << " is not a 16-bit analog output");
+                    lv.volts_per_digit = l.full_scale / 32767.0;
+                }
+                bm->levers.push_back(lv);
+            }
+            bm->top = stage(beam->top, beam->where, "slit top");
+            bm->bottom = stage(beam->bottom, beam->where, "slit bottom");
+            bm->left = stage(beam->left, beam->where, "slit left");
+            bm->right = stage(beam->right, beam->where, "slit right");
+            plant->beam = std::move(bm);
+        });
     for (const SignalConfig& sc : signals)
         errors.capture([&] {
             IoPoint to = b.input(sc.to, "a signal");
@@ -402,6 +490,11 @@ std::shared_ptr<Plant> SimConfig::build(Segment& seg, const Catalog& catalog, Er
             m.phase = sc.phase;
             m.gain = sc.gain;
             m.noise = sc.noise;
+            if (sc.beam >= 0) {
+                if (!plant->beam) throw Error(SB() << sc.where << ": a diode (beam: " << sc.beam << ") needs the plant's beam: section");
+                m.beam = plant->beam.get();
+                m.diode = sc.beam;
+            }
             if (!sc.stage.empty()) {
                 m.stage = plant->find_stage(sc.stage);
                 if (!m.stage) throw Error(SB() << sc.where << ": no stage named '" << sc.stage << "'");

@@ -20,6 +20,7 @@
 
 #include <deque>
 #include <memory>
+#include <optional>
 #include <string>
 #include <sys/socket.h>
 #include <vector>
@@ -71,6 +72,21 @@ struct SignalConfig {
     SignalModel::Shape shape = SignalModel::Shape::Constant;
     double amplitude = 0, offset = 0, frequency = 1, phase = 0, gain = 1, noise = 0, full_scale = 10;
     std::string stage; // sensor of this stage's position
+    int beam = -1;     // diode under the beam: 0 the whole beam, 1..4 a quadrant
+    std::string where;
+};
+
+// `beam:` (beam.hpp): the spot, the source's motion, the optics' levers and the slit's blades.
+struct BeamConfig {
+    BeamParams params;
+    struct Lever {
+        std::string stage;  // a stage, or
+        EntryRef output;    // an analog output (slave -1: none)
+        double full_scale = 10, x = 0, y = 0;
+        std::string where;
+    };
+    std::vector<Lever> optics;
+    std::string top, bottom, left, right; // slit blades (stage names; empty: open)
     std::string where;
 };
 
@@ -84,6 +100,7 @@ struct SimConfig {
     std::vector<StageConfig> stages;
     std::vector<SignalConfig> signals;
     std::vector<BridgeConfig> bridges;
+    std::optional<BeamConfig> beam;
     // `clock: {offset_us, drift_ppm}`: the segment's own clock (Segment::set_clock), as the
     // crystals of another machine would run it; default the simulated time itself.
     double clock_offset_us = 0, clock_drift_ppm = 0;
