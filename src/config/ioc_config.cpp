@@ -471,7 +471,48 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         e.flush_s = c["flush_s"].number(between(0.01, 3600)).value_or(e.flush_s);
         cfg.capture = std::move(e);
     }
-    if (YamlNode dets = root["detectors"]; dets && dets.keys({"mca"})) {
+    if (YamlNode dets = root["detectors"]; dets && dets.keys({"mca", "quadem"})) {
+        std::set<std::string> qnames;
+        for (const YamlNode& d : dets["quadem"].list()) {
+            if (!d.keys({"name", "currents", "geometry", "averaging_time", "current_scale", "current_offset", "position_scale",
+                         "position_offset", "egu", "prec"}))
+                continue;
+            QuadEmEntry e;
+            e.where = d.where();
+            e.name = d.required("name", " (the PV prefix after the IOC's, e.g. QE1)").string().value_or("");
+            if (!e.name.empty() && e.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") != std::string::npos)
+                d["name"].error(SB() << "'" << e.name << "' should be a plain PV name part (letters, digits, _ -)");
+            else if (!e.name.empty() && !qnames.insert(e.name).second)
+                d["name"].error(SB() << "quadem '" << e.name << "' is defined twice");
+            YamlNode cur = d.required("currents", " (four engine values: the diodes' currents)");
+            e.currents_where = cur.where();
+            for (const YamlNode& c : cur.list())
+                if (auto v = c.string()) e.currents.push_back(*v);
+            if (cur && e.currents.size() != 4) cur.error(SB() << "should name four values, got " << e.currents.size());
+            if (auto g = d["geometry"].string()) {
+                if (*g == "Diamond" || *g == "Square" || *g == "SquareCC") e.geometry = *g;
+                else d["geometry"].error(SB() << "'" << *g << "' is not a geometry (Diamond, Square, SquareCC)");
+            }
+            e.averaging_time = d["averaging_time"].number(between(0, 3600)).value_or(e.averaging_time);
+            auto numbers = [&](const char* key, double* out, std::size_t n) {
+                YamlNode v = d[key];
+                if (!v) return;
+                auto items = v.list();
+                if (items.size() != n) {
+                    v.error(SB() << "should be " << n << " numbers");
+                    return;
+                }
+                for (std::size_t i = 0; i < n; ++i)
+                    if (auto x = items[i].number()) out[i] = *x;
+            };
+            numbers("current_scale", e.current_scale, 4);
+            numbers("current_offset", e.current_offset, 4);
+            numbers("position_scale", e.position_scale, 2);
+            numbers("position_offset", e.position_offset, 2);
+            e.egu = d["egu"].string().value_or("");
+            e.prec = int(d["prec"].integer(between(0, 15)).value_or(4));
+            cfg.quadem.push_back(std::move(e));
+        }
         std::set<std::string> names;
         for (const YamlNode& d : dets["mca"].list()) {
             if (!d.keys({"name", "channels", "offset", "slope", "lines", "background", "dead_time"})) continue;

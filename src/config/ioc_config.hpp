@@ -278,6 +278,21 @@ struct McaEntry {
     std::string where;
 };
 
+// A quad electrometer (quadEM) over four engine values (docs/detectors.md):
+// `detectors: {quadem: [{name, currents: [4 values], geometry, averaging_time, current_scale,
+// current_offset, position_scale, position_offset, egu, prec}]}`.
+struct QuadEmEntry {
+    std::string name;                   // $(P)<name>: quadEM's PVs, e.g. QE1 -> DEMO:QE1:PosY:MeanValue_RBV
+    std::vector<std::string> currents;  // four engine values (bus entries, axis variables)
+    std::string geometry = "Square";    // Diamond, Square, SquareCC
+    double averaging_time = 0.1;        // [s] AveragingTime
+    double current_scale[4] = {1, 1, 1, 1}, current_offset[4] = {0, 0, 0, 0};
+    double position_scale[2] = {1e6, 1e6}, position_offset[2] = {0, 0};
+    std::string egu;                    // of the positions
+    int prec = 4;
+    std::string where, currents_where;
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -304,6 +319,7 @@ struct IocConfig {
     std::optional<CaptureEntry> capture;
     std::vector<FeedbackEntry> feedback;
     std::vector<McaEntry> mca; // detectors.mca
+    std::vector<QuadEmEntry> quadem; // detectors.quadem
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

@@ -328,6 +328,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get());
     feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_);
     detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s);
+    quadem_ = std::make_unique<IocQuadEm>(cfg_, registry_, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
@@ -794,6 +795,7 @@ void Ioc::bring_up() {
                 [this](const std::string& name) { return flyscan_->plc_cell(name); });
     binding_cycle_ = 0;
     flyscan_->bind(*engine_, axes_->group(), buses, storages_->storages());
+    quadem_->bind(*engine_, axes_->group()); // before the feedback loops: they read its values in the same cycle
     feedback_->bind(*engine_, axes_->group());
     binding_cycle_ = -1;
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
@@ -828,6 +830,7 @@ void Ioc::publish() {
     plcs_->publish();
     storages_->publish();
     flyscan_->publish();
+    quadem_->publish();
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) {
         b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)

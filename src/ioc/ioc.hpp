@@ -13,6 +13,7 @@
 #include "ethercat/catalog.hpp"
 #include "ioc/axes.hpp"
 #include "ioc/detectors.hpp"
+#include "ioc/quadem.hpp"
 #include "ioc/feedback.hpp"
 #include "ioc/flyscan.hpp"
 #include "ioc/kinematics.hpp"
@@ -75,6 +76,7 @@ public:
     IocFlyScan& flyscan() { return *flyscan_; }
     IocFeedback& feedback() { return *feedback_; }
     IocDetectors& detectors() { return *detectors_; }
+    IocQuadEm& quadem() { return *quadem_; }
     // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
     // (`beamctl signals`). Frozen once the IOC is built.
     const registry::Registry& signals() const { return registry_; }
@@ -155,6 +157,7 @@ private:
     std::unique_ptr<IocPvt> pvt_; // profile moves of the axes with epics.motorRecord.pvt
     std::unique_ptr<IocFeedback> feedback_; // fast EPID loops (feedback:)
     std::unique_ptr<IocDetectors> detectors_; // simulated detectors (detectors:)
+    std::unique_ptr<IocQuadEm> quadem_;       // quad electrometers (detectors.quadem)
     std::unique_ptr<IocFlyScan> flyscan_; // position compare and capture (pcomp:, capture:)
     bool brought_up_ = false;
     std::unique_ptr<pv::Autosave> autosave_; // ioc.yaml autosave:

@@ -79,7 +79,15 @@ ValueSource resolve_value(const registry::Registry& reg, motion::AxisGroup* axes
         std::sscanf(name.c_str(), "ec%d.", &v.bus);
         return v;
     }
-    why = SB() << "'" << name << "' is a signal of " << s->owner << "; the cycle reads bus entries, axis variables, pcomp<n>.* and time";
+    if (s->owner_kind == registry::OwnerKind::Engine && s->type == "LREAL" && bit < 0) { // a value of an engine block (qe1.posy)
+        std::string w;
+        v.entry = reg.bind(name, w);
+        if (v.entry.bound()) {
+            v.kind = ValueSource::Kind::Float64;
+            return v;
+        }
+    }
+    why = SB() << "'" << name << "' is a signal of " << s->owner << "; the cycle reads bus entries, axis variables, pcomp<n>.*, quadem values and time";
     return v;
 }
 

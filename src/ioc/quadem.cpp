@@ -1,0 +1,314 @@
+#include "ioc/quadem.hpp"
+
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "ioc/pv_util.hpp"
+#include "pv/db_file.hpp"
+
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+
+namespace beamctl::ioc {
+namespace {
+
+log::Logger lg("quadem");
+
+std::string num(double v) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.17g", v);
+    return b;
+}
+
+std::string lower(std::string s) {
+    for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return s;
+}
+
+// quadEM.template's averaged-value records, in the order of the 11 values.
+const char* const kAveNames[detector::kQuadEmValues] = {"Current1Ave", "Current2Ave", "Current3Ave", "Current4Ave", "SumXAve", "SumYAve",
+                                                        "SumAllAve",   "DiffXAve",    "DiffYAve",    "PositionXAve", "PositionYAve"};
+const char* const kStats[4] = {"MeanValue_RBV", "SigmaValue_RBV", "MinValue_RBV", "MaxValue_RBV"};
+
+enum Mode { kContinuous = 0, kMultiple = 1, kSingle = 2 };
+
+} // namespace
+
+struct IocQuadEm::Unit {
+    config::QuadEmEntry cfg;
+    std::string p; // $(P)<name>:
+    std::unique_ptr<detector::QuadEm> qe;
+    ValueSource in[4];
+    registry::BoundSignal ok[4]; // the inputs' buses' masterstatus (unbound: always good)
+    // records
+    pv::Record *acquire = nullptr, *mode = nullptr, *mode_rbv = nullptr, *num_acquire = nullptr, *num_acquire_rbv = nullptr,
+               *num_acquired = nullptr, *avg_time = nullptr, *avg_time_rbv = nullptr, *num_average = nullptr, *num_averaged = nullptr,
+               *sample_time = nullptr, *geometry = nullptr, *geometry_rbv = nullptr, *overflows = nullptr;
+    pv::Record *cur_offset[4] = {}, *cur_scale[4] = {}, *pos_offset[2] = {}, *pos_scale[2] = {};
+    pv::Record* ave[detector::kQuadEmValues] = {};
+    pv::Record* stats[detector::kQuadEmValues][4] = {};
+    bool acquiring = false;
+    int acquired = 0;
+    uint64_t seen_dropped = 0;
+};
+
+// The Triggers stage's quadEM part: every electrometer takes one sample of its four currents.
+class IocQuadEm::Stage : public rt::Stage {
+public:
+    explicit Stage(IocQuadEm& q) : q_(q) {}
+    const char* name() const noexcept override { return "quadem"; }
+    void run(const rt::CycleInfo& c) noexcept override {
+        for (auto& up : q_.units_) {
+            Unit& u = *up;
+            double raw[4];
+            bool valid = true;
+            for (int i = 0; i < 4; ++i) {
+                raw[i] = u.in[i].read(c.t_ns);
+                if (u.ok[i].bound() && u.ok[i].get() == 0) valid = false;
+            }
+            u.qe->sample(raw, valid, c.cycle);
+        }
+    }
+
+private:
+    IocQuadEm& q_;
+};
+
+IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db) : reg_(reg), db_(db) {
+    pv::DbFile f;
+    for (const config::QuadEmEntry& e : cfg.quadem) {
+        auto u = std::make_unique<Unit>();
+        u->cfg = e;
+        u->p = cfg.prefix + e.name + ":";
+        detector::QuadEmParams prm;
+        for (int i = 0; i < 4; ++i) prm.current_scale[i] = e.current_scale[i], prm.current_offset[i] = e.current_offset[i];
+        for (int i = 0; i < 2; ++i) prm.position_scale[i] = e.position_scale[i], prm.position_offset[i] = e.position_offset[i];
+        prm.geometry = e.geometry == "Diamond" ? detector::QuadEmGeometry::Diamond
+                       : e.geometry == "SquareCC" ? detector::QuadEmGeometry::SquareCC
+                                                  : detector::QuadEmGeometry::Square;
+        u->qe = std::make_unique<detector::QuadEm>(prm);
+        // the cycle's values as engine signals, read through a binder onto the electrometer's cells
+        const std::string owner = lower(e.name);
+        for (int k = 0; k < detector::kQuadEmValues; ++k) {
+            registry::Signal s;
+            s.name = owner + "." + lower(detector::kQuadEmValueNames[k]);
+            s.type = "LREAL";
+            s.direction = registry::Direction::Input;
+            s.owner_kind = registry::OwnerKind::Engine;
+            s.owner = "quadem " + e.name;
+            reg.declare(std::move(s));
+        }
+        const detector::QuadEm* qe = u->qe.get();
+        reg.set_binder(owner + ".", [qe, owner](const registry::Signal& s, int bit, std::string& why) {
+            registry::BoundSignal b;
+            if (bit >= 0) {
+                why = s.name + " is a number, not bits";
+                return b;
+            }
+            for (int k = 0; k < detector::kQuadEmValues; ++k)
+                if (s.name == owner + "." + lower(detector::kQuadEmValueNames[k])) {
+                    b.image = reinterpret_cast<uint8_t*>(const_cast<double*>(qe->values() + k));
+                    b.bits = 64;
+                    return b;
+                }
+            why = "no value " + s.name;
+            return b;
+        });
+        // quadEM.template's PVs (their names; a bo Acquire where quadEM has a busy record)
+        const std::string& p = u->p;
+        const std::string prec = std::to_string(e.prec), egu = e.egu.substr(0, 15);
+        f.records.push_back(record("bo", p + "Acquire", {{"ZNAM", "Done"}, {"ONAM", "Acquire"}, {"VAL", "1"}}));
+        const std::vector<std::pair<std::string, std::string>> modes = {{"ZRST", "Continuous"}, {"ONST", "Multiple"}, {"TWST", "Single"}};
+        f.records.push_back(record("mbbo", p + "AcquireMode", modes));
+        f.records.push_back(record("mbbi", p + "AcquireMode_RBV", modes));
+        f.records.push_back(record("longout", p + "NumAcquire", {{"VAL", "1"}, {"DRVL", "1"}, {"DRVH", "2147483647"}}));
+        f.records.push_back(record("longin", p + "NumAcquire_RBV", {}));
+        f.records.push_back(record("longin", p + "NumAcquired", {{"DESC", "Number of acquisitions complete"}}));
+        f.records.push_back(record("ao", p + "AveragingTime", {{"DESC", "Averaging time"}, {"PREC", "4"}, {"EGU", "s"}, {"VAL", num(e.averaging_time)}}));
+        f.records.push_back(record("ai", p + "AveragingTime_RBV", {{"DESC", "Averaging time"}, {"PREC", "4"}, {"EGU", "s"}}));
+        f.records.push_back(record("longin", p + "NumAverage_RBV", {{"DESC", "Number of samples to average"}}));
+        f.records.push_back(record("longin", p + "NumAveraged_RBV", {{"DESC", "Number of samples actually averaged"}}));
+        f.records.push_back(record("ai", p + "SampleTime_RBV", {{"DESC", "Sampling time (sec)"}, {"PREC", "6"}, {"EGU", "s"}}));
+        const std::vector<std::pair<std::string, std::string>> geo = {{"ZRST", "Diamond"}, {"ONST", "Square"}, {"TWST", "SquareCC"}};
+        auto g = geo;
+        g.push_back({"VAL", std::to_string(int(prm.geometry))});
+        f.records.push_back(record("mbbo", p + "Geometry", g));
+        f.records.push_back(record("mbbi", p + "Geometry_RBV", geo));
+        for (int i = 0; i < 4; ++i) {
+            const std::string n = std::to_string(i + 1);
+            f.records.push_back(record("ao", p + "CurrentOffset" + n, {{"DESC", "Offset"}, {"PREC", prec}, {"VAL", num(e.current_offset[i])}}));
+            f.records.push_back(record("ao", p + "CurrentScale" + n, {{"DESC", "Scale " + n}, {"PREC", "3"}, {"VAL", num(e.current_scale[i])}}));
+        }
+        for (int i = 0; i < 2; ++i) {
+            const std::string n = i ? "Y" : "X";
+            f.records.push_back(record("ao", p + "PositionOffset" + n, {{"DESC", "Offset " + n}, {"PREC", prec}, {"EGU", egu}, {"VAL", num(e.position_offset[i])}}));
+            f.records.push_back(record("ao", p + "PositionScale" + n, {{"DESC", "Scale " + n}, {"PREC", "3"}, {"VAL", num(e.position_scale[i])}}));
+        }
+        f.records.push_back(record("longin", p + "RingOverflows", {{"DESC", "Readings the IOC did not take"}}));
+        for (int k = 0; k < detector::kQuadEmValues; ++k) {
+            const bool pos = k >= detector::kPosX;
+            std::vector<std::pair<std::string, std::string>> flds = {{"PREC", prec}};
+            if (pos) flds.push_back({"EGU", egu});
+            f.records.push_back(record("ai", p + kAveNames[k], flds));
+            for (const char* st : kStats) f.records.push_back(record("ai", p + detector::kQuadEmValueNames[k] + ":" + st, flds));
+        }
+        units_.push_back(std::move(u));
+    }
+    if (f.records.empty()) return;
+    db_.load(f);
+    for (auto& up : units_) {
+        Unit& u = *up;
+        auto find = [&](const std::string& n) {
+            pv::Record* r = db_.find(u.p + n);
+            if (!r) throw Error(SB() << "quadem " << u.cfg.name << ": record " << u.p << n << " missing");
+            return r;
+        };
+        u.acquire = find("Acquire");
+        u.mode = find("AcquireMode");
+        u.mode_rbv = find("AcquireMode_RBV");
+        u.num_acquire = find("NumAcquire");
+        u.num_acquire_rbv = find("NumAcquire_RBV");
+        u.num_acquired = find("NumAcquired");
+        u.avg_time = find("AveragingTime");
+        u.avg_time_rbv = find("AveragingTime_RBV");
+        u.num_average = find("NumAverage_RBV");
+        u.num_averaged = find("NumAveraged_RBV");
+        u.sample_time = find("SampleTime_RBV");
+        u.geometry = find("Geometry");
+        u.geometry_rbv = find("Geometry_RBV");
+        u.overflows = find("RingOverflows");
+        for (int i = 0; i < 4; ++i) {
+            u.cur_offset[i] = find("CurrentOffset" + std::to_string(i + 1));
+            u.cur_scale[i] = find("CurrentScale" + std::to_string(i + 1));
+        }
+        for (int i = 0; i < 2; ++i) {
+            u.pos_offset[i] = find(std::string("PositionOffset") + (i ? "Y" : "X"));
+            u.pos_scale[i] = find(std::string("PositionScale") + (i ? "Y" : "X"));
+        }
+        for (int k = 0; k < detector::kQuadEmValues; ++k) {
+            u.ave[k] = find(kAveNames[k]);
+            for (int s = 0; s < 4; ++s) u.stats[k][s] = find(std::string(detector::kQuadEmValueNames[k]) + ":" + kStats[s]);
+        }
+        for (pv::Record* r : {u.mode_rbv, u.num_acquire_rbv, u.num_acquired, u.avg_time_rbv, u.num_average, u.num_averaged, u.sample_time,
+                              u.geometry_rbv, u.overflows})
+            r->val_read_only = true;
+        for (int k = 0; k < detector::kQuadEmValues; ++k) {
+            u.ave[k]->val_read_only = true;
+            for (pv::Record* r : u.stats[k]) r->val_read_only = true;
+        }
+        Unit* self = &u;
+        auto param = [this, self](pv::Record& r, const pv::FieldDesc& fd) {
+            if (std::string_view(fd.name) != "VAL") return pv::PutStatus::Ok;
+            if (&r == self->avg_time && !(get_value(r) >= 0)) {
+                LOG_WARN(lg, r.name() << ": " << get_value(r) << " refused: the averaging time is >= 0 s");
+                return pv::PutStatus::Failed;
+            }
+            if ((&r == self->cur_scale[0] || &r == self->cur_scale[1] || &r == self->cur_scale[2] || &r == self->cur_scale[3] ||
+                 &r == self->pos_scale[0] || &r == self->pos_scale[1]) && !std::isfinite(get_value(r))) {
+                LOG_WARN(lg, r.name() << ": refused: a scale is a finite number");
+                return pv::PutStatus::Failed;
+            }
+            if ((&r == self->geometry || &r == self->mode) && !(get_value(r) >= 0 && get_value(r) <= 2)) {
+                LOG_WARN(lg, r.name() << ": " << get_value(r) << " refused: not one of the record's three choices");
+                return pv::PutStatus::Failed;
+            }
+            apply(*self);
+            return pv::PutStatus::Ok;
+        };
+        for (pv::Record* r : {u.mode, u.num_acquire, u.avg_time, u.geometry, u.cur_offset[0], u.cur_offset[1], u.cur_offset[2], u.cur_offset[3],
+                              u.cur_scale[0], u.cur_scale[1], u.cur_scale[2], u.cur_scale[3], u.pos_offset[0], u.pos_offset[1], u.pos_scale[0],
+                              u.pos_scale[1]})
+            r->put_hook = param;
+        u.acquire->put_hook = [this, self](pv::Record& r, const pv::FieldDesc& fd) {
+            if (std::string_view(fd.name) == "VAL") set_acquire(*self, get_value(r) != 0);
+            return pv::PutStatus::Ok;
+        };
+    }
+}
+
+IocQuadEm::~IocQuadEm() = default;
+
+const detector::QuadEm& IocQuadEm::unit(std::size_t i) const { return *units_.at(i)->qe; }
+
+void IocQuadEm::apply(Unit& u) {
+    detector::QuadEmParams p;
+    for (int i = 0; i < 4; ++i) p.current_offset[i] = get_value(*u.cur_offset[i]), p.current_scale[i] = get_value(*u.cur_scale[i]);
+    for (int i = 0; i < 2; ++i) p.position_offset[i] = get_value(*u.pos_offset[i]), p.position_scale[i] = get_value(*u.pos_scale[i]);
+    const int g = int(get_value(*u.geometry));
+    p.geometry = detector::QuadEmGeometry(g >= 0 && g <= 2 ? g : 1);
+    // quadEM: NumAverage = int(AveragingTime / SampleTime + 0.5), at least 1
+    const double n = std::floor(get_value(*u.avg_time) / cycle_s_ + 0.5);
+    p.num_average = int(std::max(1.0, std::min(n, 1e7)));
+    u.qe->set_params(p);
+    set_value(db_, *u.mode_rbv, get_value(*u.mode), false);
+    set_value(db_, *u.num_acquire_rbv, get_value(*u.num_acquire), false);
+    set_value(db_, *u.num_average, p.num_average, false);
+    set_value(db_, *u.avg_time_rbv, p.num_average * cycle_s_, false);
+    set_value(db_, *u.sample_time, cycle_s_, false);
+    set_value(db_, *u.geometry_rbv, double(int(p.geometry)), false);
+}
+
+void IocQuadEm::set_acquire(Unit& u, bool on) {
+    if (on && !u.acquiring) {
+        u.acquired = 0;
+        set_value(db_, *u.num_acquired, 0, false);
+    }
+    u.acquiring = on;
+}
+
+void IocQuadEm::bind(rt::Engine& engine, motion::AxisGroup* axes) {
+    if (units_.empty()) return;
+    cycle_s_ = double(engine.period_ns()) * 1e-9;
+    for (auto& up : units_) {
+        Unit& u = *up;
+        for (int i = 0; i < 4; ++i) {
+            std::string why;
+            u.in[i] = resolve_value(reg_, axes, u.cfg.currents[i], why);
+            if (u.in[i].kind == ValueSource::Kind::None || u.in[i].kind == ValueSource::Kind::Time)
+                throw Error(SB() << u.cfg.currents_where << ": quadem " << u.cfg.name << " current " << (i + 1) << ": "
+                                 << (why.empty() ? std::string("'time' is not a current") : why));
+            if (u.in[i].bus >= 0) u.ok[i] = reg_.bind(std::string(SB() << "ec" << u.in[i].bus << ".masterstatus"), why);
+        }
+        apply(u);
+        set_acquire(u, get_value(*u.acquire) != 0);
+    }
+    stage_ = std::make_unique<Stage>(*this);
+    engine.add_stage(rt::StageOrder::Triggers, *stage_);
+}
+
+void IocQuadEm::publish() {
+    for (auto& up : units_) {
+        Unit& u = *up;
+        detector::QuadEmReading r;
+        bool got = false;
+        while (u.qe->pop(r)) {
+            if (!u.acquiring) continue; // Acquire off: the readings are not taken
+            got = true;
+            ++u.acquired;
+            const int mode = int(get_value(*u.mode));
+            const int want = int(get_value(*u.num_acquire));
+            if (mode == kSingle || (mode == kMultiple && u.acquired >= std::max(1, want))) {
+                u.acquiring = false;
+                break; // this reading is the last one
+            }
+        }
+        if (got) {
+            for (int k = 0; k < detector::kQuadEmValues; ++k) {
+                set_value(db_, *u.ave[k], r.mean[k], false);
+                set_value(db_, *u.stats[k][0], r.mean[k], false);
+                set_value(db_, *u.stats[k][1], r.sigma[k], false);
+                set_value(db_, *u.stats[k][2], r.min[k], false);
+                set_value(db_, *u.stats[k][3], r.max[k], false);
+            }
+            set_value(db_, *u.num_averaged, r.n, false);
+            set_value(db_, *u.num_acquired, u.acquired, false);
+            if (!u.acquiring) set_value(db_, *u.acquire, 0, false); // Multiple/Single done
+        }
+        if (u.qe->dropped() != u.seen_dropped) {
+            u.seen_dropped = u.qe->dropped();
+            set_value(db_, *u.overflows, clamp_long(u.seen_dropped), false);
+        }
+    }
+}
+
+} // namespace beamctl::ioc

@@ -1,0 +1,59 @@
+// Quad electrometers in an IOC (docs/detectors.md): each entry of `detectors.quadem` reads four
+// engine values (the diodes' currents: bus entries of analog inputs, as a current amplifier on an
+// EL3104 gives them) once per cycle, computes quadEM's 11 values (detector/quadem.hpp) and serves
+// quadEM's PVs under $(P)<name>: (quadEM.template's Acquire, AcquireMode, NumAcquire, NumAcquired,
+// AveragingTime, NumAverage_RBV, NumAveraged_RBV, SampleTime_RBV, Geometry, CurrentOffset/Scale1-4,
+// PositionOffset/ScaleX/Y, Current1Ave .. PositionYAve, RingOverflows, and the statistics plugins'
+// <value>:MeanValue_RBV, SigmaValue_RBV, MinValue_RBV, MaxValue_RBV).
+// The cycle's values are engine signals <name in lower case>.<value in lower case> (qe1.posy,
+// qe1.sumall, ...): a fast feedback loop reads them in the same cycle (the stage runs before the
+// loops). They follow every cycle whatever Acquire says; Acquire gates the averaged readings.
+// Threading: construction before the registry freezes; bind() at bring-up; the stage on the RT
+// thread; publish() and the records on the IOC loop.
+#pragma once
+
+#include "config/ioc_config.hpp"
+#include "detector/quadem.hpp"
+#include "ioc/value_source.hpp"
+#include "pv/database.hpp"
+#include "registry/registry.hpp"
+#include "rt/engine.hpp"
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace beamctl::ioc {
+
+class IocQuadEm {
+public:
+    // Declares the signals, makes the records (loaded into `db`). Throws Error (file:line:col).
+    IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db);
+    ~IocQuadEm();
+    IocQuadEm(const IocQuadEm&) = delete;
+    IocQuadEm& operator=(const IocQuadEm&) = delete;
+
+    // Bring-up: resolves the currents in the cycle of `engine` and adds the stage (Triggers, before
+    // the feedback loops: bind this first).
+    void bind(rt::Engine& engine, motion::AxisGroup* axes);
+    // IOC loop: the readings into the PVs.
+    void publish();
+
+    std::size_t size() const { return units_.size(); }
+    const detector::QuadEm& unit(std::size_t i) const;
+
+private:
+    struct Unit;
+    class Stage;
+
+    void apply(Unit& u); // the parameter PVs -> the electrometer
+    void set_acquire(Unit& u, bool on);
+
+    registry::Registry& reg_;
+    pv::Database& db_;
+    std::vector<std::unique_ptr<Unit>> units_;
+    std::unique_ptr<Stage> stage_;
+    double cycle_s_ = 1e-3;
+};
+
+} // namespace beamctl::ioc
