@@ -3,6 +3,7 @@ synApps' mca record (examples/detectors/ioc.yaml), driven as users drive it: pye
 epics.devices.mca.MCA, the mca.db PVs, ERST with a put-callback that completes at the end of the
 acquisition."""
 
+import math
 from pathlib import Path
 
 import epics
@@ -75,3 +76,52 @@ def test_the_mca_db_commands(tmp_path, prefix):
         assert put_status(p + "mca1Erase", 1) == 1
         assert wait_for(lambda: get(p + "mca1.NORD") == 0, 5)
         assert get(p + "mca1.ERTM") == 0 or get(p + "mca1.ERTM") <= ertm
+
+
+# ---------------------------------------------------------------------------------------------
+# The quad electrometer (examples/bpm): quadEM's PVs over the simulated beam, a mirror move seen
+# as PosY, and the fast loop that holds the beam
+# ---------------------------------------------------------------------------------------------
+def running_bpm(tmp_path, prefix):
+    cfg = (EXAMPLES / "bpm" / "ioc.yaml").read_text()
+    cfg = cfg.replace("ioc: {name: BPM}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
+    cfg = cfg.replace("plant: plant.yaml", f"plant: {EXAMPLES / 'bpm' / 'plant.yaml'}")
+    cfg = cfg.replace("file: ../", f"file: {EXAMPLES}/")
+    return running_config(tmp_path, prefix, cfg, lambda: get(prefix + "QE1:NumAcquired") > 0)
+
+
+def test_quadem_position_follows_a_mirror_move_and_the_loop_holds_it(tmp_path, prefix):
+    p = prefix + "QE1:"
+    with running_bpm(tmp_path, prefix):
+        assert epics.caget(p + "Geometry_RBV", as_string=True) == "Square"
+        assert get(p + "SampleTime_RBV") == 0.001
+        # average over 1 s: whole periods of the 7 Hz vibration
+        assert put_status(p + "AveragingTime", 1.0) == 1
+        assert wait_for(lambda: get(p + "NumAverage_RBV") == 1000, 5)
+        assert abs(get(p + "SumAll:MeanValue_RBV") - 1.0) < 0.01  # uA, the whole spot
+
+        def next_mean():
+            n = get(p + "NumAcquired")
+            assert wait_for(lambda: get(p + "NumAcquired") >= n + 2, 10)  # a whole average after the change
+            return get(p + "PosY:MeanValue_RBV")
+        y0 = next_mean()
+        assert abs(y0) < 3, y0  # centred (the drift: 0.5 um/s)
+        assert 3 < get(p + "PosY:SigmaValue_RBV") < 12  # the vibration: 10 um amplitude, 7 um rms
+        # the mirror's jack up by h (DMOV may come within the axis's tolerance, the stage settles after): the spot
+        # 25 h up, PosY = 125.33 erf(25 h / (0.1 sqrt 2)), 25 um for h = 1 um (within the piezo's +-45 um)
+        motor = epics.Motor(prefix + "MirrorJack")
+        assert put_status(prefix + "MirrorJack.CNEN", 1) == 1
+        assert wait_for(lambda: get(prefix + "MirrorJack-EnaAct") == 1, 5)
+        assert motor.move(0.001, wait=True, timeout=20) == 0
+        y1 = next_mean()
+        h = get(prefix + "MirrorJack.RBV")
+        assert 0.0005 < h < 0.0015, h
+        want = 125.33 * math.erf(25 * h / (0.1 * math.sqrt(2)))
+        assert abs(y1 - y0 - want) < 5, (y0, y1, h, want)
+        # the fast loop brings it back to 0 with the piezo, and takes out most of the vibration
+        assert put_status(prefix + "epidFast1.FBON", 1) == 1
+        assert put_status(prefix + "epidFast1.PROC", 1) == 1
+        y2 = next_mean()
+        assert abs(y2) < 2, y2
+        assert get(p + "PosY:SigmaValue_RBV") < 3
+        assert get(prefix + "epidFast1.OVAL") < -want / 5 / 2  # -want / 5 V: the piezo's 5 um/V
