@@ -101,6 +101,10 @@ IocFeedback::IocFeedback(const config::IocConfig& cfg, registry::Registry& reg, 
         std::string why;
         if (!reg_.claim(s->name, "feedback " + e.name, why)) throw Error(SB() << at(e.output_where) << ": feedback " << e.name << " output: " << why);
         l->out_float_bits = registry::datatype_float_bits(s->type);
+        int in_bit = -1; // the input exists (bind() then resolves it in the cycle)
+        if (!reg_.find_with_bit(e.input, in_bit))
+            throw Error(SB() << at(e.input_where) << ": feedback " << e.name << " input: no signal '" << e.input
+                             << "' in this IOC (`beamctl signals` lists them)");
         // the record: synApps' epid with the loop's initial parameters
         f.records.push_back(record("epid", cfg.prefix + e.name,
                                    {{"DTYP", "Fast Epid"}, {"INP", "@" + e.name}, {"SCAN", e.scan}, {"DESC", e.desc.substr(0, 40)},

@@ -326,9 +326,9 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     memmaps_ = std::make_unique<IocMemMaps>(cfg_, catalog_, db_);
     plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
     flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get());
+    quadem_ = std::make_unique<IocQuadEm>(cfg_, registry_, db_); // before feedback: its values are loop inputs
     feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_);
     detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s);
-    quadem_ = std::make_unique<IocQuadEm>(cfg_, registry_, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);

@@ -77,6 +77,12 @@ private:
 IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db) : reg_(reg), db_(db) {
     pv::DbFile f;
     for (const config::QuadEmEntry& e : cfg.quadem) {
+        for (std::size_t i = 0; i < e.currents.size(); ++i) { // each exists (bind() then resolves them in the cycle)
+            int bit = -1;
+            if (e.currents[i] != "time" && !reg.find_with_bit(e.currents[i], bit))
+                throw Error(SB() << e.currents_where << ": quadem " << e.name << " current " << (i + 1) << ": no signal '" << e.currents[i]
+                                 << "' in this IOC (`beamctl signals` lists them)");
+        }
         auto u = std::make_unique<Unit>();
         u->cfg = e;
         u->p = cfg.prefix + e.name + ":";

@@ -219,3 +219,34 @@ TEST(IocConfig, FeedbackAndDetectorSections) {
     EXPECT_NE(e[3].find("should not be 0"), std::string::npos) << e[3];
     EXPECT_NE(e[4].find("rate"), std::string::npos) << e[4];
 }
+
+TEST(IocConfig, QuadEmSection) {
+    config::IocConfig c = config::IocConfig::parse("ioc: {name: T}\n"
+                                                   "detectors:\n"
+                                                   "  quadem:\n"
+                                                   "    - {name: QE1, currents: [a, b, c, d], geometry: Diamond, averaging_time: 0.5,\n"
+                                                   "       current_scale: [1, 2, 3, 4], position_scale: [10, 20], egu: um}\n",
+                                                   "/cfg/ioc.yaml");
+    ASSERT_EQ(c.quadem.size(), 1u);
+    EXPECT_EQ(c.quadem[0].currents, (std::vector<std::string>{"a", "b", "c", "d"}));
+    EXPECT_EQ(c.quadem[0].geometry, "Diamond");
+    EXPECT_EQ(c.quadem[0].averaging_time, 0.5);
+    EXPECT_EQ(c.quadem[0].current_scale[3], 4);
+    EXPECT_EQ(c.quadem[0].position_scale[1], 20);
+    EXPECT_EQ(c.quadem[0].position_offset[0], 0);
+    const auto e = errors_of("ioc: {name: T}\n"
+                             "detectors:\n"
+                             "  quadem:\n"
+                             "    - {name: QE1, currents: [a, b, c], geometry: Round}\n"
+                             "    - {name: QE1, currents: [a, b, c, d], position_scale: [1], averaging_time: -1}\n"
+                             "    - {name: QE2}\n");
+    ASSERT_EQ(e.size(), 6u) << ::testing::PrintToString(e);
+    EXPECT_NE(e[0].find("ioc.yaml:4:"), std::string::npos) << e[0];
+    EXPECT_NE(e[0].find("should name four values, got 3"), std::string::npos) << e[0];
+    EXPECT_NE(e[1].find("'Round' is not a geometry"), std::string::npos) << e[1];
+    EXPECT_NE(e[2].find("defined twice"), std::string::npos) << e[2];
+    EXPECT_NE(e[3].find("position_scale: should be 2 numbers"), std::string::npos) << e[3];
+    EXPECT_NE(e[4].find("averaging_time should be from 0 to 3600, got -1"), std::string::npos) << e[4];
+    EXPECT_NE(e[5].find("ioc.yaml:6:"), std::string::npos) << e[5];
+    EXPECT_NE(e[5].find("currents"), std::string::npos) << e[5];
+}
