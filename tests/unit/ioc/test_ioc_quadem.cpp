@@ -191,3 +191,23 @@ TEST(IocQuadEm, TheFastLoopRejectsTheSourceVibration) {
     EXPECT_LT(closed, open / 4) << "open " << open << " um rms, closed " << closed << " um rms";
     std::printf("PosY residual: %.3f um rms open, %.3f um rms closed (factor %.1f)\n", open, closed, open / closed);
 }
+
+TEST(IocQuadEm, TheDemoBeamPassesTheSlitAndTheMirrorPitchesIt) {
+    VirtualIoc v(kSource + "/examples/demo/ioc.yaml");
+    v.run(300);
+    ethercat::sim::Plant& plant = *v.ioc->plant(0);
+    const double* qe = v.ioc->quadem().unit(0).values();
+    EXPECT_NEAR(qe[detector::kSumAll], 1.0, 0.01); // the slit (blades at 6, -4, -7, 3 mm) passes it all
+    // the downstream vertical jack (s24) 1 um down: the mirror pitches up, the spot ~24 um up
+    const double at = 1.0; // the spot's height at a fixed time, before and after
+    const double y0 = plant.beam->y(at);
+    plant.find_stage("s24")->set_position(-0.001);
+    v.run(10);
+    EXPECT_NEAR(plant.beam->y(at) - y0, 0.024333, 1e-6); // 2 D theta - 2/3 of the jack's 1 um
+    EXPECT_NEAR(qe[detector::kPosY], 125.33 * std::erf(plant.beam->y(plant.time() - 0.002) / (0.1 * std::sqrt(2.0))), 0.3);
+    EXPECT_GT(qe[detector::kPosY], 5); // up, whatever the vibration (+-10 um) does
+    // the top blade below the beam: no light
+    plant.find_stage("SlitTop")->set_position(-1);
+    v.run(10);
+    EXPECT_NEAR(qe[detector::kSumAll], 0, 0.001);
+}
