@@ -120,10 +120,10 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
             why = "no value " + s.name;
             return b;
         });
-        // quadEM.template's PVs (their names; a bo Acquire where quadEM has a busy record)
+        // quadEM.template's PVs (their names)
         const std::string& p = u->p;
         const std::string prec = std::to_string(e.prec), egu = e.egu.substr(0, 15);
-        f.records.push_back(record("bo", p + "Acquire", {{"ZNAM", "Done"}, {"ONAM", "Acquire"}, {"VAL", "1"}}));
+        f.records.push_back(record("busy", p + "Acquire", {{"ZNAM", "Done"}, {"ONAM", "Acquire"}, {"VAL", "1"}}));
         const std::vector<std::pair<std::string, std::string>> modes = {{"ZRST", "Continuous"}, {"ONST", "Multiple"}, {"TWST", "Single"}};
         f.records.push_back(record("mbbo", p + "AcquireMode", modes));
         f.records.push_back(record("mbbi", p + "AcquireMode_RBV", modes));

@@ -108,7 +108,7 @@ double scan_period(uint16_t scan) {
 // a database that uses one is told "not supported", not "unknown".
 static bool known_epics_type(std::string_view t) {
     static const char* known[] = {"swait", "sseq", "scalcout", "acalcout",
-                                  "transform", "scaler", "busy", "asyn", "timestamp",
+                                  "transform", "scaler", "asyn", "timestamp",
                                   "digitel", "table", "sCalcout", "vs", "pid", "steppermotor"};
     for (const char* k : known)
         if (t == k) return true;

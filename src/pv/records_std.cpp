@@ -3,6 +3,7 @@
 // record support (checkAlarms, monitor, convert) so clients see what a softIoc would show.
 #include "core/error.hpp"
 #include "pv/record.hpp"
+#include "pv/database.hpp"
 #include "pv/record_support.hpp"
 
 #include <algorithm>
@@ -213,6 +214,47 @@ struct BoRecord : BinaryBase<BoRecord> {
         binary_process(true);
         pact = 0;
         return ProcessResult::Done;
+    }
+};
+
+// synApps' busy record (the busy module's busyRecord.c): a bo whose forward link, and so the
+// completion of a put-callback, waits while VAL is 1. A client puts 1 with a callback; the owner of
+// the work (a driver, a sequence) puts 0 when it is done, and the callback completes then. HIGH > 0:
+// VAL returns to 0 by itself after HIGH seconds (the database's clock).
+struct BusyRecord : BinaryBase<BusyRecord> {
+    using BinaryBase::BinaryBase;
+    double high = 0;
+    bool waiting = false; // returned Async: a put-callback and the forward link wait for VAL 0
+    void metadata(const FieldDesc& f, Metadata& md) const override {
+        Record::metadata(f, md);
+        if (&f == val_fd) md.ctrl_hi = 65535;
+    }
+    static std::vector<FieldDesc> fields() {
+        using R = BusyRecord;
+        auto v = binary_fields(common_fields());
+        add_output_fields<R>(v, Dbf::UShort);
+        v.push_back(BEAMCTL_FIELD(R, HIGH, high, Double, 0));
+        return v;
+    }
+    ProcessResult process() override {
+        pact = 1;
+        binary_process(true);
+        pact = 0; // busy, but not in processing: the owner's put of 0 processes it
+        if (val != 0) {
+            if (high > 0) call_after(high);
+            waiting = true;
+            return ProcessResult::Async;
+        }
+        if (waiting) {
+            waiting = false;
+            async_done(); // the put-callback that waited for the 1 completes; FLNK follows (Done)
+        }
+        return ProcessResult::Done;
+    }
+    void on_delay() override { // HIGH passed: back to 0
+        if (val == 0 || !database()) return;
+        val = 0;
+        database()->process(*this);
     }
 };
 
@@ -508,6 +550,7 @@ void register_standard_records(RecordTypes& types) {
     add_type<AoRecord>(types, "ao");
     add_type<BiRecord>(types, "bi");
     add_type<BoRecord>(types, "bo");
+    add_type<BusyRecord>(types, "busy");
     add_type<LonginRecord>(types, "longin");
     add_type<LongoutRecord>(types, "longout");
     add_type<MbbiRecord>(types, "mbbi");

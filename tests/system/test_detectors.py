@@ -4,6 +4,7 @@ epics.devices.mca.MCA, the mca.db PVs, ERST with a put-callback that completes a
 acquisition."""
 
 import math
+import time
 from pathlib import Path
 
 import epics
@@ -125,3 +126,12 @@ def test_quadem_position_follows_a_mirror_move_and_the_loop_holds_it(tmp_path, p
         assert abs(y2) < 2, y2
         assert get(p + "PosY:SigmaValue_RBV") < 3
         assert get(prefix + "epidFast1.OVAL") < -want / 5 / 2  # -want / 5 V: the piezo's 5 um/V
+        # Single with a put-callback on Acquire (a busy record): done after one reading
+        assert put_status(p + "Acquire", 0) == 1
+        assert put_status(p + "AcquireMode", 2) == 1
+        assert put_status(p + "AveragingTime", 0.2) == 1
+        t0 = time.monotonic()
+        assert put_status(p + "Acquire", 1, timeout=10) == 1
+        assert time.monotonic() - t0 >= 0.15
+        assert get(p + "NumAcquired") == 1 and get(p + "Acquire") == 0
+        assert get(p + "NumAveraged_RBV") == 200

@@ -500,3 +500,34 @@ record(ao, "w") { field(DTYP, "beamctl") field(OUT, "@out") field(OMSL, "closed_
     EXPECT_NE(load_error("record(ai, \"q\") { field(DTYP, \"beamctl\") field(INP, \"@nope\") }").find("needs device"),
               std::string::npos);
 }
+
+TEST_F(Links, BusyRecordHoldsThePutCallbackAndTheForwardLinkUntilZero) {
+    load(R"(record(busy, "b") { field(ZNAM, "Done") field(ONAM, "Busy") field(FLNK, "n") }
+            record(calc, "n") { field(CALC, "VAL+1") }
+            record(busy, "h") { field(HIGH, "0.5") })");
+    int called = 0;
+    PutStatus got = PutStatus::Failed;
+    ASSERT_EQ(put("b", 1, [&](PutStatus st) { ++called, got = st; }), PutStatus::Ok);
+    EXPECT_EQ(called, 0); // busy: the callback waits
+    EXPECT_EQ(gets("b"), "Busy");
+    EXPECT_EQ(getd("n"), 0); // and so does the forward link
+    advance(1);
+    EXPECT_EQ(called, 0);
+    ASSERT_EQ(put("b", 0), PutStatus::Ok); // the owner of the work: done
+    EXPECT_EQ(called, 1);
+    EXPECT_EQ(got, PutStatus::Ok);
+    EXPECT_EQ(getd("n"), 1);
+    // a put of 0 with a callback completes at once
+    ASSERT_EQ(put("b", 0, [&](PutStatus) { ++called; }), PutStatus::Ok);
+    EXPECT_EQ(called, 2);
+    EXPECT_EQ(getd("n"), 2);
+    // HIGH: back to 0 by itself, the callback then
+    ASSERT_EQ(put("h", 1, [&](PutStatus) { ++called; }), PutStatus::Ok);
+    advance(0.3);
+    EXPECT_EQ(getd("h"), 1);
+    EXPECT_EQ(called, 2);
+    advance(0.3);
+    EXPECT_EQ(getd("h"), 0);
+    EXPECT_EQ(called, 3);
+    EXPECT_EQ(put("b", 2), PutStatus::BadValue); // two states
+}
