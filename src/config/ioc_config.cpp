@@ -43,6 +43,19 @@ std::vector<std::string> paths_of(const YamlNode& n, const std::string& dir) {
     return out;
 }
 
+
+// The name of an entry that becomes part of PV names: letters, digits, _ - (and : when `colon`),
+// unique among `names` (its kind says which, in the error).
+void check_name_part(const YamlNode& n, const std::string& name, const char* kind, std::set<std::string>& names, bool colon) {
+    if (name.empty()) return;
+    const char* ok = colon ? "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_:-"
+                           : "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-";
+    if (name.find_first_not_of(ok) != std::string::npos)
+        n.error(SB() << "'" << name << "' should be a plain PV name part (letters, digits, _ " << (colon ? ": " : "") << "-)");
+    else if (!names.insert(name).second)
+        n.error(SB() << kind << " '" << name << "' is defined twice");
+}
+
 } // namespace
 
 std::vector<BusConfig> read_bus_list(const YamlNode& buses, const std::string& dir, bool scanner_file) {
@@ -480,10 +493,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             QuadEmEntry e;
             e.where = d.where();
             e.name = d.required("name", " (the PV prefix after the IOC's, e.g. QE1)").string().value_or("");
-            if (!e.name.empty() && e.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") != std::string::npos)
-                d["name"].error(SB() << "'" << e.name << "' should be a plain PV name part (letters, digits, _ -)");
-            else if (!e.name.empty() && !qnames.insert(e.name).second)
-                d["name"].error(SB() << "quadem '" << e.name << "' is defined twice");
+            check_name_part(d["name"], e.name, "quadem", qnames, false);
             YamlNode cur = d.required("currents", " (four engine values: the diodes' currents)");
             e.currents_where = cur.where();
             for (const YamlNode& c : cur.list())
@@ -519,10 +529,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             McaEntry e;
             e.where = d.where();
             e.name = d.required("name", " (the mca record's name after the IOC prefix, e.g. mca1)").string().value_or("");
-            if (!e.name.empty() && e.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_:-") != std::string::npos)
-                d["name"].error(SB() << "'" << e.name << "' should be a plain PV name part (letters, digits, _ : -)");
-            else if (!e.name.empty() && !names.insert(e.name).second)
-                d["name"].error(SB() << "mca '" << e.name << "' is defined twice");
+            check_name_part(d["name"], e.name, "mca", names, true);
             e.channels = uint32_t(d["channels"].integer(between(1, 1 << 20)).value_or(2048));
             e.offset = d["offset"].number().value_or(0);
             e.slope = d["slope"].number().value_or(0.01);
@@ -550,10 +557,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             FeedbackEntry e;
             e.where = d.where();
             e.name = d.required("name", " (the epid record's name after the IOC prefix)").string().value_or("");
-            if (!e.name.empty() && e.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_:-") != std::string::npos)
-                d["name"].error(SB() << "'" << e.name << "' should be a plain PV name part (letters, digits, _ : -)");
-            else if (!e.name.empty() && !names.insert(e.name).second)
-                d["name"].error(SB() << "feedback loop '" << e.name << "' is defined twice");
+            check_name_part(d["name"], e.name, "feedback loop", names, true);
             e.input = d.required("input", " (an engine value: a bus entry or an axis variable)").string().value_or("");
             e.input_where = d["input"].where();
             e.output = d.required("output", " (a bus output entry)").string().value_or("");
