@@ -70,7 +70,7 @@ def test_fly_scan_on_the_spiral_writes_a_nexus_file(tmp_path, prefix):
         # slot as real mechanics would: the bounds below allow for the slots missed during the scan.
         missed_before = get(p + "m0-ThdMissedCycles")
         motor = epics.Motor(p + "SpiralL")
-        assert motor.move(3.3, wait=False) == 0
+        assert motor.move(3.3, wait=False) in (0, 1)  # 1: MOVN was already seen
         assert wait_for(lambda: get(p + "PCOMP1:PRODUCED") >= 2, 20)
         # the file grows while the scan runs: a SWMR reader sees the rows flushed so far
         path = data / "spiral_001.h5"
@@ -189,7 +189,7 @@ def test_timestamped_output_switches_between_frames(tmp_path, prefix):
         missed_before = get(p + "m0-ThdMissedCycles")
         # 2.5 mm of arc: rises at 0.8, 1.6, 2.4 mm and falls at 1.2, 2.0 mm on both outputs
         motor = epics.Motor(p + "SpiralL")
-        assert motor.move(2.5, wait=False) == 0
+        assert motor.move(2.5, wait=False) in (0, 1)  # 1: MOVN was already seen
         assert wait_for(lambda: get(p + "SpiralL.DMOV") == 1 and get(p + "SpiralL.MOVN") == 0, 30)
         assert wait_for(lambda: get(p + "PCOMP3:TIMED") == 5, 5)
         assert get(p + "PCOMP1:PRODUCED") == 3
