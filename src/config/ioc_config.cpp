@@ -484,7 +484,48 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         e.flush_s = c["flush_s"].number(between(0.01, 3600)).value_or(e.flush_s);
         cfg.capture = std::move(e);
     }
-    if (YamlNode dets = root["detectors"]; dets && dets.keys({"mca", "quadem"})) {
+    if (YamlNode dets = root["detectors"]; dets && dets.keys({"mca", "quadem", "area_detector"})) {
+        std::set<std::string> parts; // every PV name part of every area detector
+        for (const YamlNode& d : dets["area_detector"].list()) {
+            if (!d.keys({"cam", "image", "hdf", "stats", "bus", "size", "pixel_size", "centre", "photons_per_flux", "dark", "read_noise",
+                         "data_type", "acquire_time", "acquire_period", "gain", "file_path"}))
+                continue;
+            AreaDetectorEntry e;
+            e.where = d.where();
+            for (auto [key, out] : {std::pair<const char*, std::string*>{"cam", &e.cam}, {"image", &e.image}, {"hdf", &e.hdf}, {"stats", &e.stats}}) {
+                *out = d[key].string().value_or(*out);
+                const std::string kind = std::string("area_detector ") + key;
+                check_name_part(d.has(key) ? d[key] : d, *out, kind.c_str(), parts, false);
+            }
+            e.bus = int(d["bus"].integer(between(0, 255)).value_or(-1));
+            if (YamlNode v = d["size"]) {
+                auto items = v.list();
+                if (items.size() != 2) v.error("should be [x, y] pixels");
+                else {
+                    e.size_x = int(items[0].integer(between(1, 8192)).value_or(e.size_x));
+                    e.size_y = int(items[1].integer(between(1, 8192)).value_or(e.size_y));
+                }
+            }
+            if (YamlNode v = d["centre"]) {
+                auto items = v.list();
+                if (items.size() != 2) v.error("should be [x, y] mm");
+                else e.centre_x = items[0].number().value_or(0), e.centre_y = items[1].number().value_or(0);
+            }
+            e.pixel_size = d["pixel_size"].number(between(1e-6, 100)).value_or(e.pixel_size);
+            e.photons_per_flux = d["photons_per_flux"].number(between(0, 1e15)).value_or(e.photons_per_flux);
+            e.dark = d["dark"].number(between(0, 1e9)).value_or(e.dark);
+            e.read_noise = d["read_noise"].number(between(0, 1e9)).value_or(e.read_noise);
+            if (auto t = d["data_type"].string()) {
+                static const std::set<std::string> types = {"Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Float32", "Float64"};
+                if (types.count(*t)) e.data_type = *t;
+                else d["data_type"].error(SB() << "'" << *t << "' is not a data type (Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64)");
+            }
+            e.acquire_time = d["acquire_time"].number(between(0, 3600)).value_or(e.acquire_time);
+            e.acquire_period = d["acquire_period"].number(between(0, 3600)).value_or(e.acquire_period);
+            e.gain = d["gain"].number(between(0, 1e6)).value_or(e.gain);
+            e.file_path = d["file_path"].string().value_or("");
+            cfg.area_detector.push_back(std::move(e));
+        }
         std::set<std::string> qnames;
         for (const YamlNode& d : dets["quadem"].list()) {
             if (!d.keys({"name", "currents", "geometry", "averaging_time", "current_scale", "current_offset", "position_scale",

@@ -293,6 +293,22 @@ struct QuadEmEntry {
     std::string where, currents_where;
 };
 
+// `detectors: {area_detector: [{cam, image, hdf, stats, bus, size, pixel_size, centre, ...}]}`: a
+// simulated camera of the beam behind areaDetector's PV sets (docs/detectors.md).
+struct AreaDetectorEntry {
+    std::string cam = "cam1", image = "image1", hdf = "HDF1", stats = "Stats1"; // $(P)<part>: each
+    int bus = -1;                  // the simulated bus whose plant's beam it sees (-1: the first with one)
+    int size_x = 640, size_y = 480; // sensor pixels
+    double pixel_size = 0.005;     // [mm] at the beam plane
+    double centre_x = 0, centre_y = 0; // [mm] the beam-plane point at the sensor's centre
+    double photons_per_flux = 1e10; // electrons per second per flux unit
+    double dark = 10, read_noise = 2; // counts a pixel per frame; electrons rms
+    std::string data_type = "UInt16"; // DataType's initial choice (the image's FTVL follows it)
+    double acquire_time = 0.01, acquire_period = 0.1, gain = 1;
+    std::string file_path;          // HDF1:FilePath's initial value
+    std::string where;
+};
+
 struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
@@ -320,6 +336,7 @@ struct IocConfig {
     std::vector<FeedbackEntry> feedback;
     std::vector<McaEntry> mca; // detectors.mca
     std::vector<QuadEmEntry> quadem; // detectors.quadem
+    std::vector<AreaDetectorEntry> area_detector; // detectors.area_detector
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

@@ -677,24 +677,9 @@ void IocFlyScan::stop() {
     if (writer_ && writer_->status().busy) writer_->stop();
 }
 
-void IocFlyScan::set_text(pv::Record* r, const std::string& t) {
-    std::vector<double> c(t.begin(), t.begin() + std::min<std::size_t>(t.size(), 511));
-    c.push_back(0);
-    set_array(db_, *r, c.data(), uint32_t(c.size()));
-}
+void IocFlyScan::set_text(pv::Record* r, const std::string& t) { ioc::set_text(db_, *r, t.substr(0, 511)); }
 
-std::string IocFlyScan::text(pv::Record* r) const {
-    const pv::FieldDesc* f = r->type().find("VAL");
-    pv::Elements e = r->elements(*f);
-    std::string s;
-    for (uint32_t i = 0; i < e.count; ++i) {
-        double v = 0;
-        pv::get_element(*r, *f, e, i, pv::Prim::Double, &v);
-        if (v == 0) break;
-        s += char(int(v));
-    }
-    return s;
-}
+std::string IocFlyScan::text(pv::Record* r) const { return get_text(*r); }
 
 void IocFlyScan::publish() {
     auto set = [&](pv::Record* r, double v) {

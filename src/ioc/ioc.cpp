@@ -329,6 +329,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     quadem_ = std::make_unique<IocQuadEm>(cfg_, registry_, db_); // before feedback: its values are loop inputs
     feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_);
     detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s);
+    area_ = std::make_unique<IocAreaDetector>(cfg_, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
@@ -798,6 +799,16 @@ void Ioc::bring_up() {
     quadem_->bind(*engine_, axes_->group()); // before the feedback loops: they read its values in the same cycle
     feedback_->bind(*engine_, axes_->group());
     binding_cycle_ = -1;
+    // the cameras see the plant's beam of a simulated bus in this process (bus -1: the first with one)
+    area_->bind([this](int bus) -> IocAreaDetector::BeamSource {
+        for (std::size_t i = 0; i < buses_.size(); ++i) {
+            ethercat::sim::Plant* p = buses_[i].plant.get();
+            if (!p || !p->beam || (bus >= 0 && cfg_.buses[i].id != bus)) continue;
+            ethercat::sim::Beam* beam = p->beam.get();
+            return [beam] { return beam->tally(); };
+        }
+        return {};
+    });
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
@@ -819,6 +830,7 @@ void Ioc::bring_up() {
         db_.set_restore_hook([this] { autosave_->restore(); });
     }
     db_.init_records();
+    area_->start();
     plcs_->set_epics_state(12); // initHookAfterIocBuilt
     brought_up_ = true;
 }
@@ -831,6 +843,7 @@ void Ioc::publish() {
     storages_->publish();
     flyscan_->publish();
     quadem_->publish();
+    area_->poll(EventLoop::now_s());
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) {
         b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)

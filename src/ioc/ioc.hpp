@@ -13,6 +13,7 @@
 #include "ethercat/catalog.hpp"
 #include "ioc/axes.hpp"
 #include "ioc/detectors.hpp"
+#include "ioc/area_detector.hpp"
 #include "ioc/quadem.hpp"
 #include "ioc/feedback.hpp"
 #include "ioc/flyscan.hpp"
@@ -77,6 +78,7 @@ public:
     IocFeedback& feedback() { return *feedback_; }
     IocDetectors& detectors() { return *detectors_; }
     IocQuadEm& quadem() { return *quadem_; }
+    IocAreaDetector& area_detectors() { return *area_; }
     // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
     // (`beamctl signals`). Frozen once the IOC is built.
     const registry::Registry& signals() const { return registry_; }
@@ -158,6 +160,7 @@ private:
     std::unique_ptr<IocFeedback> feedback_; // fast EPID loops (feedback:)
     std::unique_ptr<IocDetectors> detectors_; // simulated detectors (detectors:)
     std::unique_ptr<IocQuadEm> quadem_;       // quad electrometers (detectors.quadem)
+    std::unique_ptr<IocAreaDetector> area_;   // simulated cameras (detectors.area_detector)
     std::unique_ptr<IocFlyScan> flyscan_; // position compare and capture (pcomp:, capture:)
     bool brought_up_ = false;
     std::unique_ptr<pv::Autosave> autosave_; // ioc.yaml autosave:

@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <string>
 #include <utility>
 #include <vector>
@@ -43,6 +44,38 @@ inline void set_array(pv::Database& db, pv::Record& r, const double* v, uint32_t
     r.set_count(*f, n);
     r.udf = 0;
     db.process(r);
+}
+
+// Sets an array record's elements from raw values of its own element type (n elements of
+// FTVL's size at `data`: a camera's pixels into an image waveform) and processes it.
+inline void set_array_raw(pv::Database& db, pv::Record& r, const void* data, uint32_t n) {
+    const pv::FieldDesc* f = r.type().find("VAL");
+    pv::Elements e = r.elements(*f);
+    n = n < e.capacity ? n : e.capacity;
+    std::memcpy(e.data, data, std::size_t(n) * e.stride);
+    r.set_count(*f, n);
+    r.udf = 0;
+    db.process(r);
+}
+
+// A CHAR waveform's text (up to its first NUL) and setting it (the owner's write; processes).
+inline std::string get_text(const pv::Record& r) {
+    const pv::FieldDesc* f = r.type().find("VAL");
+    pv::Elements e = const_cast<pv::Record&>(r).elements(*f);
+    std::string s;
+    for (uint32_t i = 0; i < e.count; ++i) {
+        double v = 0;
+        pv::get_element(r, *f, e, i, pv::Prim::Double, &v);
+        if (v == 0) break;
+        s += char(int(v));
+    }
+    return s;
+}
+
+inline void set_text(pv::Database& db, pv::Record& r, const std::string& t) {
+    std::vector<double> c(t.begin(), t.end());
+    c.push_back(0);
+    set_array(db, r, c.data(), uint32_t(c.size()));
 }
 
 // An instance number as ecmccfg's PV names write it: "03" (PLC03-..., DS03-...).

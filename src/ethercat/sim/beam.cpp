@@ -2,6 +2,7 @@
 
 #include "ethercat/sim/plant.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -22,7 +23,29 @@ double inside(double a, double b, double mu, double s) noexcept {
 
 } // namespace
 
-void Beam::update(Segment& seg) noexcept {
+BeamExposure exposure(const BeamTally& a, const BeamTally& b) noexcept {
+    BeamExposure e;
+    e.seconds = b.w - a.w;
+    e.sigma_x = b.sigma_x, e.sigma_y = b.sigma_y, e.flux = b.flux;
+    e.left = b.left, e.right = b.right, e.bottom = b.bottom, e.top = b.top;
+    if (!(e.seconds > 0)) { // no step between: the latest position, no spread
+        e.x = b.x, e.y = b.y, e.transmission = b.transmission;
+        return e;
+    }
+    e.x = (b.sx - a.sx) / e.seconds;
+    e.y = (b.sy - a.sy) / e.seconds;
+    e.var_x = std::max(0.0, (b.sxx - a.sxx) / e.seconds - e.x * e.x);
+    e.var_y = std::max(0.0, (b.syy - a.syy) / e.seconds - e.y * e.y);
+    e.transmission = std::clamp((b.st - a.st) / e.seconds, 0.0, 1.0);
+    return e;
+}
+
+BeamTally Beam::tally() noexcept {
+    published_.update();
+    return published_.read_buffer();
+}
+
+void Beam::update(Segment& seg, double t, double dt) noexcept {
     double dx = 0, dy = 0;
     for (const BeamLever& l : levers) {
         const double u = l.stage ? l.stage->position() : double(l.output.get_signed(seg)) * l.volts_per_digit;
@@ -30,6 +53,21 @@ void Beam::update(Segment& seg) noexcept {
         dy += l.y * u;
     }
     dx_ = dx, dy_ = dy;
+    // the step's contribution to the tally, at its end (steps are one cycle: ~1 ms)
+    const double x = this->x(t), y = this->y(t);
+    sum_.t = t;
+    if (dt > 0) {
+        sum_.w += dt;
+        sum_.sx += x * dt, sum_.sxx += x * x * dt;
+        sum_.sy += y * dt, sum_.syy += y * y * dt;
+        sum_.st += diode_at(0, x, y) / p_.flux * dt;
+    }
+    sum_.x = x, sum_.y = y, sum_.transmission = diode_at(0, x, y) / p_.flux;
+    sum_.sigma_x = p_.sigma_x, sum_.sigma_y = p_.sigma_y, sum_.flux = p_.flux;
+    sum_.left = left ? left->position() : -kInf, sum_.right = right ? right->position() : kInf;
+    sum_.bottom = bottom ? bottom->position() : -kInf, sum_.top = top ? top->position() : kInf;
+    published_.write_buffer() = sum_;
+    published_.publish();
 }
 
 double Beam::x(double t) const noexcept {

@@ -10,8 +10,10 @@
 // monitor plane (same coordinates, same spot). Units: mm, s, volts; the flux is in the unit the
 // signals' gain turns into volts (e.g. uA of photocurrent, gain in V/uA).
 // Threading: update() and the readings on the segment's thread (Plant::step); no allocation.
+// tally() on one other thread (the IOC loop's detectors).
 #pragma once
 
+#include "core/triple_buffer.hpp"
 #include "ethercat/sim/io_point.hpp"
 
 #include <array>
@@ -39,6 +41,32 @@ struct BeamLever {
     double x = 0, y = 0;
 };
 
+// What a detector that integrates the beam (a camera, a spectrometer's sample) needs: running
+// sums over the simulated time of the spot's centre and transmission, so that the difference of
+// two tallies is an exposure (mean centre, its spread, mean transmission), plus the spot size and
+// the slit's aperture at the latest step (mm; +-infinity for an open side).
+struct BeamTally {
+    double t = 0;              // simulated time of the latest step [s]
+    double w = 0;              // the sums' weight: simulated seconds summed
+    double sx = 0, sxx = 0;    // integral of x dt, x^2 dt [mm s, mm^2 s]
+    double sy = 0, syy = 0;
+    double st = 0;             // integral of the transmission dt [s]
+    double x = 0, y = 0, transmission = 0; // at the latest step
+    double sigma_x = 0, sigma_y = 0, flux = 0;
+    double left = 0, right = 0, bottom = 0, top = 0;
+};
+
+// The mean of a tally difference `b - a` (an exposure from a to b).
+struct BeamExposure {
+    double seconds = 0;
+    double x = 0, y = 0;              // mean centre [mm]
+    double var_x = 0, var_y = 0;      // the centre's variance over the exposure [mm^2]
+    double transmission = 0;          // mean fraction through the slit
+    double sigma_x = 0, sigma_y = 0, flux = 0;
+    double left = 0, right = 0, bottom = 0, top = 0;
+};
+BeamExposure exposure(const BeamTally& a, const BeamTally& b) noexcept;
+
 class Beam {
 public:
     explicit Beam(BeamParams p) : p_(p) {}
@@ -49,8 +77,11 @@ public:
     const Stage* left = nullptr;
     const Stage* right = nullptr;
 
-    // Reads the optics (after the stages moved this step).
-    void update(Segment& seg) noexcept;
+    // Reads the optics (after the stages moved this step) and adds the step [t - dt, t] to the
+    // published tally.
+    void update(Segment& seg, double t, double dt) noexcept;
+    // Any ONE other thread: the latest tally (its sums since the first step).
+    BeamTally tally() noexcept;
     // The spot centre at simulated time t [s].
     double x(double t) const noexcept;
     double y(double t) const noexcept;
@@ -64,6 +95,8 @@ public:
 private:
     BeamParams p_;
     double dx_ = 0, dy_ = 0; // the optics' displacement of the spot [mm]
+    BeamTally sum_;          // the segment thread's running sums
+    TripleBuffer<BeamTally> published_;
 };
 
 } // namespace beamctl::ethercat::sim

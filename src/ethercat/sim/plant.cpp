@@ -152,7 +152,7 @@ void Plant::step(Segment& seg) noexcept {
         for (auto& s : st.switches) s.update(seg, st.position());
     }
     t_ += dt;
-    if (beam) beam->update(seg);
+    if (beam) beam->update(seg, t_, dt);
     for (auto& s : signals) {
         // An oversampling channel takes its n samples at its SYNC0 events across the step.
         unsigned n = s.channel->samples(seg);
