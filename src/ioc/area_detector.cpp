@@ -739,7 +739,14 @@ void IocAreaDetector::apply_camera(Unit& u) {
 }
 
 void IocAreaDetector::bind(const std::function<BeamSource(int bus)>& beam_of) {
-    for (auto& up : units_) up->beam = beam_of ? beam_of(up->cfg.bus) : BeamSource{};
+    for (auto& up : units_) {
+        Unit& u = *up;
+        u.beam = beam_of ? beam_of(u.cfg.bus) : BeamSource{};
+        if (!u.beam && u.cfg.bus >= 0)
+            throw Error(SB() << u.cfg.where << ": area_detector " << u.cfg.cam << ": bus " << u.cfg.bus
+                             << " has no simulated beam in this IOC (a sim link whose plant has a beam: section)");
+        if (!u.beam) LOG_WARN(lg, u.cam << ": no simulated beam in this IOC: the camera takes dark frames");
+    }
 }
 
 void IocAreaDetector::start() {

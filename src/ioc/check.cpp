@@ -25,6 +25,7 @@
 #include <cstring>
 #include <fstream>
 #include <memory>
+#include <set>
 
 namespace beamctl::ioc {
 namespace {
@@ -59,6 +60,7 @@ public:
     }
 
     void buses(const config::IocConfig& cfg, const ethercat::Catalog& catalog) {
+        std::set<int> beamed; // the buses whose plant has a beam (what a camera sees)
         for (std::size_t b = 0; b < cfg.buses.size(); ++b) {
             const config::BusConfig& bc = cfg.buses[b];
             bool types_ok = true;
@@ -96,7 +98,12 @@ public:
                 sim.build(seg, catalog, plant_errors);
             }
             errors_.append(plant_errors);
+            if (plant_errors.empty() && sim.beam) beamed.insert(bc.id);
         }
+        for (const config::AreaDetectorEntry& a : cfg.area_detector)
+            if (a.bus >= 0 && !beamed.count(a.bus))
+                errors_.add(SB() << a.where << ": area_detector " << a.cam << ": bus " << a.bus
+                                 << " has no simulated beam in this IOC (a sim link whose plant has a beam: section)");
     }
 
     void axes(const config::IocConfig& cfg) {

@@ -5,6 +5,7 @@ back with h5py, the statistics plugin following a mirror move, and an ophyd-styl
 stage / trigger / read / unstage sequence."""
 
 import os
+import subprocess
 import time
 
 import epics
@@ -15,8 +16,8 @@ from epics.devices.ad_base import AD_Camera
 from epics.devices.ad_fileplugin import AD_FilePlugin
 from epics.devices.ad_image import AD_ImagePlugin
 
-from conftest import connect, put_status, wait_for
-from test_detectors import running_bpm
+from conftest import BEAMCTL, connect, put_status, require_binary, wait_for
+from test_detectors import EXAMPLES, running_bpm
 
 ECA_PUTFAIL = 160
 
@@ -222,3 +223,22 @@ def test_an_ophyd_style_sequence(tmp_path, prefix):
         assert [int(x.sum(dtype=np.int64)) for x in frames] == [int(t) for t in totals]
         # 20 ms exposures: twice the 10 ms default's signal over the dark
         assert abs(totals[0] - 2 * 5e9 * 0.01 - 320 * 240 * 10) < 0.02 * totals[0]
+
+
+def test_check_and_run_refuse_a_camera_on_a_bus_without_a_beam(tmp_path):
+    """`beamctl check` and `beamctl run` name the entry whose bus has no simulated beam."""
+    require_binary()
+    cfg = (EXAMPLES / "bpm" / "ioc.yaml").read_text()
+    cfg = cfg.replace("plant: plant.yaml", f"plant: {EXAMPLES / 'bpm' / 'plant.yaml'}").replace("file: ../", f"file: {EXAMPLES}/")
+    cfg = cfg.replace("acquire_period: 0.05}", "acquire_period: 0.05, bus: 3}")
+    path = tmp_path / "ioc.yaml"
+    path.write_text(cfg)
+    line = next(i for i, l in enumerate(cfg.splitlines(), 1) if "bus: 3}" in l)
+    want = f"{path}:{line}:7: area_detector cam1: bus 3 has no simulated beam in this IOC"
+    out = subprocess.run([BEAMCTL, "check", str(path)], capture_output=True, text=True, timeout=30)
+    assert out.returncode != 0
+    assert want in out.stdout + out.stderr, out.stdout + out.stderr
+    env = dict(os.environ, EPICS_CAS_SERVER_PORT="0")
+    out = subprocess.run([BEAMCTL, "run", str(path), "--shell-socket", "none"], capture_output=True, text=True, timeout=60, env=env)
+    assert out.returncode != 0
+    assert want in out.stderr, out.stderr

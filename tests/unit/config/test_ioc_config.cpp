@@ -220,6 +220,37 @@ TEST(IocConfig, FeedbackAndDetectorSections) {
     EXPECT_NE(e[4].find("rate"), std::string::npos) << e[4];
 }
 
+TEST(IocConfig, AreaDetectorSection) {
+    config::IocConfig c = config::IocConfig::parse("ioc: {name: T}\n"
+                                                   "detectors:\n"
+                                                   "  area_detector:\n"
+                                                   "    - {size: [320, 240], pixel_size: 0.01, data_type: UInt8, acquire_time: 0.5, file_path: /data}\n"
+                                                   "    - {cam: cam2, image: image2, hdf: HDF2, stats: Stats2, bus: 1, centre: [1, -2]}\n",
+                                                   "/cfg/ioc.yaml");
+    ASSERT_EQ(c.area_detector.size(), 2u);
+    EXPECT_EQ(c.area_detector[0].cam, "cam1");
+    EXPECT_EQ(c.area_detector[0].size_x, 320);
+    EXPECT_EQ(c.area_detector[0].data_type, "UInt8");
+    EXPECT_EQ(c.area_detector[0].acquire_time, 0.5);
+    EXPECT_EQ(c.area_detector[0].file_path, "/data");
+    EXPECT_EQ(c.area_detector[0].bus, -1);
+    EXPECT_EQ(c.area_detector[1].stats, "Stats2");
+    EXPECT_EQ(c.area_detector[1].bus, 1);
+    EXPECT_EQ(c.area_detector[1].centre_y, -2);
+    const auto e = errors_of("ioc: {name: T}\n"
+                             "detectors:\n"
+                             "  area_detector:\n"
+                             "    - {size: [320], data_type: RGB, pixel_size: 0}\n"
+                             "    - {hdf: HDF2, stats: Stats2, image: \"im 1\"}\n");
+    ASSERT_EQ(e.size(), 5u) << ::testing::PrintToString(e);
+    EXPECT_NE(e[0].find("ioc.yaml:4:"), std::string::npos) << e[0];
+    EXPECT_NE(e[0].find("should be [x, y] pixels"), std::string::npos) << e[0];
+    EXPECT_NE(e[1].find("'RGB' is not a data type"), std::string::npos) << e[1];
+    EXPECT_NE(e[2].find("pixel_size should be from 1e-06 to 100, got 0"), std::string::npos) << e[2];
+    EXPECT_NE(e[3].find("area_detector cam 'cam1' is defined twice"), std::string::npos) << e[3];
+    EXPECT_NE(e[4].find("'im 1' should be a plain PV name part"), std::string::npos) << e[4];
+}
+
 TEST(IocConfig, QuadEmSection) {
     config::IocConfig c = config::IocConfig::parse("ioc: {name: T}\n"
                                                    "detectors:\n"

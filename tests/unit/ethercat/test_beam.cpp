@@ -173,3 +173,40 @@ TEST(Beam, ConfigurationErrorsNameTheirPlace) {
     // a working one: the default stage of s1 is a lever
     EXPECT_EQ(error(slaves + "beam: {optics: [{stage: s1, y: 1}, {output: s2.analogOutput01, x: 0.1}]}\nsignals:\n  - {to: s0.analogInput01, beam: 2}\n"), "(no error)");
 }
+
+TEST(Beam, TheTallyIntegratesAnExposure) {
+    // a camera's exposure over whole periods of the vibration: the mean centre is where the source
+    // rests, the centre's variance is the sine's A^2 / 2, the transmission the slit's mean
+    std::string yaml = kBeamline;
+    yaml.replace(yaml.find("  size: [0.5, 0.5]"), 18, "  size: [0.5, 0.5]\n  vibration: {amplitude: [0, 0.05], frequency: 10}");
+    PlantBus b(yaml);
+    b.cycles(1);
+    sim::Beam& beam = *b.plant->beam;
+    const sim::BeamTally t0 = beam.tally();
+    b.cycles(200); // 0.2 s: two periods
+    const sim::BeamTally t1 = beam.tally();
+    const sim::BeamExposure e = sim::exposure(t0, t1);
+    EXPECT_NEAR(e.seconds, 0.2, 1e-9);
+    EXPECT_NEAR(e.x, 0, 1e-9);
+    EXPECT_NEAR(e.y, 0, 1e-4);
+    EXPECT_NEAR(e.var_y, 0.05 * 0.05 / 2, 2e-6);
+    EXPECT_NEAR(e.var_x, 0, 1e-12);
+    EXPECT_NEAR(e.sigma_x, 0.5, 1e-12);
+    EXPECT_NEAR(e.flux, 4, 1e-12);
+    EXPECT_EQ(e.top, 5);
+    EXPECT_EQ(e.bottom, -5);
+    EXPECT_NEAR(e.transmission, beam.transmission(b.plant->time()), 1e-3);
+    // the top blade moved down to the centre: half the beam
+    b.plant->find_stage("top")->set_position(0);
+    b.cycles(1);
+    const sim::BeamTally t2 = beam.tally();
+    b.cycles(100);
+    const sim::BeamExposure h = sim::exposure(t2, beam.tally());
+    EXPECT_NEAR(h.transmission, 0.5, 0.02);
+    EXPECT_EQ(h.top, 0);
+    // no time between two tallies: the latest centre, no spread
+    const sim::BeamExposure z = sim::exposure(t2, t2);
+    EXPECT_EQ(z.seconds, 0);
+    EXPECT_EQ(z.var_y, 0);
+    EXPECT_EQ(z.y, t2.y);
+}
