@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 
 namespace beamctl::detector {
 
@@ -55,32 +56,6 @@ template <typename T> T load(const uint8_t* p) {
     T v;
     std::memcpy(&v, p, sizeof v);
     return v;
-}
-
-template <typename T> void store(uint8_t* p, double v) {
-    T x;
-    if constexpr (std::is_integral_v<T>) x = T(std::llround(v));
-    else x = T(v);
-    std::memcpy(p, &x, sizeof x);
-}
-
-void store_value(NdType t, uint8_t* p, double v) {
-    switch (t) {
-    case NdType::Int8: store<int8_t>(p, v); break;
-    case NdType::UInt8: store<uint8_t>(p, v); break;
-    case NdType::Int16: store<int16_t>(p, v); break;
-    case NdType::UInt16: store<uint16_t>(p, v); break;
-    case NdType::Int32: store<int32_t>(p, v); break;
-    case NdType::UInt32: store<uint32_t>(p, v); break;
-    case NdType::Int64: store<int64_t>(p, v); break;
-    case NdType::UInt64: {
-        uint64_t x = uint64_t(v); // v >= 0 after clipping
-        std::memcpy(p, &x, 8);
-        break;
-    }
-    case NdType::Float32: store<float>(p, v); break;
-    case NdType::Float64: store<double>(p, v); break;
-    }
 }
 
 // P(a <= X <= b) for X ~ N(mu, s^2) (s > 0).
@@ -172,17 +147,36 @@ void Camera::render(const CameraSettings& in, const CameraSpot& spot, Frame& out
     const double photons = std::max(0.0, spot.flux) * sensor_.photons_per_flux * c.exposure;
     const double bins = double(c.bin_x) * double(c.bin_y);
     const double dark = sensor_.dark * bins, read = sensor_.read_noise * std::sqrt(bins);
-    const double hi = nd_type_max(c.type), lo = nd_type_min(c.type);
-    const bool integer = c.type != NdType::Float32 && c.type != NdType::Float64;
-    uint8_t* p = out.data.data();
-    for (int j = 0; j < ny; ++j) {
-        const double row = photons * fy[std::size_t(j)];
-        for (int i = 0; i < nx; ++i, p += es) {
-            const double e = row * fx[std::size_t(i)];
-            double v = c.gain * (e + std::sqrt(e + read * read) * normal()) + dark;
-            v = std::clamp(v, lo, hi);
-            if (integer) v = std::floor(v + 0.5) > hi ? hi : std::floor(v + 0.5);
-            store_value(c.type, p, v);
+    const Pixels px{photons, c.gain, dark, read * read, nd_type_min(c.type), nd_type_max(c.type)};
+    switch (c.type) {
+    case NdType::Int8: fill<int8_t>(px, fx, fy, out.data.data()); break;
+    case NdType::UInt8: fill<uint8_t>(px, fx, fy, out.data.data()); break;
+    case NdType::Int16: fill<int16_t>(px, fx, fy, out.data.data()); break;
+    case NdType::UInt16: fill<uint16_t>(px, fx, fy, out.data.data()); break;
+    case NdType::Int32: fill<int32_t>(px, fx, fy, out.data.data()); break;
+    case NdType::UInt32: fill<uint32_t>(px, fx, fy, out.data.data()); break;
+    case NdType::Int64: fill<int64_t>(px, fx, fy, out.data.data()); break;
+    case NdType::UInt64: fill<uint64_t>(px, fx, fy, out.data.data()); break;
+    case NdType::Float32: fill<float>(px, fx, fy, out.data.data()); break;
+    case NdType::Float64: fill<double>(px, fx, fy, out.data.data()); break;
+    }
+}
+
+// The pixels of one frame as T: gain * (e + noise) + dark, clipped to [lo, hi], rounded for integers.
+template <typename T> void Camera::fill(const Pixels& p, const std::vector<double>& fx, const std::vector<double>& fy, uint8_t* out) {
+    T* o = reinterpret_cast<T*>(out); // the frame's buffer: a vector<uint8_t> of nx * ny * sizeof(T)
+    for (double rowf : fy) {
+        const double row = p.photons * rowf;
+        for (double colf : fx) {
+            const double e = row * colf;
+            double v = p.gain * (e + std::sqrt(e + p.read2) * normal()) + p.dark;
+            v = v < p.lo ? p.lo : (v > p.hi ? p.hi : v);
+            if constexpr (std::is_integral_v<T>) {
+                v = std::floor(v + 0.5);
+                if (v > p.hi) v = p.hi;
+            }
+            T x = static_cast<T>(v);
+            std::memcpy(o++, &x, sizeof x);
         }
     }
 }

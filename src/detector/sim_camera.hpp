@@ -77,6 +77,10 @@ public:
     void render(const CameraSettings& c, const CameraSpot& spot, Frame& out);
 
 private:
+    struct Pixels {
+        double photons, gain, dark, read2, lo, hi;
+    };
+    template <typename T> void fill(const Pixels& p, const std::vector<double>& fx, const std::vector<double>& fy, uint8_t* out);
     double normal() noexcept; // N(0, 1)
     double uniform() noexcept; // (0, 1)
     uint64_t next() noexcept;
