@@ -6,7 +6,7 @@ moves, the absolute-encoder sample axis is referenced at start, the soft records
 import epics
 from epics import ca
 
-from conftest import connect, wait_for
+from conftest import put_status, connect, wait_for
 
 AXES = ["SlitTop", "SlitBottom", "SlitLeft", "SlitRight", "SampleX", "SampleY"]
 
@@ -67,12 +67,24 @@ def test_demo_beam_on_the_quad_electrometer_and_the_loop_that_holds_it(demo):
         return ca.get(connect(p + "PosY:MeanValue_RBV")), ca.get(connect(p + "PosY:SigmaValue_RBV"))
     y0, open_rms = reading()
     assert 5 < open_rms < 9, open_rms  # 10 um amplitude: 7.1 um rms
+    # the camera DEMO:cam1: (5 um pixels) at the same plane: exposures of two periods of the
+    # vibration, the gain down below saturation, the centroid over the spot (not the dark level)
+    for pv, v in (("cam1:AcquireTime", 2 / 7), ("cam1:Gain", 0.03), ("Stats1:CentroidThreshold", 100)):
+        assert put_status("DEMO:" + pv, v) == 1
+
+    def camera_y():
+        assert put_status("DEMO:cam1:Acquire", 1, timeout=10) == 1
+        assert ca.get(connect("DEMO:Stats1:MaxValue_RBV")) < 65535
+        return ca.get(connect("DEMO:Stats1:CentroidY_RBV"))
+    c0 = camera_y()
     assert abs(ca.get(connect(p + "SumAll:MeanValue_RBV")) - 1.0) < 0.01  # the slit passes it all
     pitch = epics.Motor("DEMO:MirrorPitch", timeout=5)
     pitch.put("CNEN", 1, wait=True)
     assert pitch.move(0.001, wait=True, timeout=20) == 0  # mrad
     y1, _ = reading()
     assert 15 < y1 - y0 < 28, (y0, y1)
+    c1 = camera_y()  # the camera sees the same move: rows count downwards
+    assert abs((c0 - c1) - (y1 - y0) / 5) < 1.0, (c0, c1, y0, y1)
     assert epics.caput("DEMO:epidFast1.FBON", 1, wait=True) == 1
     assert epics.caput("DEMO:epidFast1.PROC", 1, wait=True) == 1
     y2, closed_rms = reading()
