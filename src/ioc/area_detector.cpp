@@ -167,7 +167,7 @@ struct Result {
     bool has_stats = false;
     detector::FrameStats stats;
     double stats_seconds = 0, file_seconds = 0;
-    bool dropped = false;
+    bool to_image = false, to_stats = false, to_hdf = false; // the plugins that had the frame
     // the file plugin after the job
     bool capturing = false;
     int num_captured = 0, file_number = 0;
@@ -239,7 +239,11 @@ struct IocAreaDetector::Worker {
         } catch (const std::exception& e) { // a file that cannot be written: the plugin's error
             r.write_error = true;
             r.message = e.what();
-            close_file(r);
+            try {
+                close_file(r);
+            } catch (const std::exception&) { // the reason above is the first one
+            }
+            file.reset();
             capturing = false;
         }
         r.capturing = capturing;
@@ -251,6 +255,7 @@ struct IocAreaDetector::Worker {
 
     void frame(const Job& j, Result& r) {
         r.frame_done = true;
+        r.to_image = j.image, r.to_stats = j.stats, r.to_hdf = j.hdf;
         auto f = std::make_shared<detector::Frame>();
         camera.render(j.cam, j.spot, *f);
         f->unique_id = j.uid;
@@ -543,7 +548,8 @@ void IocAreaDetector::make_records(const config::AreaDetectorEntry& e, const std
         add("ai", s + k, {{"PREC", "3"}});
 }
 
-IocAreaDetector::IocAreaDetector(const config::IocConfig& cfg, pv::Database& db) : db_(db) {
+IocAreaDetector::IocAreaDetector(const config::IocConfig& cfg, pv::Database& db, std::function<double()> clock)
+    : db_(db), clock_(std::move(clock)) {
     pv::DbFile f;
     std::vector<std::size_t> first;
     for (const config::AreaDetectorEntry& e : cfg.area_detector) {
@@ -587,6 +593,12 @@ IocAreaDetector::~IocAreaDetector() = default;
 std::size_t IocAreaDetector::busy() const {
     std::size_t n = 0;
     for (const auto& u : units_) n += u->worker->outstanding() + u->in_flight;
+    return n;
+}
+
+std::size_t IocAreaDetector::busy_worker() const {
+    std::size_t n = 0;
+    for (const auto& u : units_) n += u->worker->outstanding();
     return n;
 }
 
@@ -650,7 +662,7 @@ void IocAreaDetector::hook(Unit& u) {
         if (std::string_view(fd.name) != "VAL") return pv::PutStatus::Ok;
         Unit& u2 = *self;
         if (get_value(r) != 0) {
-            if (!u2.acquiring) start(u2, now_s_);
+            if (!u2.acquiring) start(u2, clock_());
         } else if (u2.acquiring) {
             u2.stopping = true; // the exposure in progress is abandoned; done when the frames are
         }
@@ -885,9 +897,10 @@ void IocAreaDetector::take_results(Unit& u) {
     while (u.worker->take(r)) {
         if (r.frame_done) {
             if (u.in_flight) --u.in_flight;
-            latest = r.frame;
+            if (r.to_image) latest = r.frame;
             const detector::Frame& f = *r.frame;
             for (const std::string* q : {&u.image, &u.hdf, &u.stats}) {
+                if ((q == &u.image && !r.to_image) || (q == &u.hdf && !r.to_hdf) || (q == &u.stats && !r.to_stats)) continue;
                 pv::Record& cnt = u.r(*q + "ArrayCounter");
                 set_value(db_, cnt, get_value(cnt) + 1, false);
                 set_value(db_, u.r(*q + "ArrayCounter_RBV"), get_value(cnt), false);
@@ -902,7 +915,7 @@ void IocAreaDetector::take_results(Unit& u) {
                 set_value(db_, u.r(*q + "ArraySize_RBV"), double(f.data.size()), false);
                 set_value(db_, u.r(*q + "DataType_RBV"), double(int(f.type)), false);
             }
-            if (r.has_stats) {
+            if (r.has_stats) { // the statistics plugin had it
                 const detector::FrameStats& s = r.stats;
                 const std::pair<const char*, double> v[] = {
                     {"MinValue_RBV", s.min},        {"MaxValue_RBV", s.max},           {"MeanValue_RBV", s.mean},
@@ -916,7 +929,7 @@ void IocAreaDetector::take_results(Unit& u) {
                 for (auto& [k, x] : v) set_value(db_, u.r(u.stats + k), x, false);
                 set_value(db_, u.r(u.stats + "ExecutionTime_RBV"), r.stats_seconds * 1e3, false);
             }
-            set_value(db_, u.r(u.hdf + "ExecutionTime_RBV"), r.file_seconds * 1e3, false);
+            if (r.to_hdf) set_value(db_, u.r(u.hdf + "ExecutionTime_RBV"), r.file_seconds * 1e3, false);
         }
         // the file plugin's state after every job
         set_value(db_, u.r(u.hdf + "NumCaptured_RBV"), r.num_captured, false);
@@ -951,7 +964,7 @@ void IocAreaDetector::take_results(Unit& u) {
             if (get_value(u.r(u.hdf + "Capture_RBV")) != 0) set_value(db_, u.r(u.hdf + "Capture_RBV"), 0, false);
         }
     }
-    if (latest && get_value(u.r(u.image + "EnableCallbacks")) != 0) {
+    if (latest) {
         pv::Record& data = u.r(u.image + "ArrayData");
         const pv::FieldDesc* fd = data.type().find("VAL");
         const pv::Elements e = data.elements(*fd);
@@ -966,7 +979,6 @@ void IocAreaDetector::take_results(Unit& u) {
 }
 
 void IocAreaDetector::poll(double now_s) {
-    now_s_ = now_s;
     for (auto& up : units_) {
         Unit& u = *up;
         take_results(u);

@@ -27,8 +27,9 @@ namespace beamctl::ioc {
 
 class IocAreaDetector {
 public:
-    // Makes the records (loaded into `db`). Throws Error naming the entry.
-    IocAreaDetector(const config::IocConfig& cfg, pv::Database& db);
+    // Makes the records (loaded into `db`); exposures on `clock` [s] (the IOC loop's, as poll()'s).
+    // Throws Error naming the entry.
+    IocAreaDetector(const config::IocConfig& cfg, pv::Database& db, std::function<double()> clock);
     ~IocAreaDetector();
     IocAreaDetector(const IocAreaDetector&) = delete;
     IocAreaDetector& operator=(const IocAreaDetector&) = delete;
@@ -39,10 +40,12 @@ public:
     void bind(const std::function<BeamSource(int bus)>& beam_of);
     // After the records are initialised: the initial texts and readbacks; starts the workers.
     void start();
-    // IOC loop, every few ms: exposures on the clock `now_s` [s], the workers' results into PVs.
+    // IOC loop, every few ms: exposures at `now_s` [s] (the clock's time), the workers' results into PVs.
     void poll(double now_s);
-    // Frames the workers still have to process (tests wait for 0).
+    // Frames the workers still have to process or the IOC loop to take (tests wait for 0).
     std::size_t busy() const;
+    // Jobs still at the workers (tests wait for 0 before the next poll).
+    std::size_t busy_worker() const;
 
     std::size_t size() const { return units_.size(); }
 
@@ -61,7 +64,7 @@ private:
 
     pv::Database& db_;
     std::vector<std::unique_ptr<Unit>> units_;
-    double now_s_ = 0; // the latest poll's clock
+    std::function<double()> clock_;
 };
 
 // areaDetector's file name: `tmpl` as C's printf with (path, name, number) for its conversions,

@@ -329,7 +329,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     quadem_ = std::make_unique<IocQuadEm>(cfg_, registry_, db_); // before feedback: its values are loop inputs
     feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_);
     detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s);
-    area_ = std::make_unique<IocAreaDetector>(cfg_, db_);
+    area_ = std::make_unique<IocAreaDetector>(cfg_, db_, EventLoop::now_s);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
