@@ -566,7 +566,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         }
         std::set<std::string> names;
         for (const YamlNode& d : dets["mca"].list()) {
-            if (!d.keys({"name", "channels", "offset", "slope", "lines", "background", "dead_time"})) continue;
+            if (!d.keys({"name", "channels", "offset", "slope", "lines", "background", "dead_time", "bus"})) continue;
             McaEntry e;
             e.where = d.where();
             e.name = d.required("name", " (the mca record's name after the IOC prefix, e.g. mca1)").string().value_or("");
@@ -577,6 +577,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             if (e.slope == 0) d["slope"].error("should not be 0 (keV per channel)");
             e.background = d["background"].number(at_least(0)).value_or(50);
             e.dead_time = d["dead_time"].number(between(0, 1)).value_or(2e-6);
+            e.bus = int(d["bus"].integer(between(0, 255)).value_or(-1));
             for (const YamlNode& l : d["lines"].list()) {
                 if (!l.keys({"name", "energy", "rate", "fwhm"})) continue;
                 McaEntry::Line x;

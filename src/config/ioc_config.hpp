@@ -275,6 +275,8 @@ struct McaEntry {
     std::vector<Line> lines;
     double background = 50;      // counts/s over the spectrum
     double dead_time = 2e-6;     // s per event
+    int bus = -1;                // the simulated bus whose beam's transmission scales the rates
+                                 // (-1: the first with a beam:, if any)
     std::string where;
 };
 

@@ -45,6 +45,8 @@ public:
     std::string describe() const override { return "simulated MCA (" + std::to_string(cfg_.channels) + " channels)"; }
 
     const SimMcaConfig& config() const { return cfg_; }
+    // What scales every rate from now on (the beam's transmission through the slit; none: 1).
+    void set_intensity(std::function<double()> intensity) { intensity_ = std::move(intensity); }
     // The expected input count rate [counts/s] now, and per channel (tests).
     double input_rate() const;
     const std::vector<double>& shape() const { return shape_; } // counts/s per channel at intensity 1

@@ -100,10 +100,13 @@ public:
             errors_.append(plant_errors);
             if (plant_errors.empty() && sim.beam) beamed.insert(bc.id);
         }
-        for (const config::AreaDetectorEntry& a : cfg.area_detector)
-            if (a.bus >= 0 && !beamed.count(a.bus))
-                errors_.add(SB() << a.where << ": area_detector " << a.cam << ": bus " << a.bus
+        auto beam_needed = [&](const std::string& where, const std::string& what, int bus) {
+            if (bus >= 0 && !beamed.count(bus))
+                errors_.add(SB() << where << ": " << what << ": bus " << bus
                                  << " has no simulated beam in this IOC (a sim link whose plant has a beam: section)");
+        };
+        for (const config::AreaDetectorEntry& a : cfg.area_detector) beam_needed(a.where, "area_detector " + a.cam, a.bus);
+        for (const config::McaEntry& m : cfg.mca) beam_needed(m.where, "mca " + m.name, m.bus);
     }
 
     void axes(const config::IocConfig& cfg) {

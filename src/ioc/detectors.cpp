@@ -47,6 +47,7 @@ IocDetectors::IocDetectors(const config::IocConfig& cfg, pv::Database& db, std::
         for (const auto& l : e.lines) c.lines.push_back({l.name, l.energy, l.rate, l.fwhm});
         mcas_.push_back(std::make_unique<detector::SimMca>(c, clock));
         names_.push_back(e.name);
+        entries_.push_back(e);
         const std::string m = cfg.prefix + e.name;
         const std::string n = std::to_string(e.channels);
         // mca's mca.db, with its names
@@ -71,6 +72,17 @@ IocDetectors::IocDetectors(const config::IocConfig& cfg, pv::Database& db, std::
 }
 
 IocDetectors::~IocDetectors() = default;
+
+void IocDetectors::bind(const std::function<std::function<ethercat::sim::BeamTally()>(int bus)>& beam_of) {
+    for (std::size_t i = 0; i < mcas_.size(); ++i) {
+        const config::McaEntry& e = entries_[i];
+        auto beam = beam_of ? beam_of(e.bus) : std::function<ethercat::sim::BeamTally()>{};
+        if (!beam && e.bus >= 0)
+            throw Error(SB() << e.where << ": mca " << e.name << ": bus " << e.bus
+                             << " has no simulated beam in this IOC (a sim link whose plant has a beam: section)");
+        if (beam) mcas_[i]->set_intensity([beam] { return beam().transmission; });
+    }
+}
 
 std::unique_ptr<pv::LinkDevice> IocDetectors::make_device(std::string_view name, std::string& why) {
     for (std::size_t i = 0; i < mcas_.size(); ++i)

@@ -8,6 +8,7 @@
 
 #include "config/ioc_config.hpp"
 #include "detector/sim_mca.hpp"
+#include "ethercat/sim/beam.hpp"
 #include "pv/database.hpp"
 
 #include <memory>
@@ -24,12 +25,17 @@ public:
     ~IocDetectors();
     // Device support of an mca record's INP "@<name>"; nullptr with `why` if no detector has it.
     std::unique_ptr<pv::LinkDevice> make_device(std::string_view name, std::string& why);
+    // The beam each detector's sample sees: `beam_of(bus)` (bus -1: the first with one), or nullptr
+    // (the configured rates as they are). The rates follow the beam's transmission through the
+    // slit. Throws Error naming the entry whose bus has no beam.
+    void bind(const std::function<std::function<ethercat::sim::BeamTally()>(int bus)>& beam_of);
     std::size_t mcas() const { return mcas_.size(); }
     detector::SimMca& mca(std::size_t i) { return *mcas_.at(i); }
 
 private:
     class McaRef;
     std::vector<std::string> names_;
+    std::vector<config::McaEntry> entries_;
     std::vector<std::unique_ptr<detector::SimMca>> mcas_;
 };
 

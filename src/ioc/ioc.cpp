@@ -800,7 +800,7 @@ void Ioc::bring_up() {
     feedback_->bind(*engine_, axes_->group());
     binding_cycle_ = -1;
     // the cameras see the plant's beam of a simulated bus in this process (bus -1: the first with one)
-    area_->bind([this](int bus) -> IocAreaDetector::BeamSource {
+    auto beam_of = [this](int bus) -> IocAreaDetector::BeamSource {
         for (std::size_t i = 0; i < buses_.size(); ++i) {
             ethercat::sim::Plant* p = buses_[i].plant.get();
             if (!p || !p->beam || (bus >= 0 && cfg_.buses[i].id != bus)) continue;
@@ -808,7 +808,9 @@ void Ioc::bring_up() {
             return [beam] { return beam->tally(); };
         }
         return {};
-    });
+    };
+    area_->bind(beam_of);
+    detectors_->bind(beam_of); // the MCAs' samples see the beam through the slit
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {

@@ -238,6 +238,13 @@ def test_check_and_run_refuse_a_camera_on_a_bus_without_a_beam(tmp_path):
     out = subprocess.run([BEAMCTL, "check", str(path)], capture_output=True, text=True, timeout=30)
     assert out.returncode != 0
     assert want in out.stdout + out.stderr, out.stdout + out.stderr
+    # an MCA alike (the sample under a beam that is not there)
+    mca = cfg.replace("detectors:\n", "detectors:\n  mca:\n    - {name: mca1, bus: 5}\n")
+    mca_path = tmp_path / "mca.yaml"
+    mca_path.write_text(mca.replace("acquire_period: 0.05, bus: 3}", "acquire_period: 0.05}"))
+    out2 = subprocess.run([BEAMCTL, "check", str(mca_path)], capture_output=True, text=True, timeout=30)
+    assert out2.returncode != 0
+    assert "mca mca1: bus 5 has no simulated beam in this IOC" in out2.stdout + out2.stderr, out2.stdout + out2.stderr
     env = dict(os.environ, EPICS_CAS_SERVER_PORT="0")
     out = subprocess.run([BEAMCTL, "run", str(path), "--shell-socket", "none"], capture_output=True, text=True, timeout=60, env=env)
     assert out.returncode != 0

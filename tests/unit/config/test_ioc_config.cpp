@@ -225,7 +225,9 @@ TEST(IocConfig, AreaDetectorSection) {
                                                    "detectors:\n"
                                                    "  area_detector:\n"
                                                    "    - {size: [320, 240], pixel_size: 0.01, data_type: UInt8, acquire_time: 0.5, file_path: /data}\n"
-                                                   "    - {cam: cam2, image: image2, hdf: HDF2, stats: Stats2, bus: 1, centre: [1, -2]}\n",
+                                                   "    - {cam: cam2, image: image2, hdf: HDF2, stats: Stats2, bus: 1, centre: [1, -2]}\n"
+                                                   "  mca:\n"
+                                                   "    - {name: mca1, bus: 2}\n",
                                                    "/cfg/ioc.yaml");
     ASSERT_EQ(c.area_detector.size(), 2u);
     EXPECT_EQ(c.area_detector[0].cam, "cam1");
@@ -237,6 +239,8 @@ TEST(IocConfig, AreaDetectorSection) {
     EXPECT_EQ(c.area_detector[1].stats, "Stats2");
     EXPECT_EQ(c.area_detector[1].bus, 1);
     EXPECT_EQ(c.area_detector[1].centre_y, -2);
+    ASSERT_EQ(c.mca.size(), 1u);
+    EXPECT_EQ(c.mca[0].bus, 2);
     const auto e = errors_of("ioc: {name: T}\n"
                              "detectors:\n"
                              "  area_detector:\n"

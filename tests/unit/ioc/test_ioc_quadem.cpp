@@ -198,6 +198,10 @@ TEST(IocQuadEm, TheDemoBeamPassesTheSlitAndTheMirrorPitchesIt) {
     ethercat::sim::Plant& plant = *v.ioc->plant(0);
     const double* qe = v.ioc->quadem().unit(0).values();
     EXPECT_NEAR(qe[detector::kSumAll], 1.0, 0.01); // the slit (blades at 6, -4, -7, 3 mm) passes it all
+    // the fluorescence detector's sample sees the same beam: DEMO:mca1's lines and background at
+    // their configured rates through the open slit
+    const detector::SimMca& mca = v.ioc->detectors().mca(0);
+    EXPECT_NEAR(mca.input_rate(), 8000 + 1100 + 5000 + 700 + 50, 15);
     // the downstream vertical jack (s24) 1 um down: the mirror pitches up, the spot ~24 um up
     const double at = 1.0; // the spot's height at a fixed time, before and after
     const double y0 = plant.beam->y(at);
@@ -210,4 +214,9 @@ TEST(IocQuadEm, TheDemoBeamPassesTheSlitAndTheMirrorPitchesIt) {
     plant.find_stage("SlitTop")->set_position(-1);
     v.run(10);
     EXPECT_NEAR(qe[detector::kSumAll], 0, 0.001);
+    EXPECT_NEAR(mca.input_rate(), 0, 1); // and no fluorescence
+    // the top blade at the spot's centre: half of it
+    plant.find_stage("SlitTop")->set_position(plant.beam->y(plant.time()));
+    v.run(2);
+    EXPECT_NEAR(mca.input_rate() / 14850, 0.5, 0.05);
 }
