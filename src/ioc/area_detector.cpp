@@ -1024,7 +1024,8 @@ void IocAreaDetector::poll(double now_s) {
         const double period = std::max(get_value(u.r(u.cam + "AcquirePeriod")), u.settings.exposure);
         u.exposure_start = std::max(u.exposure_start + period, now_s);
         u.exposure_end = u.exposure_start + u.settings.exposure;
-        if (u.exposure_start > now_s) set_value(db_, u.r(u.cam + "DetectorState_RBV"), kWaiting, false);
+        // waiting for the period, or (Software) for the next trigger whatever the period
+        if (u.exposure_start > now_s || software) set_value(db_, u.r(u.cam + "DetectorState_RBV"), kWaiting, false);
     }
 }
 

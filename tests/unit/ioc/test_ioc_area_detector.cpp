@@ -147,6 +147,17 @@ TEST(IocAreaDetector, MultipleContinuousAndSoftwareTriggers) {
     EXPECT_EQ(c.put("T:cam1:TriggerSoftware", 1), pv::PutStatus::Ok);
     c.run(0.5);
     EXPECT_EQ(c.get("T:cam1:ArrayCounter_RBV"), before + 1);
+    // a period shorter than the polls: still one frame a trigger
+    c.put("T:cam1:Acquire", 0);
+    c.run(0.01);
+    c.put("T:cam1:AcquirePeriod", 0);
+    c.put("T:cam1:Acquire", 1);
+    c.run(0.1);
+    EXPECT_EQ(c.put("T:cam1:TriggerSoftware", 1), pv::PutStatus::Ok);
+    EXPECT_EQ(c.put("T:cam1:TriggerSoftware", 1), pv::PutStatus::Ok);
+    c.run(0.5);
+    EXPECT_EQ(c.get("T:cam1:ArrayCounter_RBV"), before + 3);
+    EXPECT_EQ(c.get("T:cam1:DetectorState_RBV"), 7);
     c.put("T:cam1:Acquire", 0);
     c.run(0.01);
     EXPECT_EQ(c.get("T:cam1:DetectorState_RBV"), 0);
