@@ -529,7 +529,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         std::set<std::string> qnames;
         for (const YamlNode& d : dets["quadem"].list()) {
             if (!d.keys({"name", "currents", "geometry", "averaging_time", "current_scale", "current_offset", "position_scale",
-                         "position_offset", "egu", "prec"}))
+                         "position_offset", "egu", "prec", "ts_points"}))
                 continue;
             QuadEmEntry e;
             e.where = d.where();
@@ -562,6 +562,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             numbers("position_offset", e.position_offset, 2);
             e.egu = d["egu"].string().value_or("");
             e.prec = int(d["prec"].integer(between(0, 15)).value_or(4));
+            e.ts_points = int(d["ts_points"].integer(between(1, 100000)).value_or(1000));
             cfg.quadem.push_back(std::move(e));
         }
         std::set<std::string> names;

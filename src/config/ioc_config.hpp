@@ -292,6 +292,7 @@ struct QuadEmEntry {
     double position_scale[2] = {1e6, 1e6}, position_offset[2] = {0, 0};
     std::string egu;                    // of the positions
     int prec = 4;
+    int ts_points = 1000;               // the time series' length (quadEM's TSPOINTS)
     std::string where, currents_where;
 };
 

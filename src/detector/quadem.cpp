@@ -57,6 +57,12 @@ void QuadEm::sample(const double raw[4], bool valid, uint64_t cycle) noexcept {
         return;
     }
     quadem_compute(raw, p_, v_);
+    if (stream_.load(std::memory_order_relaxed)) {
+        QuadEmSample s;
+        for (int k = 0; k < kQuadEmValues; ++k) s.v[k] = v_[k];
+        s.cycle = cycle;
+        if (!samples_.push(s)) samples_dropped_.fetch_add(1, std::memory_order_relaxed);
+    }
     for (int k = 0; k < kQuadEmValues; ++k) {
         const double x = v_[k];
         if (n_ == 0) sum_[k] = sum2_[k] = 0, min_[k] = max_[k] = shift_[k] = x;

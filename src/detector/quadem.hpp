@@ -14,6 +14,7 @@
 #include "core/spsc_queue.hpp"
 #include "core/triple_buffer.hpp"
 
+#include <atomic>
 #include <cstdint>
 
 namespace beamctl::detector {
@@ -39,6 +40,12 @@ struct QuadEmParams {
 // One sample's values from four raw currents.
 void quadem_compute(const double raw[4], const QuadEmParams& p, double out[kQuadEmValues]) noexcept;
 
+// One sample's 11 values (what quadEM's time-series plugin gets point by point).
+struct QuadEmSample {
+    double v[kQuadEmValues];
+    uint64_t cycle = 0;
+};
+
 struct QuadEmReading {
     double mean[kQuadEmValues], sigma[kQuadEmValues], min[kQuadEmValues], max[kQuadEmValues];
     int n = 0;          // samples averaged
@@ -60,6 +67,12 @@ public:
     const double* values() const noexcept { return v_; }
     uint64_t dropped() const noexcept { return dropped_; } // readings the IOC loop did not take
 
+    // IOC loop: every sample's values are queued for pop_sample() while on (the time series);
+    // off, the cycle skips the queue.
+    void stream_samples(bool on) noexcept { stream_.store(on, std::memory_order_relaxed); }
+    bool pop_sample(QuadEmSample& s) noexcept { return samples_.pop(s); }
+    uint64_t samples_dropped() const noexcept { return samples_dropped_.load(std::memory_order_relaxed); }
+
 private:
     TripleBuffer<QuadEmParams> params_;
     QuadEmParams p_; // RT copy
@@ -68,6 +81,9 @@ private:
     int n_ = 0;
     uint64_t dropped_ = 0;
     SpscQueue<QuadEmReading> readings_{256};
+    std::atomic<bool> stream_{false};
+    std::atomic<uint64_t> samples_dropped_{0};
+    SpscQueue<QuadEmSample> samples_{16384}; // 1.6 s at 10 kHz
 };
 
 } // namespace beamctl::detector

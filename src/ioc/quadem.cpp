@@ -6,8 +6,10 @@
 #include "pv/db_file.hpp"
 
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <vector>
 
 namespace beamctl::ioc {
 namespace {
@@ -50,6 +52,20 @@ struct IocQuadEm::Unit {
     bool acquiring = false;
     int acquired = 0;
     uint64_t seen_dropped = 0;
+    // the time series (TS:): records, then the points so far
+    pv::Record *ts_acquire = nullptr, *ts_acquiring = nullptr, *ts_read = nullptr, *ts_num_points = nullptr, *ts_current = nullptr,
+               *ts_time_per_point = nullptr, *ts_time_per_point_rbv = nullptr, *ts_avg_time = nullptr, *ts_avg_time_rbv = nullptr,
+               *ts_num_average = nullptr, *ts_elapsed = nullptr, *ts_mode = nullptr, *ts_mode_rbv = nullptr, *ts_timestamp = nullptr,
+               *ts_time_axis = nullptr;
+    pv::Record* ts_series[detector::kQuadEmValues] = {};
+    bool ts_on = false, ts_dirty = false;
+    bool ts_circular = false;
+    int ts_points = 1, ts_avg = 1;  // as started
+    long ts_n = 0;                  // points taken (beyond ts_points in a circular buffer)
+    int ts_acc_n = 0;
+    double ts_acc[detector::kQuadEmValues] = {};
+    std::vector<double> ts_data[detector::kQuadEmValues];
+    double ts_t0 = 0, ts_last_read = 0;
 };
 
 // The Triggers stage's quadEM part: every electrometer takes one sample of its four currents.
@@ -158,6 +174,29 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
             f.records.push_back(record("ai", p + kAveNames[k], flds));
             for (const char* st : kStats) f.records.push_back(record("ai", p + detector::kQuadEmValueNames[k] + ":" + st, flds));
         }
+        // the time-series plugin (NDTimeSeries with R=<name>:TS:, NDTimeSeriesN with R=<name>:TS:<value>:)
+        const std::string ts = p + "TS:", pts = std::to_string(e.ts_points);
+        f.records.push_back(record("busy", ts + "TSAcquire", {{"ZNAM", "Done"}, {"ONAM", "Acquire"}}));
+        f.records.push_back(record("bi", ts + "TSAcquiring", {{"ZNAM", "Done"}, {"ONAM", "Acquiring"}}));
+        f.records.push_back(record("bo", ts + "TSRead", {{"ZNAM", "Done"}, {"ONAM", "Read"}, {"VAL", "1"}, {"SCAN", "1 second"}}));
+        f.records.push_back(record("longout", ts + "TSNumPoints", {{"VAL", pts}, {"DRVL", "1"}, {"DRVH", pts}}));
+        f.records.push_back(record("longin", ts + "TSCurrentPoint", {}));
+        f.records.push_back(record("ao", ts + "TSTimePerPoint", {{"PREC", "6"}, {"EGU", "s"}}));
+        f.records.push_back(record("ai", ts + "TSTimePerPoint_RBV", {{"PREC", "6"}, {"EGU", "s"}}));
+        f.records.push_back(record("ao", ts + "TSAveragingTime", {{"PREC", "6"}, {"EGU", "s"}, {"VAL", "0"}}));
+        f.records.push_back(record("ai", ts + "TSAveragingTime_RBV", {{"PREC", "6"}, {"EGU", "s"}}));
+        f.records.push_back(record("longin", ts + "TSNumAverage", {}));
+        f.records.push_back(record("ai", ts + "TSElapsedTime", {{"PREC", "3"}, {"EGU", "s"}}));
+        const std::vector<std::pair<std::string, std::string>> ts_modes = {{"ZRST", "Fixed length"}, {"ONST", "Circ. buffer"}};
+        f.records.push_back(record("mbbo", ts + "TSAcquireMode", ts_modes));
+        f.records.push_back(record("mbbi", ts + "TSAcquireMode_RBV", ts_modes));
+        f.records.push_back(record("waveform", ts + "TSTimestamp", {{"FTVL", "DOUBLE"}, {"NELM", pts}}));
+        f.records.push_back(record("waveform", ts + "TSTimeAxis", {{"FTVL", "DOUBLE"}, {"NELM", pts}}));
+        for (int k = 0; k < detector::kQuadEmValues; ++k) {
+            const std::string q = ts + detector::kQuadEmValueNames[k] + ":";
+            f.records.push_back(record("stringout", q + "Name", {{"VAL", detector::kQuadEmValueNames[k]}}));
+            f.records.push_back(record("waveform", q + "TimeSeries", {{"FTVL", "DOUBLE"}, {"NELM", pts}}));
+        }
         units_.push_back(std::move(u));
     }
     if (f.records.empty()) return;
@@ -195,9 +234,27 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
             u.ave[k] = find(kAveNames[k]);
             for (int s = 0; s < 4; ++s) u.stats[k][s] = find(std::string(detector::kQuadEmValueNames[k]) + ":" + kStats[s]);
         }
+        u.ts_acquire = find("TS:TSAcquire");
+        u.ts_acquiring = find("TS:TSAcquiring");
+        u.ts_read = find("TS:TSRead");
+        u.ts_num_points = find("TS:TSNumPoints");
+        u.ts_current = find("TS:TSCurrentPoint");
+        u.ts_time_per_point = find("TS:TSTimePerPoint");
+        u.ts_time_per_point_rbv = find("TS:TSTimePerPoint_RBV");
+        u.ts_avg_time = find("TS:TSAveragingTime");
+        u.ts_avg_time_rbv = find("TS:TSAveragingTime_RBV");
+        u.ts_num_average = find("TS:TSNumAverage");
+        u.ts_elapsed = find("TS:TSElapsedTime");
+        u.ts_mode = find("TS:TSAcquireMode");
+        u.ts_mode_rbv = find("TS:TSAcquireMode_RBV");
+        u.ts_timestamp = find("TS:TSTimestamp");
+        u.ts_time_axis = find("TS:TSTimeAxis");
+        for (int k = 0; k < detector::kQuadEmValues; ++k) u.ts_series[k] = find(std::string("TS:") + detector::kQuadEmValueNames[k] + ":TimeSeries");
         for (pv::Record* r : {u.mode_rbv, u.num_acquire_rbv, u.num_acquired, u.avg_time_rbv, u.num_average, u.num_averaged, u.sample_time,
-                              u.geometry_rbv, u.overflows})
+                              u.geometry_rbv, u.overflows, u.ts_acquiring, u.ts_current, u.ts_time_per_point, u.ts_time_per_point_rbv,
+                              u.ts_avg_time_rbv, u.ts_num_average, u.ts_elapsed, u.ts_mode_rbv, u.ts_timestamp, u.ts_time_axis})
             r->val_read_only = true;
+        for (pv::Record* r : u.ts_series) r->val_read_only = true;
         for (int k = 0; k < detector::kQuadEmValues; ++k) {
             u.ave[k]->val_read_only = true;
             for (pv::Record* r : u.stats[k]) r->val_read_only = true;
@@ -227,6 +284,38 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
             r->put_hook = param;
         u.acquire->put_hook = [this, self](pv::Record& r, const pv::FieldDesc& fd) {
             if (std::string_view(fd.name) == "VAL") set_acquire(*self, get_value(r) != 0);
+            return pv::PutStatus::Ok;
+        };
+        // the time series: its settings wait while it acquires
+        auto ts_param = [this, self](pv::Record& r, const pv::FieldDesc& fd) {
+            if (std::string_view(fd.name) != "VAL") return pv::PutStatus::Ok;
+            if (self->ts_on) {
+                LOG_WARN(lg, r.name() << ": refused while the time series acquires (TSAcquire 0 first)");
+                return pv::PutStatus::Failed;
+            }
+            if (&r == self->ts_avg_time && !(get_value(r) >= 0)) {
+                LOG_WARN(lg, r.name() << ": " << get_value(r) << " refused: the averaging time is >= 0 s");
+                return pv::PutStatus::Failed;
+            }
+            if (&r == self->ts_mode && !(get_value(r) == 0 || get_value(r) == 1)) {
+                LOG_WARN(lg, r.name() << ": refused: Fixed length (0) or Circ. buffer (1)");
+                return pv::PutStatus::Failed;
+            }
+            ts_settings(*self);
+            return pv::PutStatus::Ok;
+        };
+        for (pv::Record* r : {u.ts_num_points, u.ts_avg_time, u.ts_mode}) r->put_hook = ts_param;
+        u.ts_acquire->put_hook = [this, self](pv::Record& r, const pv::FieldDesc& fd) {
+            if (std::string_view(fd.name) != "VAL") return pv::PutStatus::Ok;
+            if (get_value(r) != 0 && !self->ts_on) ts_start(*self);
+            else if (get_value(r) == 0 && self->ts_on) {
+                ts_take(*self); // what the cycle already queued
+                if (self->ts_on) ts_stop(*self);
+            }
+            return pv::PutStatus::Ok;
+        };
+        u.ts_read->put_hook = [this, self](pv::Record&, const pv::FieldDesc& fd) {
+            if (std::string_view(fd.name) == "VAL" || std::string_view(fd.name) == "PROC") ts_publish(*self);
             return pv::PutStatus::Ok;
         };
     }
@@ -262,6 +351,97 @@ void IocQuadEm::set_acquire(Unit& u, bool on) {
     u.acquiring = on;
 }
 
+void IocQuadEm::ts_settings(Unit& u) {
+    const double avg = get_value(*u.ts_avg_time);
+    const int n = int(std::max(1.0, std::min(std::floor(avg / cycle_s_ + 0.5), 1e7))); // whole samples a point
+    set_value(db_, *u.ts_num_average, n, false);
+    set_value(db_, *u.ts_avg_time_rbv, n * cycle_s_, false);
+    set_value(db_, *u.ts_time_per_point, cycle_s_, false); // the samples' (quadEM: TIME_LINK = SampleTime_RBV)
+    set_value(db_, *u.ts_time_per_point_rbv, cycle_s_, false);
+    set_value(db_, *u.ts_mode_rbv, get_value(*u.ts_mode), false);
+}
+
+void IocQuadEm::ts_start(Unit& u) {
+    ts_settings(u);
+    detector::QuadEmSample s;
+    while (u.qe->pop_sample(s)) {
+    } // a previous run's leftovers
+    u.ts_points = std::max(1, int(get_value(*u.ts_num_points)));
+    u.ts_avg = std::max(1, int(get_value(*u.ts_num_average)));
+    u.ts_circular = get_value(*u.ts_mode) == 1;
+    u.ts_n = 0, u.ts_acc_n = 0;
+    for (auto& d : u.ts_data) d.assign(std::size_t(u.ts_points), 0.0);
+    u.ts_t0 = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count()) * 1e-9 -
+              631152000; // EPICS epoch
+    u.ts_last_read = 0;
+    u.ts_on = true, u.ts_dirty = true;
+    set_value(db_, *u.ts_acquiring, 1, false);
+    set_value(db_, *u.ts_current, 0, false);
+    set_value(db_, *u.ts_elapsed, 0, false);
+    std::vector<double> axis(std::size_t(u.ts_points));
+    for (std::size_t i = 0; i < axis.size(); ++i) axis[i] = double(i) * u.ts_avg * cycle_s_;
+    set_array(db_, *u.ts_time_axis, axis.data(), uint32_t(axis.size()));
+    u.qe->stream_samples(true);
+}
+
+void IocQuadEm::ts_stop(Unit& u) {
+    u.qe->stream_samples(false);
+    u.ts_on = false;
+    ts_publish(u);
+    set_value(db_, *u.ts_acquiring, 0, false);
+    if (get_value(*u.ts_acquire) != 0) set_value(db_, *u.ts_acquire, 0, false); // a put-callback completes
+}
+
+// The samples the cycle queued: TSNumAverage of them a point.
+void IocQuadEm::ts_take(Unit& u) {
+    detector::QuadEmSample s;
+    bool stop = false;
+    uint64_t last_cycle = 0;
+    auto full = [&u] { return !u.ts_circular && u.ts_n >= u.ts_points; };
+    while (u.ts_on && !full() && u.qe->pop_sample(s)) {
+        last_cycle = s.cycle;
+        for (int k = 0; k < detector::kQuadEmValues; ++k) u.ts_acc[k] = (u.ts_acc_n ? u.ts_acc[k] : 0) + s.v[k];
+        if (++u.ts_acc_n < u.ts_avg) continue;
+        const std::size_t at = std::size_t(u.ts_n % u.ts_points);
+        for (int k = 0; k < detector::kQuadEmValues; ++k) u.ts_data[k][at] = u.ts_acc[k] / u.ts_acc_n;
+        u.ts_acc_n = 0;
+        ++u.ts_n;
+        u.ts_dirty = true;
+    }
+    stop = u.ts_on && full();
+    if (!u.ts_on) return;
+    set_value(db_, *u.ts_current, double(std::min<long>(u.ts_n, u.ts_points)), false);
+    set_value(db_, *u.ts_elapsed, double(u.ts_n) * u.ts_avg * cycle_s_, false);
+    if (stop) {
+        ts_stop(u);
+        return;
+    }
+    // TSRead's scan period: the arrays while acquiring (quadEM's TSRead, SCAN "1 second")
+    static const double kPeriods[] = {0, 0, 0, 10, 5, 2, 1, 0.5, 0.2, 0.1};
+    const double period = u.ts_read->scan < 10 ? kPeriods[u.ts_read->scan] : 0;
+    const double now = double(u.ts_n) * u.ts_avg * cycle_s_;
+    if (last_cycle && period > 0 && now - u.ts_last_read >= period) {
+        u.ts_last_read = now;
+        ts_publish(u);
+    }
+}
+
+// The points so far into the arrays, oldest first (a circular buffer's latest point is its last).
+void IocQuadEm::ts_publish(Unit& u) {
+    if (!u.ts_dirty || u.ts_data[0].empty()) return;
+    const std::size_t n = std::size_t(std::min<long>(u.ts_n, u.ts_points));
+    const std::size_t first = u.ts_n > u.ts_points ? std::size_t(u.ts_n % u.ts_points) : 0;
+    std::vector<double> v(n);
+    for (int k = 0; k < detector::kQuadEmValues; ++k) {
+        for (std::size_t i = 0; i < n; ++i) v[i] = u.ts_data[k][(first + i) % std::size_t(u.ts_points)];
+        set_array(db_, *u.ts_series[k], v.data(), uint32_t(n));
+    }
+    const long first_point = u.ts_n > u.ts_points ? u.ts_n - u.ts_points : 0;
+    for (std::size_t i = 0; i < n; ++i) v[i] = u.ts_t0 + double(first_point + long(i) + 1) * u.ts_avg * cycle_s_;
+    set_array(db_, *u.ts_timestamp, v.data(), uint32_t(n));
+    u.ts_dirty = false;
+}
+
 void IocQuadEm::bind(rt::Engine& engine, motion::AxisGroup* axes) {
     if (units_.empty()) return;
     cycle_s_ = double(engine.period_ns()) * 1e-9;
@@ -276,6 +456,7 @@ void IocQuadEm::bind(rt::Engine& engine, motion::AxisGroup* axes) {
             if (u.in[i].bus >= 0) u.ok[i] = reg_.bind(std::string(SB() << "ec" << u.in[i].bus << ".masterstatus"), why);
         }
         apply(u);
+        ts_settings(u);
         set_acquire(u, get_value(*u.acquire) != 0);
     }
     stage_ = std::make_unique<Stage>(*this);
@@ -310,6 +491,7 @@ void IocQuadEm::publish() {
             set_value(db_, *u.num_acquired, u.acquired, false);
             if (!u.acquiring) set_value(db_, *u.acquire, 0, false); // Multiple/Single done
         }
+        ts_take(u);
         if (u.qe->dropped() != u.seen_dropped) {
             u.seen_dropped = u.qe->dropped();
             set_value(db_, *u.overflows, clamp_long(u.seen_dropped), false);

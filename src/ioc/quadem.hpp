@@ -4,7 +4,10 @@
 // quadEM's PVs under $(P)<name>: (quadEM.template's Acquire, AcquireMode, NumAcquire, NumAcquired,
 // AveragingTime, NumAverage_RBV, NumAveraged_RBV, SampleTime_RBV, Geometry, CurrentOffset/Scale1-4,
 // PositionOffset/ScaleX/Y, Current1Ave .. PositionYAve, RingOverflows, and the statistics plugins'
-// <value>:MeanValue_RBV, SigmaValue_RBV, MinValue_RBV, MaxValue_RBV).
+// <value>:MeanValue_RBV, SigmaValue_RBV, MinValue_RBV, MaxValue_RBV), and the time-series plugin's
+// under $(P)<name>:TS: (NDTimeSeries: TSAcquire, TSAcquireMode, TSNumPoints, TSAveragingTime, ...;
+// NDTimeSeriesN: TS:<value>:TimeSeries, TS:<value>:Name): every sample of the cycle, averaged
+// TSNumAverage = TSAveragingTime / SampleTime at a time, a point each.
 // The cycle's values are engine signals <name in lower case>.<value in lower case> (qe1.posy,
 // qe1.sumall, ...): a fast feedback loop reads them in the same cycle (the stage runs before the
 // loops). They follow every cycle whatever Acquire says; Acquire gates the averaged readings.
@@ -48,6 +51,11 @@ private:
 
     void apply(Unit& u); // the parameter PVs -> the electrometer
     void set_acquire(Unit& u, bool on);
+    void ts_settings(Unit& u); // the time series' parameter PVs -> their readbacks
+    void ts_start(Unit& u);
+    void ts_stop(Unit& u);
+    void ts_take(Unit& u);
+    void ts_publish(Unit& u);
 
     registry::Registry& reg_;
     pv::Database& db_;

@@ -135,3 +135,27 @@ def test_quadem_position_follows_a_mirror_move_and_the_loop_holds_it(tmp_path, p
         assert time.monotonic() - t0 >= 0.15
         assert get(p + "NumAcquired") == 1 and get(p + "Acquire") == 0
         assert get(p + "NumAveraged_RBV") == 200
+
+
+def test_quadem_time_series_shows_the_source_vibration(tmp_path, prefix):
+    """quadEM's time-series plugin (TS:): 256 points of 10 ms means of PosY, acquired with a
+    put-callback on TSAcquire (Fixed length), hold the source's 7 Hz vibration: the spectrum of
+    TS:PosY:TimeSeries peaks at 7 Hz, its rms is the 10 um amplitude's 7.1 um."""
+    import numpy as np
+    ts = prefix + "QE1:TS:"
+    with running_bpm(tmp_path, prefix):
+        assert epics.caget(ts + "PosY:Name") == "PosY"
+        assert put_status(ts + "TSNumPoints", 256) == 1
+        assert put_status(ts + "TSAveragingTime", 0.01) == 1
+        assert get(ts + "TSNumAverage") == 10
+        assert epics.caget(ts + "TSAcquireMode", as_string=True) == "Fixed length"
+        assert put_status(ts + "TSAcquire", 1, timeout=20) == 1  # done when 256 points are in
+        assert get(ts + "TSAcquiring") == 0 and get(ts + "TSCurrentPoint") == 256
+        y = np.asarray(epics.caget(ts + "PosY:TimeSeries", use_monitor=False))
+        assert len(y) == 256
+        t = np.asarray(epics.caget(ts + "TSTimeAxis", use_monitor=False))[:256]
+        assert abs(t[1] - t[0] - 0.01) < 1e-9
+        spectrum = np.abs(np.fft.rfft(y - y.mean()))
+        freq = np.fft.rfftfreq(256, 0.01)
+        assert abs(freq[spectrum.argmax()] - 7) < 0.5, freq[spectrum.argmax()]
+        assert 5 < np.std(y) < 9

@@ -169,6 +169,56 @@ TEST(IocQuadEm, AcquireModesAndParameters) {
     EXPECT_NE(b.put("BPM:QE1:PosY:MeanValue_RBV", 1), pv::PutStatus::Ok);
 }
 
+TEST(IocQuadEm, TheTimeSeriesHoldsEverySampleAveraged) {
+    Bpm b;
+    const std::string ts = "BPM:QE1:TS:";
+    EXPECT_EQ(b.v.get(ts + "TSNumPoints"), 1000); // quadEM's TSPOINTS
+    EXPECT_EQ(b.v.get(ts + "TSTimePerPoint_RBV"), 0.001);
+    // 200 points of 10 samples: 2 s, 14 periods of the source's 7 Hz vibration
+    ASSERT_EQ(b.put(ts + "TSNumPoints", 200), pv::PutStatus::Ok);
+    ASSERT_EQ(b.put(ts + "TSAveragingTime", 0.01), pv::PutStatus::Ok);
+    EXPECT_EQ(b.v.get(ts + "TSNumAverage"), 10);
+    EXPECT_DOUBLE_EQ(b.v.get(ts + "TSAveragingTime_RBV"), 0.01);
+    int done = 0;
+    pv::Address a;
+    ASSERT_TRUE(b.v.ioc->database().resolve(ts + "TSAcquire", a));
+    const double one = 1;
+    ASSERT_EQ(b.v.ioc->database().put(a, pv::Prim::Double, &one, 1, [&](pv::PutStatus) { ++done; }), pv::PutStatus::Ok);
+    EXPECT_EQ(b.v.get(ts + "TSAcquiring"), 1);
+    EXPECT_NE(b.put(ts + "TSNumPoints", 100), pv::PutStatus::Ok); // not while acquiring
+    b.v.run(1000);
+    EXPECT_EQ(done, 0);
+    EXPECT_NEAR(b.v.get(ts + "TSCurrentPoint"), 100, 2);
+    b.v.run(1100);
+    EXPECT_EQ(done, 1); // Fixed length: done with the last point
+    EXPECT_EQ(b.v.get(ts + "TSAcquiring"), 0);
+    EXPECT_EQ(b.v.get(ts + "TSCurrentPoint"), 200);
+    EXPECT_DOUBLE_EQ(b.v.get(ts + "TSElapsedTime"), 2.0);
+    EXPECT_DOUBLE_EQ(b.v.get(ts + "TSTimeAxis", 1), 0.01);
+    pv::Record* series = b.v.ioc->database().find(ts + "PosY:TimeSeries");
+    ASSERT_EQ(series->elements(*series->type().find("VAL")).count, 200u);
+    // PosY over whole periods: the vibration's 10 um amplitude is 7.1 um rms (10 ms means: 0.8 % less)
+    double mean = 0, sq = 0, lo = 1e9, hi = -1e9;
+    for (uint32_t i = 0; i < 200; ++i) {
+        const double y = b.v.get(ts + "PosY:TimeSeries", i);
+        mean += y / 200, sq += y * y / 200, lo = std::min(lo, y), hi = std::max(hi, y);
+    }
+    EXPECT_NEAR(std::sqrt(sq - mean * mean), 7.07, 0.3);
+    EXPECT_NEAR(hi, 10, 0.6);
+    EXPECT_NEAR(lo, -10, 0.6);
+    EXPECT_NEAR(b.v.get(ts + "SumAll:TimeSeries", 17), 1.0, 0.01);
+    // Circ. buffer: runs until TSAcquire 0, the latest 200 points oldest first
+    ASSERT_EQ(b.put(ts + "TSAcquireMode", 1), pv::PutStatus::Ok);
+    ASSERT_EQ(b.put(ts + "TSAcquire", 1), pv::PutStatus::Ok);
+    b.v.run(3000);
+    EXPECT_EQ(b.v.get(ts + "TSAcquiring"), 1);
+    EXPECT_EQ(b.v.get(ts + "TSCurrentPoint"), 200);
+    ASSERT_EQ(b.put(ts + "TSAcquire", 0), pv::PutStatus::Ok);
+    EXPECT_EQ(b.v.get(ts + "TSAcquiring"), 0);
+    const double t_last = b.v.get(ts + "TSTimestamp", 199), t_first = b.v.get(ts + "TSTimestamp", 0);
+    EXPECT_NEAR(t_last - t_first, 1.99, 1e-6);
+}
+
 TEST(IocQuadEm, TheFastLoopRejectsTheSourceVibration) {
     Bpm b;
     // residual of PosY over 2 s (14 periods of the 7 Hz vibration), loop off and on
