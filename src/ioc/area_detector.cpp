@@ -606,8 +606,9 @@ void IocAreaDetector::hook(Unit& u) {
     Unit* self = &u;
     // every output with a readback: the applied value into it (the camera's outputs clipped to the
     // sensor first)
-    for (auto& [name, rp] : u.rec) {
-        pv::Record* r = rp;
+    for (auto& entry : u.rec) {
+        const std::string name = entry.first; // a copy the hook keeps (clang 14 cannot capture a binding)
+        pv::Record* r = entry.second;
         const std::string rbv = name + "_RBV";
         if (!u.rec.count(rbv) || r->put_hook) continue;
         const bool camera = name.compare(0, u.cam.size(), u.cam) == 0;
