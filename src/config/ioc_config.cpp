@@ -4,7 +4,9 @@
 #include "core/error.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -57,6 +59,26 @@ void check_name_part(const YamlNode& n, const std::string& name, const char* kin
 }
 
 } // namespace
+
+std::string McaEntry::element_name(int i) const {
+    if (i == 0) return name;
+    std::size_t d = name.size();
+    while (d > 0 && std::isdigit(static_cast<unsigned char>(name[d - 1]))) --d;
+    return name.substr(0, d) + std::to_string(std::strtoull(name.c_str() + d, nullptr, 10) + unsigned(i));
+}
+
+std::string McaEntry::dxp_prefix(int i) const {
+    const std::string n = element_name(i);
+    std::size_t d = n.size();
+    while (d > 0 && std::isdigit(static_cast<unsigned char>(n[d - 1]))) --d;
+    return d < n.size() ? "dxp" + n.substr(d) + ":" : "dxp_" + n + ":";
+}
+
+std::string McaEntry::sum_name() const {
+    std::size_t d = name.size();
+    while (d > 0 && std::isdigit(static_cast<unsigned char>(name[d - 1]))) --d;
+    return name.substr(0, d) + "Sum";
+}
 
 std::vector<BusConfig> read_bus_list(const YamlNode& buses, const std::string& dir, bool scanner_file) {
     std::vector<BusConfig> out;
@@ -565,13 +587,28 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             e.ts_points = int(d["ts_points"].integer(between(1, 100000)).value_or(1000));
             cfg.quadem.push_back(std::move(e));
         }
-        std::set<std::string> names;
+        std::set<std::string> names, dxps;
+        int multi_element = 0;
         for (const YamlNode& d : dets["mca"].list()) {
-            if (!d.keys({"name", "channels", "offset", "slope", "lines", "background", "dead_time", "bus"})) continue;
+            if (!d.keys({"name", "channels", "offset", "slope", "lines", "background", "dead_time", "bus", "elements", "noise_fwhm",
+                         "preamp_gains", "dxp"}))
+                continue;
             McaEntry e;
             e.where = d.where();
             e.name = d.required("name", " (the mca record's name after the IOC prefix, e.g. mca1)").string().value_or("");
-            check_name_part(d["name"], e.name, "mca", names, true);
+            e.elements = int(d["elements"].integer(between(1, 64)).value_or(1));
+            if (e.elements > 1 && (e.name.empty() || !std::isdigit(static_cast<unsigned char>(e.name.back()))))
+                d["name"].error(SB() << "'" << e.name << "' should end in the first element's number (mca1: mca1 .. mca" << e.elements << ")");
+            else if (e.elements > 1 && multi_element++)
+                d["elements"].error("only one multi-element detector per IOC (dxpMED's PVs are $(P)StartAll, ...)");
+            else
+                for (int i = 0; i < e.elements; ++i) {
+                    const bool fresh = !names.count(e.element_name(i));
+                    check_name_part(d["name"], e.element_name(i), "mca", names, true);
+                    if (fresh && !dxps.insert(e.dxp_prefix(i)).second)
+                        d["name"].error(SB() << "the DXP records " << e.dxp_prefix(i) << " of " << e.element_name(i) << " are another mca's");
+                }
+            if (e.elements > 1) check_name_part(d["name"], e.sum_name(), "mca", names, true);
             e.channels = uint32_t(d["channels"].integer(between(1, 1 << 20)).value_or(2048));
             e.offset = d["offset"].number().value_or(0);
             e.slope = d["slope"].number().value_or(0.01);
@@ -579,6 +616,25 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             e.background = d["background"].number(at_least(0)).value_or(50);
             e.dead_time = d["dead_time"].number(between(0, 1)).value_or(2e-6);
             e.bus = int(d["bus"].integer(between(0, 255)).value_or(-1));
+            e.noise_fwhm = d["noise_fwhm"].number(between(0, 100)).value_or(0.1);
+            if (d.has("preamp_gains")) {
+                for (const YamlNode& g : d["preamp_gains"].list()) e.preamp_gains.push_back(g.number(between(1e-6, 1e4)).value_or(2.0));
+                if (int(e.preamp_gains.size()) != e.elements)
+                    d["preamp_gains"].error(SB() << "should have one gain [mV/keV] per element (" << e.elements << "), not " << e.preamp_gains.size());
+            }
+            if (YamlNode x = d["dxp"]; x && x.keys({"peaking_time", "gap_time", "trigger_threshold", "energy_threshold", "preamp_gain",
+                                                   "max_energy", "adc_percent_rule", "calibration_energy"})) {
+                e.dxp.peaking_time = x["peaking_time"].number(between(0.01, 100)).value_or(2.0);
+                e.dxp.gap_time = x["gap_time"].number(between(0, 100)).value_or(0.15);
+                e.dxp.trigger_threshold = x["trigger_threshold"].number(between(0, 1000)).value_or(0);
+                e.dxp.energy_threshold = x["energy_threshold"].number(between(0, 1000)).value_or(0);
+                e.dxp.preamp_gain = x["preamp_gain"].number(between(1e-6, 1e4)).value_or(2.0);
+                e.dxp.max_energy = x["max_energy"].number(between(1e-6, 1e4)).value_or(0);
+                e.dxp.adc_percent_rule = x["adc_percent_rule"].number(between(1e-6, 100)).value_or(0);
+                e.dxp.calibration_energy = x["calibration_energy"].number(between(1e-6, 1000)).value_or(5.9);
+                if (e.dxp.max_energy > 0 && !(e.dxp.max_energy > e.offset))
+                    x["max_energy"].error(SB() << "should be above the spectrum's offset (" << e.offset << " keV)");
+            }
             for (const YamlNode& l : d["lines"].list()) {
                 if (!l.keys({"name", "energy", "rate", "fwhm"})) continue;
                 McaEntry::Line x;

@@ -263,13 +263,24 @@ struct FeedbackEntry {
 };
 
 // A simulated energy-dispersive detector behind synApps' mca record (docs/detectors.md):
-// `detectors: {mca: [{name, channels, offset, slope, lines, background, dead_time}]}`.
+// `detectors: {mca: [{name, channels, offset, slope, lines, background, dead_time, elements,
+// noise_fwhm, preamp_gains, dxp: {...}}]}`.
 struct McaEntry {
     struct Line {
         std::string name;
         double energy = 0, rate = 0, fwhm = 0.15; // keV, counts/s, keV
     };
-    std::string name;            // the record $(P)<name> and mca.db's $(P)<name>Start, ...
+    // The pulse processor's settings at start (dxp's PVs; 0: the default of SimMca)
+    struct Dxp {
+        double peaking_time = 2.0, gap_time = 0.15;   // us
+        double trigger_threshold = 0, energy_threshold = 0; // keV
+        double preamp_gain = 2.0;                     // mV/keV
+        double max_energy = 0, adc_percent_rule = 0;  // keV, %
+        double calibration_energy = 5.9;              // keV
+    };
+    std::string name;            // the record $(P)<name> and mca.db's $(P)<name>Start, ...; with
+                                 // elements > 1, the first: <stem><k> .. <stem><k + elements - 1>
+    int elements = 1;            // detector elements (> 1: also $(P)<stem>Sum and dxpMED's PVs)
     uint32_t channels = 2048;
     double offset = 0, slope = 0.01; // keV = offset + slope * channel (CALO, CALS)
     std::vector<Line> lines;
@@ -277,7 +288,16 @@ struct McaEntry {
     double dead_time = 2e-6;     // s per event
     int bus = -1;                // the simulated bus whose beam's transmission scales the rates
                                  // (-1: the first with a beam:, if any)
+    double noise_fwhm = 0.1;     // keV: the electronic part of the FWHMs at dxp.peaking_time
+    std::vector<double> preamp_gains; // mV/keV each element really has (empty: dxp.preamp_gain)
+    Dxp dxp;
     std::string where;
+
+    // The element's records: mca record name, and the DXP prefix after $(P) ("dxp<n>:" for a name
+    // that ends in its number n, else "dxp_<name>:").
+    std::string element_name(int i) const;
+    std::string dxp_prefix(int i) const;
+    std::string sum_name() const; // <stem>Sum
 };
 
 // A quad electrometer (quadEM) over four engine values (docs/detectors.md):

@@ -618,6 +618,13 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         devices_.push_back(std::move(dev));
         return devices_.back().get();
     }
+    if (detectors_->owns(name)) { // a DXP parameter or statistic: "@mca1.PeakingTime"
+        std::string reason;
+        auto dev = detectors_->make_device(name, reason);
+        if (!dev) return fail(reason);
+        devices_.push_back(std::move(dev));
+        return devices_.back().get();
+    }
     int bit = -1;
     const registry::Signal* sig = nullptr;
     std::string asyn_name, asyn_why;
@@ -846,6 +853,7 @@ void Ioc::publish() {
     flyscan_->publish();
     quadem_->publish();
     area_->poll(EventLoop::now_s());
+    detectors_->poll(); // mca records follow acquisitions started through the sum or StartAll
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) {
         b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)

@@ -285,3 +285,41 @@ TEST(IocConfig, QuadEmSection) {
     EXPECT_NE(e[5].find("ioc.yaml:6:"), std::string::npos) << e[5];
     EXPECT_NE(e[5].find("currents"), std::string::npos) << e[5];
 }
+
+TEST(IocConfig, McaElementsAndDxpSettings) {
+    config::IocConfig c = config::IocConfig::parse("ioc: {name: T}\n"
+                                                   "detectors:\n"
+                                                   "  mca:\n"
+                                                   "    - {name: mca1, elements: 4, preamp_gains: [2, 2.1, 1.9, 2], noise_fwhm: 0.05,\n"
+                                                   "       dxp: {peaking_time: 4, energy_threshold: 0.5, max_energy: 30}}\n"
+                                                   "    - {name: fluo}\n",
+                                                   "/cfg/ioc.yaml");
+    ASSERT_EQ(c.mca.size(), 2u);
+    const config::McaEntry& m = c.mca[0];
+    EXPECT_EQ(m.elements, 4);
+    EXPECT_EQ(m.element_name(3), "mca4");
+    EXPECT_EQ(m.dxp_prefix(2), "dxp3:");
+    EXPECT_EQ(m.sum_name(), "mcaSum");
+    EXPECT_EQ(m.preamp_gains[1], 2.1);
+    EXPECT_EQ(m.noise_fwhm, 0.05);
+    EXPECT_EQ(m.dxp.peaking_time, 4);
+    EXPECT_EQ(m.dxp.gap_time, 0.15);
+    EXPECT_EQ(m.dxp.energy_threshold, 0.5);
+    EXPECT_EQ(m.dxp.max_energy, 30);
+    EXPECT_EQ(c.mca[1].dxp_prefix(0), "dxp_fluo:");
+    const auto e = errors_of("ioc: {name: T}\n"
+                             "detectors:\n"
+                             "  mca:\n"
+                             "    - {name: det, elements: 2}\n"
+                             "    - {name: mca1, elements: 3, preamp_gains: [2, 2]}\n"
+                             "    - {name: mca3}\n"
+                             "    - {name: m7, elements: 2}\n"
+                             "    - {name: mca9, dxp: {peaking_time: 0, max_energy: 0.001}, offset: 1}\n");
+    ASSERT_EQ(e.size(), 6u) << ::testing::PrintToString(e);
+    EXPECT_NE(e[0].find("should end in the first element's number"), std::string::npos) << e[0];
+    EXPECT_NE(e[1].find("one gain [mV/keV] per element (3), not 2"), std::string::npos) << e[1];
+    EXPECT_NE(e[2].find("mca 'mca3' is defined twice"), std::string::npos) << e[2];
+    EXPECT_NE(e[3].find("only one multi-element detector"), std::string::npos) << e[3];
+    EXPECT_NE(e[4].find("peaking_time"), std::string::npos) << e[4];
+    EXPECT_NE(e[5].find("above the spectrum's offset"), std::string::npos) << e[5];
+}
