@@ -79,6 +79,89 @@ def test_the_mca_db_commands(tmp_path, prefix):
         assert get(p + "mca1.ERTM") == 0 or get(p + "mca1.ERTM") <= ertm
 
 
+def running_four_elements(tmp_path, prefix):
+    """The detectors example with four elements (element 4's preamp really has 2.1 mV/keV)."""
+    cfg = (EXAMPLES / "detectors" / "ioc.yaml").read_text()
+    cfg = cfg.replace("ioc: {name: DET}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
+    cfg = cfg.replace("    - name: mca1\n", "    - name: mca1\n      elements: 4\n      preamp_gains: [2.0, 2.0, 2.0, 2.1]\n")
+    assert "elements: 4" in cfg
+    return running_config(tmp_path, prefix, cfg, lambda: get(prefix + "mcaSum.NMAX") == 2048)
+
+
+def peak_channel(spectrum, lo=600, hi=700):
+    return max(range(lo, hi), key=lambda i: spectrum[i])
+
+
+def test_four_elements_with_dxp_and_the_med_pvs(tmp_path, prefix):
+    p = prefix
+    with running_four_elements(tmp_path, p):
+        dxps = [epics.devices.mca.DXP(p, mca=i) for i in range(1, 5)]
+        mcas = [epics.devices.mca.MCA(p, mca=i) for i in range(1, 5)]
+        assert dxps[0].get("PeakingTime") == 2.0
+        assert dxps[3].get("PreampGain") == 2.0
+        assert get(p + "dxp1:MCABinWidth_RBV") == 10.0  # eV per bin
+        # dxpMED: a real-time preset for every element, EraseStart with a put-callback that
+        # completes when they are all done (SetAcquireBusy -> AcquireBusy)
+        assert put_status(p + "PresetMode", 1) == 1  # Real time
+        assert put_status(p + "PresetReal", 1.5) == 1
+        assert [m.get("PRTM") for m in mcas] == [1.5] * 4
+        t0 = time.monotonic()
+        assert put_status(p + "EraseStart", 1, timeout=30) == 1
+        assert time.monotonic() - t0 > 1.0
+        assert get(p + "Acquiring") == 0 and get(p + "AcquireBusy") == 0
+        assert get(p + "ElapsedReal") == 1.5
+        rate = 8000 + 1100 + 5000 + 700 + 200
+        assert abs(get(p + "ElapsedLive") - 1.5 / (1 + rate * 2e-6)) < 1e-6
+        spectra = [list(m.get("VAL")) for m in mcas]
+        assert all(m.get("ERTM") == 1.5 for m in mcas)
+        total = list(get(p + "mcaSum"))
+        assert total == [sum(s[i] for s in spectra) for i in range(2048)]
+        # element 4's Fe Ka sits 5 % high (2.1 / 2.0) until its PreampGain says 2.1
+        assert peak_channel(spectra[0]) in range(635, 646)
+        assert peak_channel(spectra[3], 650, 700) in range(667, 679)
+        # the statistics: triggers per live second, events per real second
+        icr, ocr = get(p + "dxp1:InputCountRate"), get(p + "dxp1:OutputCountRate")
+        assert abs(icr - rate) < 0.1 * rate
+        assert abs(ocr - sum(spectra[0]) / 1.5) < 1
+        assert get(p + "dxp1:Events") == sum(spectra[0])
+        assert get(p + "dxp1:Triggers") == get(p + "dxp1:Events")  # no thresholds: every event binned
+        dxps[3].put("PreampGain", 2.1, wait=True)
+        assert wait_for(lambda: get(p + "dxp4:PreampGain_RBV") == 2.1, 5)
+        # a longer peaking time: narrower lines, more dead time
+        dxps[0].put("PeakingTime", 8.0, wait=True)
+        assert wait_for(lambda: get(p + "dxp1:PeakingTime_RBV") == 8.0, 5)
+        assert put_status(p + "EraseStart", 1, timeout=30) == 1
+        spectra = [list(m.get("VAL")) for m in mcas]
+        assert peak_channel(spectra[3]) in range(635, 646)
+        live = [m.get("ELTM") for m in mcas]
+        assert abs(live[0] - 1.5 / (1 + rate * 2e-6 * 16.15 / 4.15)) < 1e-6
+        assert abs(live[1] - 1.5 / (1 + rate * 2e-6)) < 1e-6
+        # MaxEnergy: the bin width and the element's CALS follow
+        dxps[1].put("MaxEnergy", 10.24, wait=True)
+        assert wait_for(lambda: mcas[1].get("CALS") == 0.005, 5)
+        assert get(p + "dxp2:MCABinWidth_RBV") == 5.0
+        # refused: MaxEnergy below CALO; the record raises its alarm, nothing changes
+        epics.caput(p + "dxp2:MaxEnergy", -3, wait=True)
+        assert wait_for(lambda: epics.caget(p + "dxp2:MaxEnergy.SEVR") == 3, 5)
+        assert get(p + "dxp2:MaxEnergy_RBV") == 10.24 and mcas[1].get("CALS") == 0.005
+
+
+def test_the_sum_drives_every_element(tmp_path, prefix):
+    p = prefix
+    with running_four_elements(tmp_path, p):
+        total = epics.devices.mca.MCA(p + "mcaSum")
+        total.put("PRTM", 1.0, wait=True)
+        assert put_status(p + "mcaSum.ERST", 1, timeout=30) == 1
+        # every element acquired (their records followed) and the sum is theirs added
+        assert wait_for(lambda: all(get(f"{p}mca{i}.ERTM") == 1.0 and get(f"{p}mca{i}.ACQG") == 0 for i in range(1, 5)), 5)
+        spectra = [list(get(f"{p}mca{i}")) for i in range(1, 5)]
+        assert list(total.get("VAL")) == [sum(s[i] for s in spectra) for i in range(2048)]
+        # an ROI on the sum: Fe Ka of all four elements
+        assert put_status(p + "mcaSum.R0LO", 600) == 1
+        assert put_status(p + "mcaSum.R0HI", 700) == 1
+        assert get(p + "mcaSum.R0") == sum(sum(s[600:701]) for s in spectra)
+
+
 # ---------------------------------------------------------------------------------------------
 # The quad electrometer (examples/bpm): quadEM's PVs over the simulated beam, a mirror move seen
 # as PosY, and the fast loop that holds the beam
