@@ -275,7 +275,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -769,6 +769,45 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         e.trigger = pv["trigger"].string().value_or("");
         e.trigger_duration_s = pv["trigger_duration_s"].number(between(0.0001, 3600)).value_or(e.trigger_duration_s);
         cfg.pvt = e;
+    }
+    if (YamlNode sc = root["smart_control"]; sc.keys({"name", "bind", "port", "pty", "axes", "shutter", "trigger", "scaler"}) && sc) {
+        SmartControlEntry e;
+        e.where = sc.where();
+        e.name = sc["name"].string().value_or("smart");
+        std::set<std::string> unused;
+        check_name_part(sc["name"], e.name, "smart_control", unused, false);
+        e.bind = sc["bind"].string().value_or("127.0.0.1");
+        e.port = int(sc["port"].integer(between(0, 65535)).value_or(0));
+        if (auto pty = sc["pty"].string()) e.pty = resolve(dir, *pty);
+        e.shutter = sc["shutter"].string().value_or("");
+        e.trigger = sc["trigger"].string().value_or("");
+        e.scaler = sc["scaler"].string().value_or("");
+        if (e.port == 0 && e.pty.empty()) sc.error("needs port: (TCP) or pty: (a pseudo-terminal), or both");
+        static const char* kAxes[] = {"two_theta", "omega", "phi", "kappa"};
+        static const char* kNames[] = {"TWOTHETA", "OMEGA", "PHI", "KAPPA"};
+        if (YamlNode ax = sc.required("axes", " (two_theta, omega, phi, kappa: {motor, offset, sign, low_cut, high_cut})");
+            ax.keys({"two_theta", "omega", "phi", "kappa"}) && ax) {
+            for (int i = 0; i < 4; ++i) {
+                YamlNode a = ax[kAxes[i]];
+                if (!a || !a.keys({"motor", "offset", "sign", "low_cut", "high_cut"})) continue;
+                SmartControlEntry::Axis x;
+                x.name = kNames[i];
+                x.where = a.where();
+                x.motor = a.required("motor", " (a motor record of this IOC)").string().value_or("");
+                x.offset = a["offset"].number().value_or(0);
+                x.sign = int(a["sign"].integer().value_or(1));
+                if (x.sign != 1 && x.sign != -1) a["sign"].error("should be 1 or -1");
+                x.low_cut = a["low_cut"].number().value_or(0);
+                x.high_cut = a["high_cut"].number().value_or(0);
+                if (x.low_cut > x.high_cut) a["low_cut"].error(SB() << "low_cut " << x.low_cut << " is above high_cut " << x.high_cut);
+                else if (x.high_cut > x.low_cut && x.high_cut - x.low_cut < 360)
+                    a["high_cut"].error(SB() << "the cut window " << x.low_cut << " .. " << x.high_cut
+                                             << " should span at least 360 (every angle has a place in it), or none (equal cuts)");
+                e.axes.push_back(std::move(x));
+            }
+            if (e.axes.empty()) ax.error("needs at least one of two_theta, omega, phi, kappa");
+        }
+        cfg.smart_control = e;
     }
     rd.take_errors(errors);
     return cfg;

@@ -316,6 +316,29 @@ struct QuadEmEntry {
     std::string where, currents_where;
 };
 
+// `smart_control:` (docs/goniometer.md): the goniometer controller of smartControl (seed 004) over a
+// line protocol on TCP and a pseudo-terminal, so that an external control program drives up to
+// four of this IOC's motors, a shutter, a detector trigger and a scaler.
+struct SmartControlEntry {
+    struct Axis {
+        std::string name;          // the protocol's: TWOTHETA, OMEGA, PHI, KAPPA
+        std::string motor;         // a motor record of this IOC (PV name)
+        double offset = 0;         // motor = sign x smart + offset (then into the cut window)
+        int sign = 1;              // +1 / -1
+        double low_cut = 0, high_cut = 0; // [motor units] the window a rotation is wrapped into (by 360); equal: none
+        std::string where;
+    };
+    std::string name = "smart";   // $(P)smart: (the setup table's PVs)
+    std::string bind = "127.0.0.1";
+    int port = 0;                 // TCP (0: none)
+    std::string pty;              // a symlink to a pseudo-terminal's slave ("": none)
+    std::vector<Axis> axes;       // in the protocol's order
+    std::string shutter;          // PV written 1 (open) / 0 (closed)
+    std::string trigger;          // PV written 1 when a frame starts, 0 when it ends
+    std::string scaler;           // PV whose value is integrated over a count [value x s]
+    std::string where;
+};
+
 // `detectors: {area_detector: [{cam, image, hdf, stats, bus, size, pixel_size, centre, ...}]}`: a
 // simulated camera of the beam behind areaDetector's PV sets (docs/detectors.md).
 struct AreaDetectorEntry {
@@ -360,6 +383,7 @@ struct IocConfig {
     std::vector<McaEntry> mca; // detectors.mca
     std::vector<QuadEmEntry> quadem; // detectors.quadem
     std::vector<AreaDetectorEntry> area_detector; // detectors.area_detector
+    std::optional<SmartControlEntry> smart_control;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

@@ -3,6 +3,8 @@
 #include "pv/db_shell.hpp"
 #include "pv/shell_server.hpp"
 
+#include "automation/line_server.hpp"
+
 #include "ioc/bus_pvs.hpp"
 #include "ioc/pv_util.hpp"
 #include "motion/axis_setup.hpp"
@@ -330,6 +332,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_);
     detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s);
     area_ = std::make_unique<IocAreaDetector>(cfg_, db_, EventLoop::now_s);
+    if (cfg_.smart_control) smart_ = std::make_unique<automation::SmartControl>(*cfg_.smart_control, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; }); // the engine's clock: virtual in tests
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
@@ -840,6 +843,7 @@ void Ioc::bring_up() {
     }
     db_.init_records();
     area_->start();
+    if (smart_) smart_->start(); // its motors, shutter, trigger and scaler: records of this IOC
     plcs_->set_epics_state(12); // initHookAfterIocBuilt
     brought_up_ = true;
 }
@@ -854,6 +858,7 @@ void Ioc::publish() {
     quadem_->publish();
     area_->poll(EventLoop::now_s());
     detectors_->poll(); // mca records follow acquisitions started through the sum or StartAll
+    if (smart_) smart_->poll();
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) {
         b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
@@ -1005,6 +1010,23 @@ int Ioc::run() {
         [this](const std::vector<std::string>& argv, std::ostream& os) { return sim_fault(argv, os); }};
     pv::DbShell db_shell(db_, shell_hooks);
     auto shell_server = pv::start_shell_server(loop, db_shell, cfg_.name, shell_socket_);
+    // smartControl's line protocol on TCP and/or a pseudo-terminal
+    std::unique_ptr<automation::LineServer> smart_server;
+    std::string smart_text;
+    if (smart_) {
+        const config::SmartControlEntry& sc = *cfg_.smart_control;
+        smart_server = std::make_unique<automation::LineServer>(
+            loop, [this](std::string_view line, const automation::LineServer::Reply& reply) { smart_->command(line, reply); },
+            [this](int n) { smart_->set_clients(n); });
+        try {
+            if (sc.port) smart_server->listen_tcp(sc.bind, sc.port);
+            if (!sc.pty.empty()) smart_server->open_pty(sc.pty);
+        } catch (const Error& e) {
+            throw Error(SB() << sc.where << ": smart_control: " << e.what());
+        }
+        smart_text = SB() << ", smartControl on" << (sc.port ? std::string(SB() << " tcp " << sc.bind << ":" << smart_server->port()) : "")
+                          << (sc.pty.empty() ? "" : " pty " + sc.pty);
+    }
     plcs_->set_epics_state(16); // initHookAfterIocRunning: epics_get_started()
     std::string rcp_text = rcp ? std::string(SB() << ", RCP bridge on udp " << cfg_.rcp->listen << ":" << rcp->port()) : std::string();
     std::string own_text; // the buses on their own cycles
@@ -1012,8 +1034,9 @@ int Ioc::run() {
         if (buses_[i].cycle)
             own_text += SB() << "; bus " << buses_[i].bus->id() << " its own cycle, " << *cfg_.buses[i].rate_hz << " Hz ("
                              << cycle(buses_[i].cycle).rt_setup() << ")";
-    std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)%s%s\n", server.listen_description().c_str(),
-                db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str(), own_text.c_str(), rcp_text.c_str());
+    std::printf("ready: CA on %s, %zu PVs, %zu bus(es), RT %g Hz (%s)%s%s%s\n", server.listen_description().c_str(),
+                db_.size(), buses_.size(), cfg_.rate_hz, engine_->rt_setup().c_str(), own_text.c_str(), rcp_text.c_str(),
+                smart_text.c_str());
     std::fflush(stdout);
     loop.run();
     if (autosave_) autosave_->flush(); // a clean stop saves what changed since the last save
