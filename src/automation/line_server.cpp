@@ -22,8 +22,8 @@ log::Logger lg("lineserver");
 
 } // namespace
 
-LineServer::LineServer(EventLoop& loop, Handler handler, std::function<void(int)> on_clients)
-    : loop_(loop), handler_(std::move(handler)), on_clients_(std::move(on_clients)) {}
+LineServer::LineServer(EventLoop& loop, Handler handler, std::function<void(int)> on_clients, std::function<void(const std::string&)> on_rejected)
+    : loop_(loop), handler_(std::move(handler)), on_clients_(std::move(on_clients)), on_rejected_(std::move(on_rejected)) {}
 
 LineServer::~LineServer() {
     while (!conns_.empty()) close_conn(conns_.begin()->first);
@@ -132,34 +132,47 @@ void LineServer::on_io(uint64_t id, uint32_t events) {
     }
 }
 
-void LineServer::take_lines(uint64_t id) {
+LineEvent next_line(std::string& in, bool& dropping, std::string& line, std::size_t max) {
     for (;;) {
-        auto it = conns_.find(id);
-        if (it == conns_.end()) return;
-        Conn& c = it->second;
-        const std::size_t end = c.in.find_first_of("\r\n");
+        const std::size_t end = in.find_first_of("\r\n");
         if (end == std::string::npos) {
-            if (c.in.size() > kMaxLine) { // no terminator in sight: drop what is there and the rest of it
-                if (!c.dropping) {
-                    ++too_long_;
-                    send(id, "ERR line too long (at most " + std::to_string(kMaxLine) + " bytes)");
-                }
-                c.in.clear();
-                c.dropping = true;
-            }
-            return;
+            if (in.size() <= max) return LineEvent::None;
+            in.clear(); // no terminator in sight: drop what is there, and the rest up to one
+            if (dropping) return LineEvent::None;
+            dropping = true;
+            return LineEvent::TooLong;
         }
-        std::string line = c.in.substr(0, end);
-        c.in.erase(0, end + 1);
-        const bool dropped = c.dropping;
-        c.dropping = false;
-        if (dropped) continue; // the tail of a line that was too long
-        if (line.size() > kMaxLine) {
-            ++too_long_;
-            send(id, "ERR line too long (at most " + std::to_string(kMaxLine) + " bytes)");
+        const bool dropped = dropping;
+        dropping = false;
+        if (dropped) { // the tail of a line that was too long
+            in.erase(0, end + 1);
             continue;
         }
+        if (end > max) {
+            in.erase(0, end + 1);
+            return LineEvent::TooLong;
+        }
+        line.assign(in, 0, end);
+        in.erase(0, end + 1);
         if (line.find_first_not_of(" \t") == std::string::npos) continue; // blank (or the \n of \r\n)
+        return LineEvent::Line;
+    }
+}
+
+void LineServer::take_lines(uint64_t id) {
+    std::string line;
+    for (;;) {
+        auto it = conns_.find(id); // again each time: a reply may have closed the connection
+        if (it == conns_.end()) return;
+        const LineEvent e = next_line(it->second.in, it->second.dropping, line, kMaxLine);
+        if (e == LineEvent::None) return;
+        if (e == LineEvent::TooLong) {
+            ++too_long_;
+            const std::string why = "ERR line too long (at most " + std::to_string(kMaxLine) + " bytes)";
+            if (on_rejected_) on_rejected_(why);
+            send(id, why);
+            continue;
+        }
         handler_(line, [this, id](const std::string& reply) { send(id, reply); });
     }
 }

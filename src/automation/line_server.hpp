@@ -17,6 +17,13 @@
 
 namespace beamctl::automation {
 
+// The framing, apart (fuzzed: tests/fuzz/fuzz_smart_command.cpp): takes the next event out of a
+// connection's input `in`. Returns Line (in `line`: not blank, at most max bytes), TooLong (a line
+// over max bytes, or max bytes with no terminator yet: dropped up to its terminator), or None
+// (wait for more bytes). `dropping` is the connection's state between calls.
+enum class LineEvent { None, Line, TooLong };
+LineEvent next_line(std::string& in, bool& dropping, std::string& line, std::size_t max);
+
 class LineServer {
 public:
     static constexpr std::size_t kMaxLine = 256;
@@ -25,7 +32,8 @@ public:
     using Reply = std::function<void(const std::string& line)>;
     using Handler = std::function<void(std::string_view line, const Reply& reply)>;
 
-    LineServer(EventLoop& loop, Handler handler, std::function<void(int clients)> on_clients = {});
+    LineServer(EventLoop& loop, Handler handler, std::function<void(int clients)> on_clients = {},
+               std::function<void(const std::string& why)> on_rejected = {});
     ~LineServer(); // closes everything, removes the pty's symlink
     LineServer(const LineServer&) = delete;
     LineServer& operator=(const LineServer&) = delete;
@@ -57,6 +65,7 @@ private:
     EventLoop& loop_;
     Handler handler_;
     std::function<void(int)> on_clients_;
+    std::function<void(const std::string&)> on_rejected_;
     int listen_fd_ = -1, port_ = 0;
     int pty_slave_ = -1; // kept open: the master stays readable when the client closes
     std::string pty_link_, pty_name_;

@@ -2,6 +2,7 @@
 
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 
 namespace beamctl::automation {
@@ -52,6 +53,15 @@ std::string shown(const std::string& w) { return w.size() > 32 ? w.substr(0, 32)
 
 bool parse_smart_command(std::string_view line, SmartCommand& out, std::string& why) {
     out = SmartCommand{};
+    for (std::size_t i = 0; i < line.size(); ++i) {
+        const unsigned char ch = static_cast<unsigned char>(line[i]);
+        if ((ch < 32 && ch != '\t') || ch > 126) {
+            char b[80];
+            std::snprintf(b, sizeof b, "byte 0x%02x at column %zu is not printable ASCII", ch, i + 1);
+            why = b;
+            return false;
+        }
+    }
     const std::vector<std::string> w = words_of(line);
     if (w.empty()) {
         why = "empty line";

@@ -159,7 +159,7 @@ void SmartControl::set_output(const pv::Address* a, double v) {
 
 void SmartControl::fail(const Reply& reply, const std::string& keyword, const std::string& why) {
     ++errors_;
-    const std::string line = keyword + " ERR " + why;
+    const std::string line = keyword.empty() ? "ERR " + why : keyword + " ERR " + why;
     LOG_WARN(lg, p_ << " " << line);
     set_record(db_, p_ + "Errors", double(std::min<uint64_t>(errors_, 0x7FFFFFFF)));
     set_text(db_, p_ + "LastReply", line);
@@ -188,7 +188,7 @@ void SmartControl::command(std::string_view line, const Reply& reply) {
     set_text(db_, p_ + "LastCommand", std::string(line.substr(0, 39)));
     SmartCommand c;
     std::string why;
-    if (!parse_smart_command(line, c, why)) return fail(reply, c.keyword.empty() ? "ERR" : c.keyword, why);
+    if (!parse_smart_command(line, c, why)) return fail(reply, c.keyword, why); // no keyword (not ASCII): "ERR <why>"
     const std::string& k = c.keyword;
     auto ok = [&](const std::string& rest) {
         const std::string l = k + " OK" + rest;
@@ -434,6 +434,12 @@ void SmartControl::poll() {
 }
 
 void SmartControl::set_clients(int n) { set_record(db_, p_ + "Clients", n); }
+
+void SmartControl::count_error(const std::string& why) {
+    ++errors_;
+    LOG_WARN(lg, p_ << " " << why);
+    set_record(db_, p_ + "Errors", double(std::min<uint64_t>(errors_, 0x7FFFFFFF)));
+}
 
 // The client's view of each axis, as smartControl's screen shows it, and the state.
 void SmartControl::publish_table() {

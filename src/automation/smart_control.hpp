@@ -39,6 +39,8 @@ public:
     // The IOC loop, every 10 ms: counting, the scan's steps, the table's read-backs.
     void poll();
     void set_clients(int n);
+    // Bad input the transport refused (a line too long): counted and logged with the others.
+    void count_error(const std::string& why);
 
     uint64_t commands() const { return commands_; }
     uint64_t errors() const { return errors_; }

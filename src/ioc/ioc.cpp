@@ -1017,7 +1017,7 @@ int Ioc::run() {
         const config::SmartControlEntry& sc = *cfg_.smart_control;
         smart_server = std::make_unique<automation::LineServer>(
             loop, [this](std::string_view line, const automation::LineServer::Reply& reply) { smart_->command(line, reply); },
-            [this](int n) { smart_->set_clients(n); });
+            [this](int n) { smart_->set_clients(n); }, [this](const std::string& why) { smart_->count_error(why); });
         try {
             if (sc.port) smart_server->listen_tcp(sc.bind, sc.port);
             if (!sc.pty.empty()) smart_server->open_pty(sc.pty);

@@ -4,6 +4,7 @@
 // limits before anything moves, an interrupted move answered ERR), the oscillation scan with the
 // shutter and the trigger, counting, the setup table changed through its PVs, and bad lines.
 #include "automation/smart_command.hpp"
+#include "automation/line_server.hpp"
 #include "automation/smart_control.hpp"
 
 #include "../ioc/virtual_ioc.hpp"
@@ -58,6 +59,8 @@ TEST(SmartCommand, ParsesEveryCommandAndSaysWhatIsWrong) {
         {"VELO OMEGA 0", "the velocity should be above 0"},
         {"SHUTTER AJAR", "should be OPEN or CLOSE"},
         {"STOP NOW", "usage: STOP"},
+        {"MOVE OMEGA\x01 3", "byte 0x01 at column 11 is not printable ASCII"},
+        {"POS \xc3\xa9", "byte 0xc3 at column 5"},
     };
     for (const auto& [line, expected] : bad) {
         EXPECT_FALSE(parse_smart_command(line, c, why)) << line;
@@ -256,4 +259,35 @@ TEST(SmartControl, BadLinesAreCountedAndChangeNothing) {
     EXPECT_EQ(g.v.get("GON:smart:Commands"), 3);
     EXPECT_EQ(g.v.get("GON:smart:Shutter"), 1);
     EXPECT_EQ(g.sc().errors(), 2u);
+}
+
+TEST(LineFraming, LinesBlanksAndLinesTooLong) {
+    std::string in = "ID\r\n\r\nPOS omega\nSTATUS\rHAL", line;
+    bool dropping = false;
+    const std::size_t max = 16;
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::Line);
+    EXPECT_EQ(line, "ID");
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::Line); // the blank \n of \r\n skipped
+    EXPECT_EQ(line, "POS omega");
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::Line);
+    EXPECT_EQ(line, "STATUS");
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::None); // "HAL": wait for the rest
+    in += "T\n";
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::Line);
+    EXPECT_EQ(line, "HALT");
+    // too long with its terminator: one event, then the next line
+    in = std::string(40, 'x') + "\nID\n";
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::TooLong);
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::Line);
+    EXPECT_EQ(line, "ID");
+    // too long before its terminator arrives: one event, the rest dropped up to it
+    in = std::string(20, 'y');
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::TooLong);
+    EXPECT_TRUE(dropping);
+    in += std::string(50, 'y');
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::None);
+    in += "yy\nPOS\n";
+    EXPECT_EQ(next_line(in, dropping, line, max), LineEvent::Line);
+    EXPECT_EQ(line, "POS");
+    EXPECT_FALSE(dropping);
 }
