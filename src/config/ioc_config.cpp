@@ -551,7 +551,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         std::set<std::string> qnames;
         for (const YamlNode& d : dets["quadem"].list()) {
             if (!d.keys({"name", "currents", "geometry", "averaging_time", "current_scale", "current_offset", "position_scale",
-                         "position_offset", "egu", "prec", "ts_points"}))
+                         "position_offset", "egu", "prec", "ts_points", "ranges", "range"}))
                 continue;
             QuadEmEntry e;
             e.where = d.where();
@@ -585,6 +585,18 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             e.egu = d["egu"].string().value_or("");
             e.prec = int(d["prec"].integer(between(0, 15)).value_or(4));
             e.ts_points = int(d["ts_points"].integer(between(1, 100000)).value_or(1000));
+            for (const YamlNode& r : d["ranges"].list()) {
+                if (!r.keys({"name", "full_scale"})) continue;
+                QuadEmEntry::Range x;
+                x.name = r.required("name", " (the Range PV's choice)").string().value_or("");
+                if (x.name.size() > 25) r["name"].error(SB() << "'" << x.name << "' is longer than an mbbo state string (25 characters)");
+                x.full_scale = r.required("full_scale", " [current units; 0: no limit]").number(at_least(0)).value_or(0);
+                e.ranges.push_back(std::move(x));
+            }
+            if (e.ranges.size() > 16) d["ranges"].error(SB() << "has " << e.ranges.size() << " ranges: an mbbo holds 16");
+            e.range = int(d["range"].integer(between(0, 15)).value_or(0));
+            if (e.range >= int(std::max<std::size_t>(e.ranges.size(), 1)))
+                d["range"].error(SB() << "range " << e.range << " is not one of the " << std::max<std::size_t>(e.ranges.size(), 1) << " ranges");
             cfg.quadem.push_back(std::move(e));
         }
         std::set<std::string> names, dxps;

@@ -313,6 +313,12 @@ struct QuadEmEntry {
     std::string egu;                    // of the positions
     int prec = 4;
     int ts_points = 1000;               // the time series' length (quadEM's TSPOINTS)
+    struct Range {
+        std::string name;       // the Range PV's state string ("+-120 uA")
+        double full_scale = 0;  // [current units] a current beyond +-full_scale reads +-full_scale (0: no limit)
+    };
+    std::vector<Range> ranges;          // Range's choices (none: one, "Full", without a limit)
+    int range = 0;                      // the one at start
     std::string where, currents_where;
 };
 

@@ -9,7 +9,11 @@ const char* const kQuadEmValueNames[kQuadEmValues] = {"Current1", "Current2", "C
                                                        "SumAll",   "DiffX",    "DiffY",    "PosX",     "PosY"};
 
 void quadem_compute(const double raw[4], const QuadEmParams& p, double v[kQuadEmValues]) noexcept {
-    for (int i = 0; i < 4; ++i) v[i] = raw[i] * p.current_scale[i] - p.current_offset[i];
+    for (int i = 0; i < 4; ++i) {
+        double c = raw[i] * p.current_scale[i];
+        if (p.full_scale > 0) c = c > p.full_scale ? p.full_scale : c < -p.full_scale ? -p.full_scale : c; // saturated in its range
+        v[i] = c - p.current_offset[i];
+    }
     const double i1 = v[kCurrent1], i2 = v[kCurrent2], i3 = v[kCurrent3], i4 = v[kCurrent4];
     v[kSumAll] = i1 + i2 + i3 + i4;
     switch (p.geometry) {

@@ -34,6 +34,7 @@ struct QuadEmParams {
     double position_scale[2] = {1e6, 1e6}; // quadEM's default
     double position_offset[2] = {0, 0};
     QuadEmGeometry geometry = QuadEmGeometry::Square;
+    double full_scale = 0; // the range: a scaled current beyond +-full_scale reads +-full_scale (0: no limit)
     int num_average = 1; // samples per reading (>= 1)
 };
 

@@ -45,7 +45,8 @@ struct IocQuadEm::Unit {
     // records
     pv::Record *acquire = nullptr, *mode = nullptr, *mode_rbv = nullptr, *num_acquire = nullptr, *num_acquire_rbv = nullptr,
                *num_acquired = nullptr, *avg_time = nullptr, *avg_time_rbv = nullptr, *num_average = nullptr, *num_averaged = nullptr,
-               *sample_time = nullptr, *geometry = nullptr, *geometry_rbv = nullptr, *overflows = nullptr;
+               *sample_time = nullptr, *geometry = nullptr, *geometry_rbv = nullptr, *overflows = nullptr, *range = nullptr,
+               *range_rbv = nullptr;
     pv::Record *cur_offset[4] = {}, *cur_scale[4] = {}, *pos_offset[2] = {}, *pos_scale[2] = {};
     pv::Record* ave[detector::kQuadEmValues] = {};
     pv::Record* stats[detector::kQuadEmValues][4] = {};
@@ -108,6 +109,7 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
         prm.geometry = e.geometry == "Diamond" ? detector::QuadEmGeometry::Diamond
                        : e.geometry == "SquareCC" ? detector::QuadEmGeometry::SquareCC
                                                   : detector::QuadEmGeometry::Square;
+        prm.full_scale = e.ranges.empty() ? 0 : e.ranges[std::size_t(e.range)].full_scale;
         u->qe = std::make_unique<detector::QuadEm>(prm);
         // the cycle's values as engine signals, read through a binder onto the electrometer's cells
         const std::string owner = lower(e.name);
@@ -156,6 +158,18 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
         g.push_back({"VAL", std::to_string(int(prm.geometry))});
         f.records.push_back(record("mbbo", p + "Geometry", g));
         f.records.push_back(record("mbbi", p + "Geometry_RBV", geo));
+        {
+            static const char* kSt[] = {"ZR", "ON", "TW", "TH", "FR", "FV", "SX", "SV", "EI", "NI", "TE", "EL", "TV", "TT", "FT", "FF"};
+            std::vector<std::pair<std::string, std::string>> st;
+            if (e.ranges.empty()) st.push_back({"ZRST", "Full"});
+            for (std::size_t i = 0; i < e.ranges.size(); ++i) st.push_back({std::string(kSt[i]) + "ST", e.ranges[i].name});
+            auto r = st;
+            r.push_back({"DESC", "Range"});
+            r.push_back({"VAL", std::to_string(e.range)});
+            f.records.push_back(record("mbbo", p + "Range", r));
+            st.push_back({"DESC", "Range"});
+            f.records.push_back(record("mbbi", p + "Range_RBV", st));
+        }
         for (int i = 0; i < 4; ++i) {
             const std::string n = std::to_string(i + 1);
             f.records.push_back(record("ao", p + "CurrentOffset" + n, {{"DESC", "Offset"}, {"PREC", prec}, {"VAL", num(e.current_offset[i])}}));
@@ -221,6 +235,8 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
         u.sample_time = find("SampleTime_RBV");
         u.geometry = find("Geometry");
         u.geometry_rbv = find("Geometry_RBV");
+        u.range = find("Range");
+        u.range_rbv = find("Range_RBV");
         u.overflows = find("RingOverflows");
         for (int i = 0; i < 4; ++i) {
             u.cur_offset[i] = find("CurrentOffset" + std::to_string(i + 1));
@@ -251,7 +267,7 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
         u.ts_time_axis = find("TS:TSTimeAxis");
         for (int k = 0; k < detector::kQuadEmValues; ++k) u.ts_series[k] = find(std::string("TS:") + detector::kQuadEmValueNames[k] + ":TimeSeries");
         for (pv::Record* r : {u.mode_rbv, u.num_acquire_rbv, u.num_acquired, u.avg_time_rbv, u.num_average, u.num_averaged, u.sample_time,
-                              u.geometry_rbv, u.overflows, u.ts_acquiring, u.ts_current, u.ts_time_per_point, u.ts_time_per_point_rbv,
+                              u.geometry_rbv, u.range_rbv, u.overflows, u.ts_acquiring, u.ts_current, u.ts_time_per_point, u.ts_time_per_point_rbv,
                               u.ts_avg_time_rbv, u.ts_num_average, u.ts_elapsed, u.ts_mode_rbv, u.ts_timestamp, u.ts_time_axis})
             r->val_read_only = true;
         for (pv::Record* r : u.ts_series) r->val_read_only = true;
@@ -275,10 +291,15 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
                 LOG_WARN(lg, r.name() << ": " << get_value(r) << " refused: not one of the record's three choices");
                 return pv::PutStatus::Failed;
             }
+            const double ranges = double(std::max<std::size_t>(self->cfg.ranges.size(), 1));
+            if (&r == self->range && !(get_value(r) >= 0 && get_value(r) < ranges)) {
+                LOG_WARN(lg, r.name() << ": " << get_value(r) << " refused: not one of the " << ranges << " ranges");
+                return pv::PutStatus::Failed;
+            }
             apply(*self);
             return pv::PutStatus::Ok;
         };
-        for (pv::Record* r : {u.mode, u.num_acquire, u.avg_time, u.geometry, u.cur_offset[0], u.cur_offset[1], u.cur_offset[2], u.cur_offset[3],
+        for (pv::Record* r : {u.mode, u.num_acquire, u.avg_time, u.geometry, u.range, u.cur_offset[0], u.cur_offset[1], u.cur_offset[2], u.cur_offset[3],
                               u.cur_scale[0], u.cur_scale[1], u.cur_scale[2], u.cur_scale[3], u.pos_offset[0], u.pos_offset[1], u.pos_scale[0],
                               u.pos_scale[1]})
             r->put_hook = param;
@@ -331,6 +352,8 @@ void IocQuadEm::apply(Unit& u) {
     for (int i = 0; i < 2; ++i) p.position_offset[i] = get_value(*u.pos_offset[i]), p.position_scale[i] = get_value(*u.pos_scale[i]);
     const int g = int(get_value(*u.geometry));
     p.geometry = detector::QuadEmGeometry(g >= 0 && g <= 2 ? g : 1);
+    const std::size_t range = std::size_t(std::max(0.0, get_value(*u.range)));
+    p.full_scale = range < u.cfg.ranges.size() ? u.cfg.ranges[range].full_scale : 0;
     // quadEM: NumAverage = int(AveragingTime / SampleTime + 0.5), at least 1
     const double n = std::floor(get_value(*u.avg_time) / cycle_s_ + 0.5);
     p.num_average = int(std::max(1.0, std::min(n, 1e7)));
@@ -341,6 +364,7 @@ void IocQuadEm::apply(Unit& u) {
     set_value(db_, *u.avg_time_rbv, p.num_average * cycle_s_, false);
     set_value(db_, *u.sample_time, cycle_s_, false);
     set_value(db_, *u.geometry_rbv, double(int(p.geometry)), false);
+    set_value(db_, *u.range_rbv, double(range), false);
 }
 
 void IocQuadEm::set_acquire(Unit& u, bool on) {

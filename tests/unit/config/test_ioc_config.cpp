@@ -323,3 +323,24 @@ TEST(IocConfig, McaElementsAndDxpSettings) {
     EXPECT_NE(e[4].find("peaking_time"), std::string::npos) << e[4];
     EXPECT_NE(e[5].find("above the spectrum's offset"), std::string::npos) << e[5];
 }
+
+TEST(IocConfig, QuadEmRanges) {
+    config::IocConfig c = config::IocConfig::parse("ioc: {name: T}\n"
+                                                   "detectors:\n"
+                                                   "  quadem:\n"
+                                                   "    - {name: QE1, currents: [a, b, c, d], range: 1,\n"
+                                                   "       ranges: [{name: \"+-2 uA\", full_scale: 2}, {name: \"+-200 nA\", full_scale: 0.2}]}\n",
+                                                   "/cfg/ioc.yaml");
+    ASSERT_EQ(c.quadem.size(), 1u);
+    ASSERT_EQ(c.quadem[0].ranges.size(), 2u);
+    EXPECT_EQ(c.quadem[0].ranges[1].name, "+-200 nA");
+    EXPECT_EQ(c.quadem[0].ranges[1].full_scale, 0.2);
+    EXPECT_EQ(c.quadem[0].range, 1);
+    const auto e = errors_of("ioc: {name: T}\n"
+                             "detectors:\n"
+                             "  quadem:\n"
+                             "    - {name: QE1, currents: [a, b, c, d], range: 2, ranges: [{name: a, full_scale: -1}]}\n");
+    ASSERT_EQ(e.size(), 2u) << ::testing::PrintToString(e);
+    EXPECT_NE(e[0].find("range 2 is not one of the 1 ranges"), std::string::npos) << e[0];
+    EXPECT_NE(e[1].find("full_scale should be >= 0, got -1"), std::string::npos) << e[1];
+}

@@ -270,3 +270,21 @@ TEST(IocQuadEm, TheDemoBeamPassesTheSlitAndTheMirrorPitchesIt) {
     v.run(2);
     EXPECT_NEAR(mca.input_rate() / 14850, 0.5, 0.05);
 }
+
+TEST(IocQuadEm, TheRangeSaturatesTheCurrents) {
+    Bpm b;
+    EXPECT_EQ(b.v.get("BPM:QE1:Range_RBV"), 0); // +-2 uA: the whole spot (1 uA) reads as it is
+    b.v.run(200);
+    EXPECT_NEAR(b.v.get("BPM:QE1:SumAll:MeanValue_RBV"), 1.0, 0.01);
+    const double i1 = b.v.get("BPM:QE1:Current1:MeanValue_RBV");
+    EXPECT_GT(i1, 0.2); // a quadrant's share is above the small range
+    ASSERT_EQ(b.put("BPM:QE1:Range", 1), pv::PutStatus::Ok); // +-200 nA
+    EXPECT_EQ(b.v.get("BPM:QE1:Range_RBV"), 1);
+    b.v.run(300);
+    EXPECT_DOUBLE_EQ(b.v.get("BPM:QE1:Current1:MaxValue_RBV"), 0.2); // saturated
+    EXPECT_DOUBLE_EQ(b.cells()[detector::kCurrent1], 0.2);
+    EXPECT_LT(b.v.get("BPM:QE1:SumAll:MeanValue_RBV"), 0.81);
+    // a range that is not one of the choices: refused, nothing changes
+    EXPECT_NE(b.put("BPM:QE1:Range", 2), pv::PutStatus::Ok);
+    EXPECT_EQ(b.v.get("BPM:QE1:Range_RBV"), 1);
+}
