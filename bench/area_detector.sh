@@ -28,11 +28,9 @@ trap 'kill $ioc 2>/dev/null || true; rm -rf "$work"' EXIT
 sed -e "s#plant: plant.yaml#plant: $PWD/examples/bpm/plant.yaml#" -e "s#file: ../#file: $PWD/examples/#" \
     -e "s#size: \[320, 240\], pixel_size: 0.01#size: [1024, 1024], pixel_size: 0.003#" \
     -e "s#acquire_period: 0.05}#acquire_period: 0}#" examples/bpm/ioc.yaml > "$work/ioc.yaml"
-port=$((20000 + RANDOM % 20000))
-EPICS_CAS_SERVER_PORT=$port "$BEAMCTL" run "$work/ioc.yaml" --shell-socket none > "$work/ioc.log" 2>&1 &
-ioc=$!
-for _ in $(seq 50); do grep -q '^ready' "$work/ioc.log" && break; sleep 0.2; done
-EPICS_CA_ADDR_LIST=localhost:$port EPICS_CA_AUTO_ADDR_LIST=NO EPICS_CA_MAX_ARRAY_BYTES=20000000 \
+. bench/ioc_under_test.sh
+start_ioc "$work/ioc.yaml" "$work/ioc.log"
+EPICS_CA_MAX_ARRAY_BYTES=20000000 \
 /usr/bin/python3 - "$SECS" "$ioc" <<'PY'
 import sys, time, epics
 secs, pid = float(sys.argv[1]), int(sys.argv[2])

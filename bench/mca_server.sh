@@ -24,11 +24,9 @@ detectors:
         - {name: Cu Ka, energy: 8.048, rate: 5000, fwhm: 0.18}
         - {name: Zn Ka, energy: 8.639, rate: 3000, fwhm: 0.18}
 YAML
-port=$((20000 + RANDOM % 20000))
-EPICS_CAS_SERVER_PORT=$port "$BEAMCTL" run "$work/ioc.yaml" --shell-socket none > "$work/ioc.log" 2>&1 &
-ioc=$!
-for _ in $(seq 50); do grep -q '^ready' "$work/ioc.log" && break; sleep 0.2; done
-EPICS_CA_ADDR_LIST=localhost:$port EPICS_CA_AUTO_ADDR_LIST=NO EPICS_CA_MAX_ARRAY_BYTES=1000000 \
+. bench/ioc_under_test.sh
+start_ioc "$work/ioc.yaml" "$work/ioc.log"
+EPICS_CA_MAX_ARRAY_BYTES=1000000 \
 /usr/bin/python3 - "$SECS" "$ioc" <<'PY'
 import sys, time, epics
 secs, pid = float(sys.argv[1]), int(sys.argv[2])

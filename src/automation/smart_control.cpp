@@ -16,13 +16,8 @@ log::Logger lg("smartcontrol");
 
 constexpr const char* kParts[] = {"TwoTheta", "Omega", "Phi", "Kappa"};
 
-pv::DbRecord record(const std::string& type, const std::string& name, std::vector<std::pair<std::string, std::string>> fields) {
-    pv::DbRecord r;
-    r.type = type;
-    r.name = name;
-    r.loc = SourceLoc{"<generated>", 1, 1};
-    for (auto& [k, v] : fields) r.fields.push_back(pv::DbField{k, v, r.loc});
-    return r;
+pv::DbRecord record(const std::string& type, const std::string& name, const std::vector<std::pair<std::string, std::string>>& fields) {
+    return pv::generated_record(type, name, fields);
 }
 
 std::string fmt(double v) {

@@ -16,13 +16,8 @@ namespace beamctl::ioc {
 
 // A generated record definition.
 inline pv::DbRecord record(const std::string& type, const std::string& name,
-                           std::vector<std::pair<std::string, std::string>> fields) {
-    pv::DbRecord r;
-    r.type = type;
-    r.name = name;
-    r.loc = SourceLoc{"<generated>", 1, 1};
-    for (auto& [k, v] : fields) r.fields.push_back(pv::DbField{k, v, r.loc});
-    return r;
+                           const std::vector<std::pair<std::string, std::string>>& fields) {
+    return pv::generated_record(type, name, fields);
 }
 
 // Sets a record's VAL from the owner of the value (bypasses the client put hook) and processes.

@@ -42,6 +42,7 @@
 
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace beamctl::pv {
@@ -88,5 +89,16 @@ DbFile load_db_file(const std::string& path, const MacroMap& macros,
 
 // Appends `more` (e.g. the next file loaded) to `into` with the redefinition rules above.
 void merge_db(DbFile& into, const DbFile& more);
+
+// A record definition made by code (an IOC's generated PVs), located at "<generated>".
+inline DbRecord generated_record(const std::string& type, const std::string& name,
+                                 const std::vector<std::pair<std::string, std::string>>& fields) {
+    DbRecord r;
+    r.type = type;
+    r.name = name;
+    r.loc = SourceLoc{"<generated>", 1, 1};
+    for (const auto& [k, v] : fields) r.fields.push_back(DbField{k, v, r.loc});
+    return r;
+}
 
 } // namespace beamctl::pv
