@@ -17,10 +17,10 @@ namespace {
 
 struct Med {
     config::IocConfig cfg;
+    std::vector<std::unique_ptr<pv::LinkDevice>> devices; // outlive the records that use them
     pv::Database db;
     double now = 100; // the virtual clock [s]
     std::unique_ptr<ioc::IocDetectors> det;
-    std::vector<std::unique_ptr<pv::LinkDevice>> devices;
 
     Med() {
         detector::register_detector_records(pv::RecordTypes::global());
