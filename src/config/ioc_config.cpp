@@ -275,7 +275,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control", "compound_motors"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -820,6 +820,50 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             if (e.axes.empty()) ax.error("needs at least one of two_theta, omega, phi, kappa");
         }
         cfg.smart_control = e;
+    }
+    std::set<std::string> compound_names;
+    for (YamlNode g : root["compound_motors"].list()) {
+        if (!g.keys({"name", "reals", "inputs", "virtuals", "inverse"})) continue;
+        CompoundMotorEntry e;
+        e.where = g.where();
+        e.name = g.required("name", " (the group's name)").string().value_or("");
+        std::set<std::string> names; // every expression name of the group, once
+        auto expr_name = [&](const YamlNode& at, const std::string& n) {
+            bool ident = !n.empty() && (std::isalpha((unsigned char)n[0]) || n[0] == '_');
+            for (char c : n) ident = ident && (std::isalnum((unsigned char)c) || c == '_');
+            if (!ident) at.error(SB() << "'" << n << "' is not a name the expressions can use (letters, digits, _)");
+            else if (!names.insert(n).second) at.error(SB() << "'" << n << "' is used twice in compound motor group '" << e.name << "'");
+        };
+        for (const char* key : {"reals", "inputs"}) {
+            YamlNode m = std::string_view(key) == "reals" ? g.required(key, " (name: motor record PV)") : g[key];
+            for (const auto& [n, v] : m.entries()) {
+                expr_name(v, n);
+                CompoundMotorEntry::Name x{n, v.string().value_or(""), v.where()};
+                (std::string_view(key) == "reals" ? e.reals : e.inputs).push_back(x);
+            }
+        }
+        for (const auto& [n, v] : g.required("virtuals", " (name: {forward, egu, prec, velocity})").entries()) {
+            if (!v.keys({"forward", "egu", "prec", "velocity", "mres", "desc"})) continue;
+            expr_name(v, n);
+            check_name_part(v, n, "compound motor", compound_names, true);
+            CompoundMotorEntry::Virtual x;
+            x.name = n, x.where = v.where();
+            x.forward = v.required("forward", " (an expression in the reals and inputs)").string().value_or("");
+            x.egu = v["egu"].string().value_or("");
+            x.desc = v["desc"].string().value_or("");
+            x.prec = int(v["prec"].integer(between(0, 15)).value_or(3));
+            x.velocity = v["velocity"].number(above(0)).value_or(1);
+            x.mres = v["mres"].number(above(0)).value_or(0);
+            e.virtuals.push_back(std::move(x));
+        }
+        for (const auto& [n, v] : g.required("inverse", " (real name: expression in the virtuals and inputs)").entries()) {
+            bool real = false;
+            for (const auto& r : e.reals) real = real || r.name == n;
+            if (!real) v.error(SB() << "'" << n << "' is not one of the group's reals");
+            e.inverse.emplace_back(n, v.string().value_or(""));
+            e.inverse_where.push_back(v.where());
+        }
+        cfg.compound_motors.push_back(std::move(e));
     }
     rd.take_errors(errors);
     return cfg;

@@ -345,6 +345,34 @@ struct SmartControlEntry {
     std::string where;
 };
 
+// `compound_motors:` (docs/automation.md): motors whose position is a function of other motors
+// (motor records of this IOC or, through Channel Access, of other IOCs), served as motor records.
+// A group drives a set of real motors and serves one or more virtual motors: `forward` gives each
+// virtual from the reals' readbacks (and the read-only `inputs`), `inverse` each driven real from
+// the virtuals; both in the PLC's expression language.
+struct CompoundMotorEntry {
+    struct Virtual {
+        std::string name;     // the motor record $(P)<name>, and the name in the expressions
+        std::string forward;  // expression in reals and inputs
+        std::string egu, desc;
+        int prec = 3;
+        double velocity = 1; // VELO (the record's; the reals move at their own speeds)
+        double mres = 0;     // 0: 10^-prec
+        std::string where;
+    };
+    struct Name {
+        std::string name; // in the expressions
+        std::string pv;   // a motor record (reals) or any PV (inputs)
+        std::string where;
+    };
+    std::string name;                // the group's, for messages
+    std::vector<Name> reals, inputs;
+    std::vector<Virtual> virtuals;
+    std::vector<std::pair<std::string, std::string>> inverse; // real name -> expression, in file order
+    std::vector<std::string> inverse_where;
+    std::string where;
+};
+
 // `detectors: {area_detector: [{cam, image, hdf, stats, bus, size, pixel_size, centre, ...}]}`: a
 // simulated camera of the beam behind areaDetector's PV sets (docs/detectors.md).
 struct AreaDetectorEntry {
@@ -390,6 +418,7 @@ struct IocConfig {
     std::vector<QuadEmEntry> quadem; // detectors.quadem
     std::vector<AreaDetectorEntry> area_detector; // detectors.area_detector
     std::optional<SmartControlEntry> smart_control;
+    std::vector<CompoundMotorEntry> compound_motors;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).
