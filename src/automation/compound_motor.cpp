@@ -362,7 +362,7 @@ CompoundMotors::CompoundMotors(const std::vector<config::CompoundMotorEntry>& cf
             vv.record = prefix + x.name;
             vv.mres = x.mres > 0 ? x.mres : std::pow(10.0, -x.prec);
             f.records.push_back(pv::generated_record("motor", vv.record,
-                                                     {{"DTYP", "asynMotor"},
+                                                     {{"DTYP", "Compound Motor"},
                                                       {"OUT", "@compound(" + c.name + "," + x.name + ")"},
                                                       {"DESC", (x.desc.empty() ? "compound motor " + c.name : x.desc).substr(0, 40)},
                                                       {"EGU", x.egu},

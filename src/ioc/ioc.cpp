@@ -333,6 +333,7 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s);
     area_ = std::make_unique<IocAreaDetector>(cfg_, db_, EventLoop::now_s);
     if (cfg_.smart_control) smart_ = std::make_unique<automation::SmartControl>(*cfg_.smart_control, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; }); // the engine's clock: virtual in tests
+    if (!cfg_.compound_motors.empty()) compound_ = std::make_unique<automation::CompoundMotors>(cfg_.compound_motors, cfg_.prefix, db_);
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
@@ -844,6 +845,7 @@ void Ioc::bring_up() {
     db_.init_records();
     area_->start();
     if (smart_) smart_->start(); // its motors, shutter, trigger and scaler: records of this IOC
+    if (compound_) compound_->start(); // their reals and inputs: here, or other IOCs' (run() connects those)
     plcs_->set_epics_state(12); // initHookAfterIocBuilt
     brought_up_ = true;
 }
@@ -859,6 +861,7 @@ void Ioc::publish() {
     area_->poll(EventLoop::now_s());
     detectors_->poll(); // mca records follow acquisitions started through the sum or StartAll
     if (smart_) smart_->poll();
+    if (compound_) compound_->poll();
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) {
         b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
@@ -941,6 +944,12 @@ int Ioc::run() {
         }
     } stop_ca_links{ca_links_.get()};
     if (ca_links_) ca_links_->start(loop);
+    // automation's CA client (compound motors over other IOCs' motors); goes before the loop
+    std::unique_ptr<ca::Client> automation_client;
+    if (compound_ && compound_->needs_client()) {
+        automation_client = std::make_unique<ca::Client>(loop, ca::ClientConfig::from_env());
+        compound_->connect(*automation_client);
+    }
     ca::ServerConfig sc = ca::ServerConfig::from_env();
     if (cfg_.ca_port) sc.set_port(*cfg_.ca_port, cfg_.path + ": ca: port");
     ca::Server server(loop, db_, sc);

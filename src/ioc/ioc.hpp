@@ -4,6 +4,7 @@
 // the cycle. The IOC loop thread owns the PV database and the CA server.
 #pragma once
 
+#include "automation/compound_motor.hpp"
 #include "automation/smart_control.hpp"
 #include "ca/ca_link.hpp"
 #include "ca/server.hpp"
@@ -81,6 +82,7 @@ public:
     IocQuadEm& quadem() { return *quadem_; }
     IocAreaDetector& area_detectors() { return *area_; }
     automation::SmartControl* smart_control() { return smart_.get(); } // smart_control: (or none)
+    automation::CompoundMotors* compound_motors() { return compound_.get(); } // compound_motors: (or none)
     // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
     // (`beamctl signals`). Frozen once the IOC is built.
     const registry::Registry& signals() const { return registry_; }
@@ -164,6 +166,7 @@ private:
     std::unique_ptr<IocQuadEm> quadem_;       // quad electrometers (detectors.quadem)
     std::unique_ptr<IocAreaDetector> area_;   // simulated cameras (detectors.area_detector)
     std::unique_ptr<automation::SmartControl> smart_; // the goniometer protocol (smart_control:)
+    std::unique_ptr<automation::CompoundMotors> compound_; // virtual motors over motor records (compound_motors:)
     std::unique_ptr<IocFlyScan> flyscan_; // position compare and capture (pcomp:, capture:)
     bool brought_up_ = false;
     std::unique_ptr<pv::Autosave> autosave_; // ioc.yaml autosave:

@@ -230,7 +230,8 @@ const Menu kMenuMotorUeip{"motorUEIP", {"No", "Yes"}};
 const Menu kMenuMotorSpmg{"motorSPMG", {"Stop", "Pause", "Move", "Go"}};
 const Menu kMenuMotorTorq{"motorTORQ", {"Disable", "Enable"}};
 const Menu kMenuMotorRstm{"motorRSTM", {"Never", "Always", "NearZero", "Conditional"}};
-const Menu kMenuMotorDtyp{"DTYP", {"Sim Motor", "asynMotor"}};
+// "Compound Motor": automation/compound_motor (a virtual motor over other motor records).
+const Menu kMenuMotorDtyp{"DTYP", {"Sim Motor", "asynMotor", "Compound Motor"}};
 const Menu kMenuMotorAccu{"motorACCSUSED", {"Use ACCL", "Use ACCS"}};
 const Menu kMenuMotorRmod{"motorRMOD", {"Default", "Arithmetic", "Geometric", "In-Position"}};
 const Menu kMenuMotorStup{"motorSTUP", {"OFF", "ON", "BUSY"}};

@@ -344,3 +344,48 @@ TEST(IocConfig, QuadEmRanges) {
     EXPECT_NE(e[0].find("range 2 is not one of the 1 ranges"), std::string::npos) << e[0];
     EXPECT_NE(e[1].find("full_scale should be >= 0, got -1"), std::string::npos) << e[1];
 }
+
+TEST(IocConfig, CompoundMotors) {
+    config::IocConfig c = config::IocConfig::parse("ioc: {name: T}\n"
+                                                   "compound_motors:\n"
+                                                   "  - name: slit\n"
+                                                   "    reals: {top: \"S:top\", bot: \"S:bot\"}\n"
+                                                   "    inputs: {g: \"S:gain.VAL\"}\n"
+                                                   "    virtuals:\n"
+                                                   "      gap: {forward: \"top - bot\", egu: mm, prec: 4, velocity: 2}\n"
+                                                   "      centre: {forward: \"(top + bot) / 2\"}\n"
+                                                   "    inverse: {top: \"centre + gap / 2\", bot: \"centre - gap / 2\"}\n",
+                                                   "/cfg/ioc.yaml");
+    ASSERT_EQ(c.compound_motors.size(), 1u);
+    const auto& g = c.compound_motors[0];
+    EXPECT_EQ(g.name, "slit");
+    ASSERT_EQ(g.reals.size(), 2u);
+    EXPECT_EQ(g.reals[1].name, "bot");
+    EXPECT_EQ(g.reals[1].pv, "S:bot");
+    ASSERT_EQ(g.inputs.size(), 1u);
+    EXPECT_EQ(g.inputs[0].pv, "S:gain.VAL");
+    ASSERT_EQ(g.virtuals.size(), 2u);
+    EXPECT_EQ(g.virtuals[0].name, "gap");
+    EXPECT_EQ(g.virtuals[0].egu, "mm");
+    EXPECT_EQ(g.virtuals[0].prec, 4);
+    EXPECT_EQ(g.virtuals[0].velocity, 2);
+    EXPECT_EQ(g.virtuals[1].forward, "(top + bot) / 2");
+    ASSERT_EQ(g.inverse.size(), 2u);
+    EXPECT_EQ(g.inverse[0], std::make_pair(std::string("top"), std::string("centre + gap / 2")));
+    const auto e = errors_of("ioc: {name: T}\n"
+                             "compound_motors:\n"
+                             "  - name: a\n"
+                             "    reals: {x: \"M:x\", 2y: \"M:y\"}\n"
+                             "    virtuals: {x: {forward: \"x\"}, v: {egu: mm}}\n"
+                             "    inverse: {z: \"v\"}\n"
+                             "  - name: b\n"
+                             "    reals: {r: \"M:r\"}\n"
+                             "    virtuals: {v: {forward: \"r\"}}\n"
+                             "    inverse: {r: \"v\"}\n");
+    ASSERT_EQ(e.size(), 5u) << ::testing::PrintToString(e);
+    EXPECT_NE(e[0].find("'2y' is not a name the expressions can use"), std::string::npos) << e[0];
+    EXPECT_NE(e[1].find("'x' is used twice in compound motor group 'a'"), std::string::npos) << e[1];
+    EXPECT_NE(e[2].find("forward"), std::string::npos) << e[2];
+    EXPECT_NE(e[3].find("'z' is not one of the group's reals"), std::string::npos) << e[3];
+    EXPECT_NE(e[4].find("compound motor 'v' is defined twice"), std::string::npos) << e[4];
+}

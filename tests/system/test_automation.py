@@ -1,0 +1,167 @@
+"""Automation (docs/automation.md) with a real EPICS client: the split-and-delay example's virtual
+motors (examples/snd, seed 003) moved with put-callbacks move every real axis to the seed's
+geometry; a move beyond the reals' limits is refused before anything moves; a stopped move fails;
+and a compound motor drives another IOC's motor records through Channel Access."""
+
+import ctypes
+import math
+import time
+from pathlib import Path
+
+import epics
+from epics import ca
+
+from conftest import (_put_done, ECA_NORMAL, ECA_PUTFAIL, IocServer, RunServer, acquire_port, connect, forget_pvs, put_status,
+                      release_port, require_binary, running_config, wait_for)
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+HC, D_SI220, C_MM_PS, GAP = 12.398419843320026, 1.920155716, 0.299792458, 55.0
+
+
+def get(name, **kw):
+    return ca.get(connect(name), **kw)
+
+
+def bragg(kev):
+    return math.degrees(math.asin(HC / (2 * D_SI220 * kev)))
+
+
+def running_snd(tmp_path, prefix):
+    d = EXAMPLES / "snd"
+    cfg = (d / "ioc.yaml").read_text()
+    cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
+    cfg = cfg.replace("file: snd_motors.db", f"file: {d / 'snd_motors.db'}").replace('"SND:', f'"{prefix}')
+    assert "SND:" not in cfg.split("compound_motors:")[1]
+    return running_config(tmp_path, prefix, cfg, lambda: abs(get(prefix + "E1.RBV") - 8.0) < 1e-3, timeout=20)
+
+
+def test_e1_moves_every_crystal_arm_and_the_diagnostic(tmp_path, prefix):
+    with running_snd(tmp_path, prefix):
+        assert abs(get(prefix + "E1.VAL") - 8.0) < 1e-3  # VAL starts at the readback
+        assert put_status(prefix + "E1", 9.5, timeout=60) == ECA_NORMAL
+        th = bragg(9.5)
+        for axis in ("T1:TH1", "T1:TH2", "T4:TH1", "T4:TH2"):
+            assert abs(get(prefix + axis + ".RBV") - th) < 2e-4, axis
+        for axis in ("T1:TTH", "T4:TTH"):
+            assert abs(get(prefix + axis + ".RBV") - 2 * th) < 2e-4, axis
+        length = get(prefix + "T1:L.RBV")
+        assert abs(get(prefix + "DD:X.RBV") - length * math.sin(math.radians(2 * th))) < 2e-3  # Eq. 2
+        assert abs(get(prefix + "E1.RBV") - 9.5) < 1e-4
+        assert get(prefix + "E1.DMOV") == 1
+        # the channel-cut branch did not move
+        assert abs(get(prefix + "T2:TH.RBV") - bragg(8.0)) < 2e-4
+        # E2: T2/T3's crystals and dcc.x = 2 gap cos theta2 (Eq. 3)
+        assert put_status(prefix + "E2", 7.0, timeout=60) == ECA_NORMAL
+        th2 = bragg(7.0)
+        assert abs(get(prefix + "T3:TH.RBV") - th2) < 2e-4
+        assert abs(get(prefix + "DCC:X.RBV") - 2 * GAP * math.cos(math.radians(th2))) < 2e-3
+
+
+def test_delay_moves_the_delay_stages_to_eq1(tmp_path, prefix):
+    with running_snd(tmp_path, prefix):
+        assert put_status(prefix + "Delay", 100.0, timeout=60) == ECA_NORMAL
+        th1, th2 = math.radians(bragg(8.0)), math.radians(bragg(8.0))
+        length = (100.0 * C_MM_PS / 2 + GAP * (1 - math.cos(2 * th2)) / math.sin(th2)) / (1 - math.cos(2 * th1))
+        for axis in ("T1:L", "T4:L"):
+            assert abs(get(prefix + axis + ".RBV") - length) < 2e-3, axis
+        assert abs(get(prefix + "DD:X.RBV") - length * math.sin(2 * th1)) < 2e-3
+        assert abs(get(prefix + "Delay.RBV") - 100.0) < 0.05
+
+
+def test_a_move_beyond_a_reals_limits_is_refused_and_nothing_moves(tmp_path, prefix):
+    with running_snd(tmp_path, prefix):
+        # the virtual's limits follow the reals': th within [5, 80] degrees
+        assert abs(get(prefix + "E1.LLM") - HC / (2 * D_SI220 * math.sin(math.radians(80)))) < 1e-3
+        # narrow one crystal's range: th1 <= 26 degrees, i.e. E1 >= 7.37 keV
+        assert put_status(prefix + "T4:TH2.HLM", 26.0) == ECA_NORMAL
+        e_low = HC / (2 * D_SI220 * math.sin(math.radians(26.0)))
+        assert wait_for(lambda: abs(get(prefix + "E1.LLM") - e_low) < 1e-3, 5), get(prefix + "E1.LLM")
+        before = {a: get(prefix + a + ".RBV") for a in ("T1:TH1", "T4:TH2", "T1:TTH", "DD:X")}
+        assert put_status(prefix + "E1", 7.0, timeout=30) == ECA_PUTFAIL
+        assert get(prefix + "E1.LVIO") == 1
+        time.sleep(0.5)
+        assert {a: get(prefix + a + ".RBV") for a in before} == before
+        # still movable within them
+        assert put_status(prefix + "E1", 7.5, timeout=60) == ECA_NORMAL
+
+
+def test_a_stopped_move_fails_its_put_callback(tmp_path, prefix):
+    with running_snd(tmp_path, prefix):
+        got = []
+        chid = connect(prefix + "E1")
+        data = (ctypes.c_double * 1)(4.0)  # theta 23.8 -> 53.8 degrees at 5 deg/s: about 6 s
+        assert epics.ca.libca.ca_array_put_callback(6, 1, chid, data, _put_done, ctypes.py_object(got)) == ECA_NORMAL
+        epics.ca.flush_io()
+        assert wait_for(lambda: get(prefix + "E1.DMOV") == 0, 5)
+        time.sleep(1.0)
+        assert not got
+        epics.caput(prefix + "E1.STOP", 1)
+        assert wait_for(lambda: got, 10)
+        assert got[0] == ECA_PUTFAIL  # it ended short: never a success
+        assert get(prefix + "E1.DMOV") == 1
+        th = get(prefix + "T1:TH1.RBV")
+        assert 24 < th < 50
+        time.sleep(0.5)
+        assert get(prefix + "T1:TH1.RBV") == th  # the reals stopped
+        assert abs(get(prefix + "E1.RBV") - 4.0) > 0.5
+
+
+MOTORS_DB = """
+record(motor, "$(P)th")  { field(DTYP, "Sim Motor") field(MRES, "0.0001") field(RDBD, "0.0001") field(VELO, "10") field(ACCL, "0.1")
+                           field(DLLM, "5") field(DHLM, "80") field(DVAL, "20") }
+record(motor, "$(P)tth") { field(DTYP, "Sim Motor") field(MRES, "0.0001") field(RDBD, "0.0001") field(VELO, "20") field(ACCL, "0.1")
+                           field(DLLM, "10") field(DHLM, "160") field(DVAL, "40") }
+"""
+
+
+def test_a_compound_motor_drives_another_iocs_motors_through_ca(tmp_path, prefix):
+    """IOC A serves two motor records (beamctl softioc); IOC B's compound motor E moves them."""
+    require_binary()
+    a_prefix = prefix + "A:"
+    (tmp_path / "motors.db").write_text(MOTORS_DB)
+    a_port = acquire_port()
+    a = IocServer(tmp_path, [tmp_path / "motors.db"], a_port, macros=f"P={a_prefix}", name="motors").start()
+    try:
+        theta = "asin(12.398419843320026 / (2 * 1.920155716 * E))"
+        cfg = f"""ioc: {{name: B, prefix: "{prefix}"}}
+compound_motors:
+  - name: energy
+    reals: {{th: "{a_prefix}th", tth: "{a_prefix}tth"}}
+    virtuals:
+      E: {{forward: "12.398419843320026 / (2 * 1.920155716 * sin(th * pi / 180))", egu: keV, prec: 4}}
+    inverse:
+      th: "{theta} * 180 / pi"
+      tth: "2 * {theta} * 180 / pi"
+"""
+        (tmp_path / "b.yaml").write_text(cfg)
+        b_port = acquire_port()
+        b = RunServer(tmp_path, tmp_path / "b.yaml", b_port)
+        b.extra_env = {"EPICS_CA_ADDR_LIST": f"127.0.0.1:{a_port}", "EPICS_CA_AUTO_ADDR_LIST": "NO"}
+        b.start()
+        try:
+            e0 = HC / (2 * D_SI220 * math.sin(math.radians(20)))
+            assert wait_for(lambda: abs(get(prefix + "E.RBV") - e0) < 1e-3, 20), get(prefix + "E.RBV")
+            assert put_status(prefix + "E", 8.0, timeout=60) == ECA_NORMAL
+            assert abs(get(a_prefix + "th.RBV") - bragg(8.0)) < 2e-4
+            assert abs(get(a_prefix + "tth.RBV") - 2 * bragg(8.0)) < 2e-4
+            assert abs(get(prefix + "E.RBV") - 8.0) < 1e-4
+            # beyond the remote reals' limits (th >= 5 degrees -> E <= 37 keV): refused, nothing moves
+            assert put_status(prefix + "E", 40.0, timeout=30) == ECA_PUTFAIL
+            assert abs(get(a_prefix + "th.RBV") - bragg(8.0)) < 2e-4
+            # the other IOC goes away: the compound motor says so (an invalid alarm), and comes back
+            a.stop()
+            assert wait_for(lambda: get(prefix + "E.SEVR") == 3, 30), get(prefix + "E.SEVR")
+            a.start()  # its simulated motors start again at th 20, tth 40 degrees
+            assert wait_for(lambda: get(prefix + "E.SEVR") < 3 and abs(get(prefix + "E.RBV") - e0) < 1e-3, 30)
+            assert put_status(prefix + "E", 9.0, timeout=60) == ECA_NORMAL
+            assert abs(get(prefix + "E.RBV") - 9.0) < 1e-4  # A's th, read through B (this client's own
+            assert get(prefix + "E.SEVR") == 0               # channels to A may still be searching)
+        finally:
+            b.stop()
+            b.kill()
+            release_port(b_port)
+    finally:
+        a.stop()
+        a.kill()
+        forget_pvs(prefix)
+        release_port(a_port)
