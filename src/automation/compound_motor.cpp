@@ -96,6 +96,7 @@ struct CompoundMotors::Group {
     std::string not_connected; // which, for messages
     // the move under way
     bool moving = false, stop_asked = false, limits_due = true;
+    std::vector<double> seen_limits; // the reals' HLM, LLM when the virtuals' limits were derived
     int mover = -1, outstanding = 0, polls = 0;
     double move_target = 0;
     std::vector<std::string> failures;
@@ -294,6 +295,10 @@ struct CompoundMotors::Group {
                     start_move(i);
                     if (moving) break;
                 }
+        // the virtuals' limits: when a real's limits changed, after a move, else every 0.5 s
+        std::vector<double> lims;
+        for (const auto& s : st) lims.push_back(s.hlm), lims.push_back(s.llm);
+        if (lims != seen_limits) limits_due = true, seen_limits = lims;
         if (!moving && (limits_due || ++polls % 50 == 0)) update_limits();
     }
 
