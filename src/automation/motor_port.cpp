@@ -167,7 +167,60 @@ private:
     bool have_ = false;
 };
 
+class LocalWriter final : public PvWriter {
+public:
+    LocalWriter(pv::Database& db, const std::string& name, const pv::Address& a) : db_(db), name_(name), a_(a) {}
+    const std::string& name() const override { return name_; }
+    void put(double v, bool wait, MotorPort::Done done) override {
+        auto shared = std::make_shared<MotorPort::Done>(std::move(done));
+        auto fire = [shared, this](pv::PutStatus s) {
+            if (!*shared) return;
+            const MotorPort::Done d = std::move(*shared);
+            *shared = nullptr;
+            d(s == pv::PutStatus::Ok, s == pv::PutStatus::Ok ? std::string() : "the put to " + name_ + " failed");
+        };
+        const pv::PutStatus st = db_.put(a_, pv::Prim::Double, &v, 1, wait ? pv::PutCallback(fire) : pv::PutCallback());
+        if (st != pv::PutStatus::Ok || !wait) fire(st);
+    }
+
+private:
+    pv::Database& db_;
+    std::string name_;
+    pv::Address a_;
+};
+
+class CaWriter final : public PvWriter {
+public:
+    CaWriter(ca::Client& client, const std::string& name) : name_(name), ch_(client.channel(name)), life_(std::make_shared<int>(0)) {}
+    const std::string& name() const override { return name_; }
+    void put(double v, bool wait, MotorPort::Done done) override {
+        if (!wait) {
+            const bool ok = ch_->put(v);
+            return done(ok, ok ? std::string() : name_ + " is not connected");
+        }
+        std::weak_ptr<int> alive = life_;
+        ch_->put(v, [this, alive, done](const ca::Result& r) {
+            if (alive.expired()) return;
+            done(r.ok(), r.ok() ? std::string() : "the put to " + name_ + " failed: " + r.message);
+        });
+    }
+
+private:
+    std::string name_;
+    std::shared_ptr<ca::Channel> ch_;
+    std::shared_ptr<int> life_;
+};
+
 } // namespace
+
+std::unique_ptr<PvWriter> make_local_writer(pv::Database& db, const std::string& channel) {
+    pv::Address a;
+    if (!db.resolve(channel, a)) return nullptr;
+    return std::make_unique<LocalWriter>(db, channel, a);
+}
+std::unique_ptr<PvWriter> make_ca_writer(ca::Client& client, const std::string& channel) {
+    return std::make_unique<CaWriter>(client, channel);
+}
 
 std::unique_ptr<MotorPort> make_local_motor(pv::Database& db, const std::string& record) { return std::make_unique<LocalMotor>(db, record); }
 std::unique_ptr<MotorPort> make_ca_motor(ca::Client& client, const std::string& record) { return std::make_unique<CaMotor>(client, record); }

@@ -56,4 +56,16 @@ public:
 std::unique_ptr<PvReader> make_local_reader(pv::Database& db, const std::string& channel); // nullptr if not here
 std::unique_ptr<PvReader> make_ca_reader(ca::Client& client, const std::string& channel);
 
+// A PV written by automation (a state machine's step): here or elsewhere. With `wait`, `done`
+// comes when the put-callback completes (processing ended: a motor arrived); without, when the
+// put was sent. `done` is called once.
+class PvWriter {
+public:
+    virtual ~PvWriter() = default;
+    virtual const std::string& name() const = 0;
+    virtual void put(double v, bool wait, MotorPort::Done done) = 0;
+};
+std::unique_ptr<PvWriter> make_local_writer(pv::Database& db, const std::string& channel); // nullptr if not here
+std::unique_ptr<PvWriter> make_ca_writer(ca::Client& client, const std::string& channel);
+
 } // namespace beamctl::automation

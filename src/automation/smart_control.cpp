@@ -4,6 +4,7 @@
 #include "core/log.hpp"
 #include "pv/convert.hpp"
 #include "pv/db_file.hpp"
+#include "pv/publish.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -32,27 +33,13 @@ std::string num(double v) {
     return b;
 }
 
-// The owner's write of a record's VAL (no client rules), then processing.
+// The owner's writes by record name (pv/publish.hpp); nothing when there is no such record.
 void set_record(pv::Database& db, const std::string& name, double v) {
-    pv::Record* r = db.find(name);
-    if (!r) return;
-    const pv::FieldDesc* f = r->type().find("VAL");
-    pv::Elements e = r->elements(*f);
-    pv::put_element(*r, *f, e, 0, pv::Prim::Double, &v);
-    r->udf = 0;
-    db.process(*r);
+    if (pv::Record* r = db.find(name)) pv::set_value(db, *r, v, false);
 }
 
 void set_text(pv::Database& db, const std::string& name, const std::string& text) {
-    pv::Record* r = db.find(name);
-    if (!r) return;
-    char s[pv::kStringSize] = {};
-    std::strncpy(s, text.c_str(), sizeof s - 1);
-    const pv::FieldDesc* f = r->type().find("VAL");
-    pv::Elements e = r->elements(*f);
-    pv::put_element(*r, *f, e, 0, pv::Prim::String, s);
-    r->udf = 0;
-    db.process(*r);
+    if (pv::Record* r = db.find(name)) pv::set_string(db, *r, text);
 }
 
 } // namespace

@@ -382,7 +382,10 @@ void Circuit::on_write(const Header& h, const uint8_t* payload, bool notify) {
         };
     }
     bool asg_write = ch->addr.field && std::strcmp(ch->addr.field->name, "ASG") == 0;
+    origin_.assign(user_).append("@").append(host_); // who, for audit logs (a latch's acknowledgement)
+    ctx_.db.set_put_origin(origin_);
     pv::PutStatus st = ctx_.db.put(ch->addr, pv::Prim(t), host.data(), h.count, std::move(cb));
+    ctx_.db.set_put_origin({});
     if (!notify && st != pv::PutStatus::Ok) reply(eca_of(st), "put failed");
     if (asg_write && on_asg_changed) on_asg_changed();
 }

@@ -112,6 +112,7 @@ private:
     uint16_t minor_ = 0;
     uint16_t priority_ = 0;
     std::string user_, host_;
+    std::string origin_; // "user@host" during a put (Database::put_origin)
     bool events_off_ = false;
     bool close_ = false;
 

@@ -275,7 +275,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control", "compound_motors"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control", "compound_motors", "state_machines"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -864,6 +864,84 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             e.inverse_where.push_back(v.where());
         }
         cfg.compound_motors.push_back(std::move(e));
+    }
+    std::set<std::string> fsm_names;
+    for (YamlNode m : root["state_machines"].list()) {
+        if (!m.keys({"name", "states", "initial", "latch", "after_ack", "names", "transitions"})) continue;
+        StateMachineEntry e;
+        e.where = m.where();
+        e.name = m.required("name", " (its PVs are $(P)<name>:...)").string().value_or("");
+        check_name_part(m["name"], e.name, "state machine", fsm_names, false);
+        auto steps = [](const YamlNode& list, std::vector<StateMachineEntry::Step>& out) {
+            for (YamlNode st : list.list()) {
+                if (!st.keys({"put", "value", "wait", "timeout", "wait_for", "delay"})) continue;
+                StateMachineEntry::Step x;
+                x.where = st.where();
+                const int kinds = st.has("put") + st.has("wait_for") + st.has("delay");
+                if (kinds != 1) {
+                    st.error("a step is one of put: PV (with value:), wait_for: expression, delay: seconds");
+                    continue;
+                }
+                if (st.has("put")) {
+                    x.kind = StateMachineEntry::Step::Kind::Put;
+                    x.pv = st["put"].string().value_or("");
+                    x.value = st.required("value", " (the number written)").number().value_or(0);
+                    x.wait = st["wait"].boolean().value_or(true);
+                    x.seconds = st["timeout"].number(above(0)).value_or(0);
+                } else if (st.has("wait_for")) {
+                    x.kind = StateMachineEntry::Step::Kind::WaitFor;
+                    x.expr = st["wait_for"].string().value_or("");
+                    x.seconds = st["timeout"].number(above(0)).value_or(0);
+                } else {
+                    x.kind = StateMachineEntry::Step::Kind::Delay;
+                    x.seconds = st["delay"].number(between(0, 86400)).value_or(0);
+                }
+                out.push_back(std::move(x));
+            }
+        };
+        std::set<std::string> states;
+        for (const auto& [n, v] : m.required("states", " (name: {parent, invariant, entry, exit})").entries()) {
+            if (!v.keys({"parent", "invariant", "entry", "exit"})) continue;
+            StateMachineEntry::State x;
+            x.name = n, x.where = v.where();
+            if (n.empty() || n.size() > 25) v.error(SB() << "state name '" << n << "' should be 1 to 25 characters (an mbbi string)");
+            check_name_part(v, n, "state", states, false);
+            x.parent = v["parent"].string().value_or("");
+            x.invariant = v["invariant"].string().value_or("");
+            steps(v["entry"], x.entry);
+            steps(v["exit"], x.exit);
+            e.states.push_back(std::move(x));
+        }
+        if (e.states.size() > 16) m["states"].error(SB() << e.states.size() << " states; an mbbi shows at most 16");
+        auto is_state = [&](const std::string& s) { return states.count(s) > 0; };
+        for (const auto& x : e.states)
+            if (!x.parent.empty() && (!is_state(x.parent) || x.parent == x.name))
+                m["states"][x.name]["parent"].error(SB() << "'" << x.parent << "' is not another state of '" << e.name << "'");
+        e.initial = m.required("initial", " (the state at start-up)").string().value_or("");
+        if (!e.initial.empty() && !is_state(e.initial)) m["initial"].error(SB() << "'" << e.initial << "' is not a state of '" << e.name << "'");
+        e.latch = m["latch"].string().value_or("");
+        if (!e.latch.empty() && !is_state(e.latch)) m["latch"].error(SB() << "'" << e.latch << "' is not a state of '" << e.name << "'");
+        e.after_ack = m["after_ack"].string().value_or(e.initial);
+        if (m.has("after_ack") && !is_state(e.after_ack)) m["after_ack"].error(SB() << "'" << e.after_ack << "' is not a state of '" << e.name << "'");
+        for (const auto& [n, v] : m["names"].entries()) {
+            e.names.emplace_back(n, v.string().value_or(""));
+            e.names_where.push_back(v.where());
+        }
+        for (YamlNode t : m["transitions"].list()) {
+            if (!t.keys({"name", "from", "to", "guard", "steps", "timeout"})) continue;
+            StateMachineEntry::Transition x;
+            x.where = t.where();
+            x.from = t.required("from", " (a state)").string().value_or("");
+            x.to = t.required("to", " (a state)").string().value_or("");
+            x.name = t["name"].string().value_or(x.from + "->" + x.to);
+            for (const auto& [key, val] : {std::pair{"from", &x.from}, {"to", &x.to}})
+                if (!val->empty() && !is_state(*val)) t[key].error(SB() << "'" << *val << "' is not a state of '" << e.name << "'");
+            x.guard = t["guard"].string().value_or("");
+            x.timeout = t["timeout"].number(above(0)).value_or(300);
+            steps(t["steps"], x.steps);
+            e.transitions.push_back(std::move(x));
+        }
+        cfg.state_machines.push_back(std::move(e));
     }
     rd.take_errors(errors);
     return cfg;

@@ -373,6 +373,43 @@ struct CompoundMotorEntry {
     std::string where;
 };
 
+// `state_machines:` (docs/automation.md): finite state machines served as PVs under
+// $(P)<name>: (State, Request, Busy, Transition, Step, Allowed, Error, Latched, Ack, AckBy, AckTime).
+// A transition runs its steps (the from-state's exit steps, its own, the to-state's entry steps);
+// any failure, a time-out, a false guard or a state's invariant turning false moves the machine to
+// its error latch, which refuses every request until Ack is written.
+struct StateMachineEntry {
+    struct Step {
+        enum class Kind { Put, WaitFor, Delay } kind = Kind::Put;
+        std::string pv;        // Put: the PV written
+        double value = 0;      // Put: the value
+        bool wait = true;      // Put: with a put-callback; the step ends when it completes
+        std::string expr;      // WaitFor: the condition
+        double seconds = 0;    // Delay: how long; Put/WaitFor: time-out (0: the transition's)
+        std::string where;
+    };
+    struct State {
+        std::string name, parent; // a sub-state names its parent
+        std::string invariant;    // must hold while in the state (and its sub-states); "" none
+        std::vector<Step> entry, exit;
+        std::string where;
+    };
+    struct Transition {
+        std::string name, from, to; // from: a state or a parent of states
+        std::string guard;          // must hold when requested; "" none
+        std::vector<Step> steps;
+        double timeout = 300;       // [s] the whole transition
+        std::string where;
+    };
+    std::string name;
+    std::vector<State> states;                                // in mbbi order (at most 16)
+    std::string initial, latch, after_ack;                    // after_ack: default initial
+    std::vector<std::pair<std::string, std::string>> names;   // expression name -> PV
+    std::vector<std::string> names_where;
+    std::vector<Transition> transitions;
+    std::string where;
+};
+
 // `detectors: {area_detector: [{cam, image, hdf, stats, bus, size, pixel_size, centre, ...}]}`: a
 // simulated camera of the beam behind areaDetector's PV sets (docs/detectors.md).
 struct AreaDetectorEntry {
@@ -419,6 +456,7 @@ struct IocConfig {
     std::vector<AreaDetectorEntry> area_detector; // detectors.area_detector
     std::optional<SmartControlEntry> smart_control;
     std::vector<CompoundMotorEntry> compound_motors;
+    std::vector<StateMachineEntry> state_machines;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

@@ -334,6 +334,8 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     area_ = std::make_unique<IocAreaDetector>(cfg_, db_, EventLoop::now_s);
     if (cfg_.smart_control) smart_ = std::make_unique<automation::SmartControl>(*cfg_.smart_control, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; }); // the engine's clock: virtual in tests
     if (!cfg_.compound_motors.empty()) compound_ = std::make_unique<automation::CompoundMotors>(cfg_.compound_motors, cfg_.prefix, db_);
+    if (!cfg_.state_machines.empty())
+        fsms_ = std::make_unique<automation::StateMachines>(cfg_.state_machines, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; });
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
@@ -846,6 +848,7 @@ void Ioc::bring_up() {
     area_->start();
     if (smart_) smart_->start(); // its motors, shutter, trigger and scaler: records of this IOC
     if (compound_) compound_->start(); // their reals and inputs: here, or other IOCs' (run() connects those)
+    if (fsms_) fsms_->start();
     plcs_->set_epics_state(12); // initHookAfterIocBuilt
     brought_up_ = true;
 }
@@ -862,6 +865,7 @@ void Ioc::publish() {
     detectors_->poll(); // mca records follow acquisitions started through the sum or StartAll
     if (smart_) smart_->poll();
     if (compound_) compound_->poll();
+    if (fsms_) fsms_->poll();
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) {
         b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
@@ -944,11 +948,13 @@ int Ioc::run() {
         }
     } stop_ca_links{ca_links_.get()};
     if (ca_links_) ca_links_->start(loop);
-    // automation's CA client (compound motors over other IOCs' motors); goes before the loop
+    // automation's CA client (compound motors and state machines over other IOCs' PVs); goes
+    // before the loop
     std::unique_ptr<ca::Client> automation_client;
-    if (compound_ && compound_->needs_client()) {
+    if ((compound_ && compound_->needs_client()) || (fsms_ && fsms_->needs_client())) {
         automation_client = std::make_unique<ca::Client>(loop, ca::ClientConfig::from_env());
-        compound_->connect(*automation_client);
+        if (compound_) compound_->connect(*automation_client);
+        if (fsms_) fsms_->connect(*automation_client);
     }
     ca::ServerConfig sc = ca::ServerConfig::from_env();
     if (cfg_.ca_port) sc.set_port(*cfg_.ca_port, cfg_.path + ": ca: port");

@@ -6,6 +6,7 @@
 
 #include "automation/compound_motor.hpp"
 #include "automation/smart_control.hpp"
+#include "automation/state_machine.hpp"
 #include "ca/ca_link.hpp"
 #include "ca/server.hpp"
 #include "config/ioc_config.hpp"
@@ -83,6 +84,7 @@ public:
     IocAreaDetector& area_detectors() { return *area_; }
     automation::SmartControl* smart_control() { return smart_.get(); } // smart_control: (or none)
     automation::CompoundMotors* compound_motors() { return compound_.get(); } // compound_motors: (or none)
+    automation::StateMachines* state_machines() { return fsms_.get(); }         // state_machines: (or none)
     // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
     // (`beamctl signals`). Frozen once the IOC is built.
     const registry::Registry& signals() const { return registry_; }
@@ -167,6 +169,7 @@ private:
     std::unique_ptr<IocAreaDetector> area_;   // simulated cameras (detectors.area_detector)
     std::unique_ptr<automation::SmartControl> smart_; // the goniometer protocol (smart_control:)
     std::unique_ptr<automation::CompoundMotors> compound_; // virtual motors over motor records (compound_motors:)
+    std::unique_ptr<automation::StateMachines> fsms_;      // state machines with an error latch (state_machines:)
     std::unique_ptr<IocFlyScan> flyscan_; // position compare and capture (pcomp:, capture:)
     bool brought_up_ = false;
     std::unique_ptr<pv::Autosave> autosave_; // ioc.yaml autosave:

@@ -123,6 +123,11 @@ public:
     // when processing ends (immediately for synchronous records); a put-callback that arrives
     // while another is active on the same record waits behind it. Returns Ok when accepted.
     PutStatus put(const Address& a, Prim t, const void* data, uint32_t n, PutCallback cb = {});
+    // Who is putting, for audit logs (caPutLog's "user@host"): the CA server names its client
+    // for the duration of each client put; empty when the IOC itself puts. The view is valid
+    // only during that put.
+    void set_put_origin(std::string_view who) { put_origin_ = who; }
+    std::string_view put_origin() const { return put_origin_; }
     // dbPut: stores n elements of type t (conversion, special(), put_hook, UDF, monitors)
     // without processing the record and without the client rules of put() (autosave restore).
     PutStatus store_value(const Address& a, Prim t, const void* data, uint32_t n) {
@@ -240,6 +245,7 @@ private:
     std::vector<IoIntr> io_intr_; // SCAN "I/O Intr" records (all have a bound device link), read-backs
     bool io_intr_stale_ = true;    // a link of one of them may have changed (relink, add)
     double now_s_ = 0;         // the last time scan_periodic was given
+    std::string_view put_origin_; // set_put_origin
     std::function<double()> clock_;
     std::unordered_map<std::string, std::vector<Record*>> events_; // SCAN=Event by EVNT, PHAS order
     std::deque<Record*> once_;                                       // scanOnce queue

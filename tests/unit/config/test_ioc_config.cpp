@@ -389,3 +389,51 @@ TEST(IocConfig, CompoundMotors) {
     EXPECT_NE(e[3].find("'z' is not one of the group's reals"), std::string::npos) << e[3];
     EXPECT_NE(e[4].find("compound motor 'v' is defined twice"), std::string::npos) << e[4];
 }
+
+TEST(IocConfig, StateMachines) {
+    config::IocConfig c = config::IocConfig::parse("ioc: {name: T}\n"
+                                                   "state_machines:\n"
+                                                   "  - name: m\n"
+                                                   "    states: {a: {}, b: {parent: a, invariant: \"x > 1\", entry: [{delay: 0.5}]}, l: {}}\n"
+                                                   "    initial: a\n"
+                                                   "    latch: l\n"
+                                                   "    names: {x: \"P:x\"}\n"
+                                                   "    transitions:\n"
+                                                   "      - {from: a, to: b, guard: \"x > 0\", timeout: 20,\n"
+                                                   "         steps: [{put: \"P:y\", value: 2, wait: false, timeout: 3}, {wait_for: \"x > 1\", timeout: 4}]}\n",
+                                                   "/cfg/ioc.yaml");
+    ASSERT_EQ(c.state_machines.size(), 1u);
+    const auto& m = c.state_machines[0];
+    ASSERT_EQ(m.states.size(), 3u);
+    EXPECT_EQ(m.states[1].parent, "a");
+    EXPECT_EQ(m.states[1].invariant, "x > 1");
+    ASSERT_EQ(m.states[1].entry.size(), 1u);
+    EXPECT_EQ(m.states[1].entry[0].kind, config::StateMachineEntry::Step::Kind::Delay);
+    EXPECT_EQ(m.initial, "a");
+    EXPECT_EQ(m.latch, "l");
+    EXPECT_EQ(m.after_ack, "a"); // the initial state by default
+    ASSERT_EQ(m.transitions.size(), 1u);
+    const auto& t = m.transitions[0];
+    EXPECT_EQ(t.name, "a->b");
+    EXPECT_EQ(t.timeout, 20);
+    ASSERT_EQ(t.steps.size(), 2u);
+    EXPECT_EQ(t.steps[0].pv, "P:y");
+    EXPECT_EQ(t.steps[0].value, 2);
+    EXPECT_FALSE(t.steps[0].wait);
+    EXPECT_EQ(t.steps[0].seconds, 3);
+    EXPECT_EQ(t.steps[1].expr, "x > 1");
+    const auto e = errors_of("ioc: {name: T}\n"
+                             "state_machines:\n"
+                             "  - name: m\n"
+                             "    states: {a: {parent: z}, b: {}}\n"
+                             "    initial: c\n"
+                             "    transitions:\n"
+                             "      - {from: a, to: q}\n"
+                             "      - {from: a, to: b, steps: [{put: \"P:y\"}, {delay: 1, wait_for: \"1\"}]}\n");
+    ASSERT_EQ(e.size(), 5u) << ::testing::PrintToString(e);
+    EXPECT_NE(e[0].find("'z' is not another state of 'm'"), std::string::npos) << e[0];
+    EXPECT_NE(e[1].find("'c' is not a state of 'm'"), std::string::npos) << e[1];
+    EXPECT_NE(e[2].find("'q' is not a state of 'm'"), std::string::npos) << e[2];
+    EXPECT_NE(e[3].find("value"), std::string::npos) << e[3];
+    EXPECT_NE(e[4].find("a step is one of put"), std::string::npos) << e[4];
+}
