@@ -12,7 +12,7 @@ JOBS=${JOBS:-$(nproc)}
 BUILD_PKGS="g++ cmake ninja-build pkgconf libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libyaml-cpp-dev libtinyxml2-dev libmuparser-dev libhdf5-dev libcminpack-dev"
 # The client command that the demo prints (pyepics imports only under Debian's /usr/bin/python3).
 DEMO_PKGS="python3 python3-pyepics"
-TEST_PKGS="$DEMO_PKGS python3-pytest python3-numpy iproute2 procps clang-14 libclang-rt-14-dev tshark python3-h5py hdf5-tools python3-matplotlib"
+TEST_PKGS="$DEMO_PKGS python3-pytest python3-numpy iproute2 procps clang-14 libclang-rt-14-dev tshark python3-h5py hdf5-tools python3-matplotlib python3-aiosmtpd"
 
 deps() {
     local want="$BUILD_PKGS"

@@ -275,7 +275,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control", "compound_motors", "state_machines"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control", "compound_motors", "state_machines", "notify"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -942,6 +942,57 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             e.transitions.push_back(std::move(x));
         }
         cfg.state_machines.push_back(std::move(e));
+    }
+    if (YamlNode n = root["notify"];
+        n.keys({"smtp", "webhooks", "rules", "min_interval", "dedup", "retries", "retry_interval", "timeout"}) && n) {
+        NotifyEntry e;
+        e.where = n.where();
+        if (YamlNode sm = n["smtp"]; sm.keys({"host", "port", "from", "to"}) && sm) {
+            e.smtp_host = sm.required("host", " (the mail server)").string().value_or("");
+            e.smtp_port = int(sm["port"].integer(between(1, 65535)).value_or(25));
+            e.from = sm["from"].string().value_or("beamctl");
+            for (YamlNode t : sm.required("to", " (a list of addresses)").list()) e.to.push_back(t.string().value_or(""));
+            if (e.to.empty()) sm["to"].error("needs at least one address");
+        }
+        for (YamlNode w : n["webhooks"].list()) {
+            NotifyEntry::Webhook h;
+            h.url = w.string().value_or("");
+            const std::string scheme = "http://";
+            std::string rest = h.url.rfind(scheme, 0) == 0 ? h.url.substr(scheme.size()) : "";
+            const std::size_t slash = rest.find('/');
+            std::string hostport = rest.substr(0, slash);
+            h.path = slash == std::string::npos ? "/" : rest.substr(slash);
+            const std::size_t colon = hostport.rfind(':');
+            h.host = hostport.substr(0, colon);
+            if (colon != std::string::npos) h.port = std::atoi(hostport.c_str() + colon + 1);
+            if (rest.empty() || h.host.empty() || h.port <= 0 || h.port > 65535)
+                w.error(SB() << "'" << h.url << "' should be http://host[:port]/path (https is not supported)");
+            else
+                e.webhooks.push_back(h);
+        }
+        for (YamlNode r : n.required("rules", " (a list of {state_machine: NAME} or {pv: NAME, severity: MAJOR})").list()) {
+            if (!r.keys({"state_machine", "pv", "severity"})) continue;
+            NotifyEntry::Rule x;
+            x.where = r.where();
+            x.state_machine = r["state_machine"].string().value_or("");
+            x.pv = r["pv"].string().value_or("");
+            const std::string sev = r["severity"].one_of({"MINOR", "MAJOR", "INVALID"}).value_or("MAJOR");
+            x.severity = sev == "MINOR" ? 1 : sev == "INVALID" ? 3 : 2;
+            if (x.state_machine.empty() == x.pv.empty()) r.error("a rule names one of state_machine: or pv:");
+            else if (!x.state_machine.empty() && x.state_machine != "*") {
+                bool known = false;
+                for (const auto& m : cfg.state_machines) known = known || m.name == x.state_machine;
+                if (!known) r["state_machine"].error(SB() << "'" << x.state_machine << "' is not one of state_machines:");
+            }
+            e.rules.push_back(std::move(x));
+        }
+        if (e.smtp_host.empty() && e.webhooks.empty()) n.error("needs smtp: or webhooks: (somewhere to send to)");
+        e.min_interval_s = n["min_interval"].number(between(0, 86400)).value_or(60);
+        e.dedup_s = n["dedup"].number(between(0, 864000)).value_or(600);
+        e.retries = int(n["retries"].integer(between(0, 100)).value_or(3));
+        e.retry_interval_s = n["retry_interval"].number(between(0, 3600)).value_or(10);
+        e.timeout_s = n["timeout"].number(between(0.1, 120)).value_or(5);
+        cfg.notify = e;
     }
     rd.take_errors(errors);
     return cfg;

@@ -410,6 +410,33 @@ struct StateMachineEntry {
     std::string where;
 };
 
+// `notify:` (docs/automation.md): email (SMTP) and webhooks (HTTP POST of JSON) when a state
+// machine latches or a PV of this IOC reaches an alarm severity.
+struct NotifyEntry {
+    struct Rule {
+        std::string state_machine; // "name" or "*": when it latches
+        std::string pv;            // a record of this IOC: when its SEVR reaches `severity`
+        int severity = 2;          // 1 MINOR, 2 MAJOR, 3 INVALID
+        std::string where;
+    };
+    struct Webhook {
+        std::string url, host, path; // http://host[:port]/path
+        int port = 80;
+    };
+    std::string smtp_host;         // "" no email
+    int smtp_port = 25;
+    std::string from = "beamctl";
+    std::vector<std::string> to;
+    std::vector<Webhook> webhooks;
+    std::vector<Rule> rules;
+    double min_interval_s = 60;    // per rule: at most one message per interval
+    double dedup_s = 600;          // the same text within this is sent once
+    int retries = 3;
+    double retry_interval_s = 10;
+    double timeout_s = 5;          // each connection's
+    std::string where;
+};
+
 // `detectors: {area_detector: [{cam, image, hdf, stats, bus, size, pixel_size, centre, ...}]}`: a
 // simulated camera of the beam behind areaDetector's PV sets (docs/detectors.md).
 struct AreaDetectorEntry {
@@ -457,6 +484,7 @@ struct IocConfig {
     std::optional<SmartControlEntry> smart_control;
     std::vector<CompoundMotorEntry> compound_motors;
     std::vector<StateMachineEntry> state_machines;
+    std::optional<NotifyEntry> notify;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

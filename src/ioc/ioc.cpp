@@ -336,6 +336,10 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     if (!cfg_.compound_motors.empty()) compound_ = std::make_unique<automation::CompoundMotors>(cfg_.compound_motors, cfg_.prefix, db_);
     if (!cfg_.state_machines.empty())
         fsms_ = std::make_unique<automation::StateMachines>(cfg_.state_machines, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; });
+    if (cfg_.notify) {
+        notifier_ = std::make_unique<automation::Notifier>(*cfg_.notify, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; });
+        if (fsms_) fsms_->on_latch([this](const std::string& m, const std::string& why) { notifier_->latched(m, why); });
+    }
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
@@ -849,6 +853,7 @@ void Ioc::bring_up() {
     if (smart_) smart_->start(); // its motors, shutter, trigger and scaler: records of this IOC
     if (compound_) compound_->start(); // their reals and inputs: here, or other IOCs' (run() connects those)
     if (fsms_) fsms_->start();
+    if (notifier_) notifier_->start();
     plcs_->set_epics_state(12); // initHookAfterIocBuilt
     brought_up_ = true;
 }
@@ -866,6 +871,7 @@ void Ioc::publish() {
     if (smart_) smart_->poll();
     if (compound_) compound_->poll();
     if (fsms_) fsms_->poll();
+    if (notifier_) notifier_->poll();
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) {
         b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)

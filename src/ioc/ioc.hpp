@@ -5,6 +5,7 @@
 #pragma once
 
 #include "automation/compound_motor.hpp"
+#include "automation/notifier.hpp"
 #include "automation/smart_control.hpp"
 #include "automation/state_machine.hpp"
 #include "ca/ca_link.hpp"
@@ -85,6 +86,7 @@ public:
     automation::SmartControl* smart_control() { return smart_.get(); } // smart_control: (or none)
     automation::CompoundMotors* compound_motors() { return compound_.get(); } // compound_motors: (or none)
     automation::StateMachines* state_machines() { return fsms_.get(); }         // state_machines: (or none)
+    automation::Notifier* notifier() { return notifier_.get(); }                // notify: (or none)
     // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
     // (`beamctl signals`). Frozen once the IOC is built.
     const registry::Registry& signals() const { return registry_; }
@@ -170,6 +172,7 @@ private:
     std::unique_ptr<automation::SmartControl> smart_; // the goniometer protocol (smart_control:)
     std::unique_ptr<automation::CompoundMotors> compound_; // virtual motors over motor records (compound_motors:)
     std::unique_ptr<automation::StateMachines> fsms_;      // state machines with an error latch (state_machines:)
+    std::unique_ptr<automation::Notifier> notifier_;       // email and webhooks (notify:)
     std::unique_ptr<IocFlyScan> flyscan_; // position compare and capture (pcomp:, capture:)
     bool brought_up_ = false;
     std::unique_ptr<pv::Autosave> autosave_; // ioc.yaml autosave:

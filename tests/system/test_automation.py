@@ -224,3 +224,124 @@ def test_parking_runs_the_auxiliary_machines_transitions(tmp_path, prefix):
         assert get_str(bearing + "State") == "locked"
         assert get(prefix + "T1:N2") == 0 and get(prefix + "T1:Vacuum") == 1
         assert get(fsm + "Latched") == 0
+
+
+class MailAndHooks:
+    """A local SMTP server (Debian's python3-aiosmtpd) and an HTTP server that record what arrives."""
+
+    def __init__(self):
+        import http.server
+        import threading
+        from aiosmtpd.controller import Controller
+
+        self.mails, self.posts = [], []
+        outer = self
+
+        class Handler:
+            async def handle_DATA(self, server, session, envelope):
+                outer.mails.append((envelope.mail_from, list(envelope.rcpt_tos), envelope.content.decode()))
+                return "250 OK"
+
+        import socket
+        probe = socket.socket()
+        probe.bind(("127.0.0.1", 0))
+        self.smtp_port = probe.getsockname()[1]  # a free port (Controller cannot take port 0)
+        probe.close()
+        self.smtp = Controller(Handler(), hostname="127.0.0.1", port=self.smtp_port)
+        self.smtp.start()
+
+        class Hook(http.server.BaseHTTPRequestHandler):
+            def do_POST(self):
+                body = self.rfile.read(int(self.headers["Content-Length"]))
+                outer.posts.append((self.path, self.headers["Content-Type"], body.decode()))
+                self.send_response(204)
+                self.end_headers()
+
+            def log_message(self, *args):
+                pass
+
+        self.http = http.server.HTTPServer(("127.0.0.1", 0), Hook)
+        self.http_port = self.http.server_address[1]
+        threading.Thread(target=self.http.serve_forever, daemon=True).start()
+
+    def close(self):
+        self.smtp.stop()
+        self.http.shutdown()
+
+
+def test_a_latch_sends_an_email_and_a_webhook_once(tmp_path, prefix):
+    import json
+    srv = MailAndHooks()
+    try:
+        d = EXAMPLES / "snd"
+        cfg = (d / "ioc.yaml").read_text()
+        cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
+        cfg = cfg.replace("file: snd_motors.db", f"file: {d / 'snd_motors.db'}").replace('"SND:', f'"{prefix}')
+        cfg = cfg.replace("port: 8025", f"port: {srv.smtp_port}").replace("127.0.0.1:8026", f"127.0.0.1:{srv.http_port}")
+        with running_config(tmp_path, prefix, cfg, lambda: get_str(prefix + "snd:State") == "parked", timeout=20):
+            assert put_status(prefix + "snd:Request", "normal_operation") == ECA_PUTFAIL  # the guard: latches
+            assert wait_for(lambda: srv.mails and srv.posts, 10), (srv.mails, srv.posts)
+            mail_from, rcpt, content = srv.mails[0]
+            assert mail_from == "snd-ioc@localhost" and rcpt == ["snd-engineers@localhost"]
+            assert "Subject: [beamctl] state machine snd latched" in content
+            assert "guard of transition unpark does not hold: bearing_t1 == bearing_t1.flying" in content
+            path, ctype, body = srv.posts[0]
+            assert path == "/snd" and ctype == "application/json"
+            assert json.loads(body)["subject"] == "[beamctl] state machine snd latched"
+            assert wait_for(lambda: get(prefix + "notify:Sent") == 1, 5)
+            # acknowledged and latched again the same way within a minute: not sent again
+            assert put_status(prefix + "snd:Ack", 1) == ECA_NORMAL
+            assert put_status(prefix + "snd:Request", "normal_operation") == ECA_PUTFAIL
+            assert wait_for(lambda: get(prefix + "notify:Suppressed") == 1, 5)
+            time.sleep(0.5)
+            assert len(srv.mails) == 1 and len(srv.posts) == 1
+    finally:
+        srv.close()
+
+
+def test_an_unreachable_mail_server_is_retried_logged_and_never_blocks_control(tmp_path, prefix):
+    srv = MailAndHooks()
+    port = srv.smtp_port
+    srv.close()  # nobody listens there now
+    d = EXAMPLES / "snd"
+    cfg = (d / "ioc.yaml").read_text()
+    cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
+    cfg = cfg.replace("file: snd_motors.db", f"file: {d / 'snd_motors.db'}").replace('"SND:', f'"{prefix}')
+    cfg = cfg.replace("port: 8025", f"port: {port}").replace('  webhooks: ["http://127.0.0.1:8026/snd"]\n', "")
+    cfg = cfg.replace("  min_interval: 60", "  min_interval: 60\n  retries: 2\n  retry_interval: 0.2")
+    with running_config(tmp_path, prefix, cfg, lambda: get_str(prefix + "snd:State") == "parked", timeout=20):
+        assert put_status(prefix + "snd:Request", "normal_operation") == ECA_PUTFAIL
+        assert wait_for(lambda: get(prefix + "notify:Failed") == 1, 10)
+        assert get(prefix + "notify:Sent") == 0
+        assert get_str(prefix + "notify:LastError").startswith("given up after 3 attempts: cannot connect to 127.0.0.1")
+        # control went on meanwhile
+        assert put_status(prefix + "snd:Ack", 1) == ECA_NORMAL
+        assert put_status(prefix + "E1", 8.5, timeout=60) == ECA_NORMAL
+
+
+def test_a_pv_reaching_its_alarm_severity_posts_a_webhook(tmp_path, prefix):
+    import json
+    srv = MailAndHooks()
+    try:
+        (tmp_path / "t.db").write_text(f'record(ao, "{prefix}temp") {{ field(HIHI, "50") field(HHSV, "MAJOR") field(HIGH, "40") field(HSV, "MINOR") }}\n')
+        cfg = f"""ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}
+db: [{{file: t.db}}]
+notify:
+  webhooks: ["http://127.0.0.1:{srv.http_port}/alarm"]
+  rules: [{{pv: "{prefix}temp", severity: MAJOR}}]
+  min_interval: 0
+"""
+        with running_config(tmp_path, prefix, cfg, lambda: get(prefix + "notify:Sent") == 0, timeout=20):
+            epics.caput(prefix + "temp", 45, wait=True)  # MINOR: below the rule's severity
+            time.sleep(0.3)
+            assert srv.posts == []
+            epics.caput(prefix + "temp", 60, wait=True)  # MAJOR
+            assert wait_for(lambda: srv.posts, 10)
+            msg = json.loads(srv.posts[0][2])
+            assert msg["subject"] == f"[beamctl] {prefix}temp in MAJOR alarm"
+            assert msg["text"].startswith(f"{prefix}temp = 60, severity MAJOR")
+            epics.caput(prefix + "temp", 61, wait=True)  # still MAJOR: no new message (edges only)
+            time.sleep(0.3)
+            assert len(srv.posts) == 1
+    finally:
+        srv.close()

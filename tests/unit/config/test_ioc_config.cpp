@@ -437,3 +437,41 @@ TEST(IocConfig, StateMachines) {
     EXPECT_NE(e[3].find("value"), std::string::npos) << e[3];
     EXPECT_NE(e[4].find("a step is one of put"), std::string::npos) << e[4];
 }
+
+TEST(IocConfig, Notify) {
+    config::IocConfig c = config::IocConfig::parse("ioc: {name: T}\n"
+                                                   "state_machines:\n"
+                                                   "  - {name: m, states: {a: {}}, initial: a}\n"
+                                                   "notify:\n"
+                                                   "  smtp: {host: mail.lab, port: 2525, from: ioc@lab, to: [a@lab, b@lab]}\n"
+                                                   "  webhooks: [\"http://hooks.lab:8080/x/y\", \"http://h2/\"]\n"
+                                                   "  rules: [{state_machine: m}, {pv: \"P:t\", severity: MINOR}]\n"
+                                                   "  min_interval: 30\n"
+                                                   "  retries: 1\n",
+                                                   "/cfg/ioc.yaml");
+    ASSERT_TRUE(c.notify);
+    const auto& n = *c.notify;
+    EXPECT_EQ(n.smtp_host, "mail.lab");
+    EXPECT_EQ(n.smtp_port, 2525);
+    EXPECT_EQ(n.to, (std::vector<std::string>{"a@lab", "b@lab"}));
+    ASSERT_EQ(n.webhooks.size(), 2u);
+    EXPECT_EQ(n.webhooks[0].host, "hooks.lab");
+    EXPECT_EQ(n.webhooks[0].port, 8080);
+    EXPECT_EQ(n.webhooks[0].path, "/x/y");
+    EXPECT_EQ(n.webhooks[1].port, 80);
+    ASSERT_EQ(n.rules.size(), 2u);
+    EXPECT_EQ(n.rules[1].pv, "P:t");
+    EXPECT_EQ(n.rules[1].severity, 1);
+    EXPECT_EQ(n.min_interval_s, 30);
+    EXPECT_EQ(n.retries, 1);
+    const auto e = errors_of("ioc: {name: T}\n"
+                             "notify:\n"
+                             "  webhooks: [\"https://secure/\"]\n"
+                             "  rules: [{state_machine: nope}, {pv: a, state_machine: b}, {pv: x, severity: LOUD}]\n");
+    ASSERT_EQ(e.size(), 5u) << ::testing::PrintToString(e);
+    EXPECT_NE(e[0].find("needs smtp: or webhooks:"), std::string::npos) << e[0]; // errors in file order
+    EXPECT_NE(e[1].find("https is not supported"), std::string::npos) << e[1];
+    EXPECT_NE(e[2].find("'nope' is not one of state_machines:"), std::string::npos) << e[2];
+    EXPECT_NE(e[3].find("a rule names one of state_machine: or pv:"), std::string::npos) << e[3];
+    EXPECT_NE(e[4].find("LOUD"), std::string::npos) << e[4];
+}
