@@ -1,6 +1,7 @@
 // Compound motors (see compound_motor.hpp).
 #include "automation/compound_motor.hpp"
 
+#include "automation/expression_names.hpp"
 #include "automation/motor_port.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
@@ -24,31 +25,7 @@ std::string fmt(double v) {
     return b;
 }
 
-// The names one set of expressions may use, bound to the group's storage.
-class NameHost final : public plc::Host {
-public:
-    explicit NameHost(std::string group) : group_(std::move(group)) {}
-    void bind(const std::string& name, double* at, bool writable) { names_.push_back({name, plc::Binding{at, writable, 1}}); }
-    std::optional<plc::Binding> resolve(std::string_view n) override {
-        for (const auto& [name, b] : names_)
-            if (name == n) return b;
-        return std::nullopt;
-    }
-    std::string why_unknown(std::string_view) override {
-        std::string s = "compound motor group '" + group_ + "' knows";
-        for (std::size_t i = 0; i < names_.size(); ++i) s += (i ? ", " : " ") + names_[i].first;
-        return s;
-    }
-    void assigned(std::string_view n) override { assigned_.emplace_back(n); }
-    const std::vector<std::string>& assigned_names() const { return assigned_; }
-
-private:
-    std::string group_;
-    std::vector<std::pair<std::string, plc::Binding>> names_;
-    std::vector<std::string> assigned_;
-};
-
-plc::Program compile(const std::string& code, const std::string& where, const std::string& what, NameHost& host) {
+plc::Program compile(const std::string& code, const std::string& where, const std::string& what, ExpressionNames& host) {
     plc::CompileOptions o;
     o.max_loop_iterations = 100000; // expressions, not programs: a runaway loop is a fault
     try {
@@ -84,7 +61,7 @@ struct CompoundMotors::Group {
     config::CompoundMotorEntry cfg;
     pv::Database& db;
     std::vector<double> rbv, input, vout, vin, target; // the expressions' storage (never resized)
-    NameHost fhost, ihost;
+    ExpressionNames fhost, ihost;
     std::vector<plc::Program> forward, inverse;
     std::vector<bool> driven;                       // per real: an inverse expression moves it
     std::vector<std::unique_ptr<MotorPort>> reals;  // null while a remote one is not made yet
@@ -103,7 +80,7 @@ struct CompoundMotors::Group {
 
     Group(const config::CompoundMotorEntry& c, pv::Database& d)
         : cfg(c), db(d), rbv(c.reals.size()), input(c.inputs.size()), vout(c.virtuals.size()), vin(c.virtuals.size()),
-          target(c.reals.size()), fhost(c.name), ihost(c.name), driven(c.reals.size()), reals(c.reals.size()),
+          target(c.reals.size()), fhost("compound motor group '" + c.name + "'"), ihost("compound motor group '" + c.name + "'"), driven(c.reals.size()), reals(c.reals.size()),
           inputs(c.inputs.size()), remote_real(c.reals.size()), remote_input(c.inputs.size()), st(c.reals.size()),
           v(c.virtuals.size()) {
         for (std::size_t j = 0; j < c.reals.size(); ++j) fhost.bind(c.reals[j].name, &rbv[j], false), ihost.bind(c.reals[j].name, &target[j], true);

@@ -1,6 +1,7 @@
 // State machines with an error latch (see state_machine.hpp).
 #include "automation/state_machine.hpp"
 
+#include "automation/expression_names.hpp"
 #include "automation/motor_port.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
@@ -39,27 +40,6 @@ std::string utc_now() {
     return b;
 }
 
-// Names an expression of one machine may use.
-class ExprHost final : public plc::Host {
-public:
-    void bind(const std::string& name, double* at) { names_.push_back({name, at}); }
-    std::optional<plc::Binding> resolve(std::string_view n) override {
-        for (const auto& [name, at] : names_)
-            if (name == n) return plc::Binding{at, name == kResult, 1};
-        return std::nullopt;
-    }
-    std::string why_unknown(std::string_view) override {
-        std::string s = "the expressions know";
-        int shown = 0;
-        for (const auto& [name, at] : names_)
-            if (name != kResult && shown++ < 40) s += (shown > 1 ? ", " : " ") + name;
-        return s;
-    }
-
-private:
-    std::vector<std::pair<std::string, double*>> names_;
-};
-
 } // namespace
 
 struct StateMachines::Machine {
@@ -78,7 +58,7 @@ struct StateMachines::Machine {
     bool names_ok = false, names_seen = false;
     std::string missing; // names not readable, for messages
     double result = 0;
-    ExprHost host;
+    ExpressionNames host;
     std::vector<std::optional<plc::Program>> invariants, guards; // per state, per transition
     std::vector<std::vector<Step>> entry, exits, steps;           // per state, state, transition
     std::vector<int> parent;
@@ -159,13 +139,13 @@ StateMachines::StateMachines(const std::vector<config::StateMachineEntry>& cfg, 
     for (auto& mp : machines_) {
         Machine& m = *mp;
         const auto& c = m.cfg;
-        for (std::size_t j = 0; j < c.names.size(); ++j) m.host.bind(c.names[j].first, &names_[m.name_base + j]);
+        for (std::size_t j = 0; j < c.names.size(); ++j) m.host.bind(c.names[j].first, &names_[m.name_base + j], false);
         std::size_t ck = 0;
         for (auto& other : machines_) {
-            m.host.bind(other->cfg.name, &state_values_[other->index]);
-            for (const auto& st : other->cfg.states) m.host.bind(other->cfg.name + "." + st.name, &constants_[ck++]);
+            m.host.bind(other->cfg.name, &state_values_[other->index], false);
+            for (const auto& st : other->cfg.states) m.host.bind(other->cfg.name + "." + st.name, &constants_[ck++], false);
         }
-        m.host.bind(kResult, &m.result);
+        m.host.bind(kResult, &m.result, true);
         m.parent.assign(c.states.size(), -1);
         for (std::size_t s = 0; s < c.states.size(); ++s) m.parent[s] = m.state_index(c.states[s].parent);
         m.state = std::max(0, m.state_index(c.initial));

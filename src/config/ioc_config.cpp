@@ -275,7 +275,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control", "compound_motors", "state_machines", "notify"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control", "compound_motors", "state_machines", "notify", "collision_zones"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -993,6 +993,19 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         e.retry_interval_s = n["retry_interval"].number(between(0, 3600)).value_or(10);
         e.timeout_s = n["timeout"].number(between(0.1, 120)).value_or(5);
         cfg.notify = e;
+    }
+    std::set<std::string> zone_names;
+    for (YamlNode z : root["collision_zones"].list()) {
+        if (!z.keys({"name", "axes", "forbidden", "lookahead"})) continue;
+        CollisionZoneEntry e;
+        e.where = z.where();
+        e.name = z.required("name", " (its PVs are $(P)<name>:...)").string().value_or("");
+        check_name_part(z["name"], e.name, "collision zone", zone_names, false);
+        for (const auto& [n, v] : z.required("axes", " (name: motor record)").entries()) e.axes.emplace_back(n, v.string().value_or(""));
+        if (e.axes.empty()) z["axes"].error("needs at least one axis");
+        e.forbidden = z.required("forbidden", " (an expression, true inside the forbidden region)").string().value_or("");
+        e.lookahead_s = z["lookahead"].number(between(0, 10)).value_or(0.2);
+        cfg.collision_zones.push_back(std::move(e));
     }
     rd.take_errors(errors);
     return cfg;

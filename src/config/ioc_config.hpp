@@ -437,6 +437,17 @@ struct NotifyEntry {
     std::string where;
 };
 
+// `collision_zones:` (docs/automation.md): forbidden regions of the joint positions of several
+// motor records of this IOC; a move that would enter one is refused, a moving axis about to enter
+// is stopped.
+struct CollisionZoneEntry {
+    std::string name;                                      // PVs $(P)<name>:...
+    std::vector<std::pair<std::string, std::string>> axes; // expression name -> motor record
+    std::string forbidden;                                 // true inside the forbidden region
+    double lookahead_s = 0.2;                              // how far ahead a moving axis is judged
+    std::string where;
+};
+
 // `detectors: {area_detector: [{cam, image, hdf, stats, bus, size, pixel_size, centre, ...}]}`: a
 // simulated camera of the beam behind areaDetector's PV sets (docs/detectors.md).
 struct AreaDetectorEntry {
@@ -485,6 +496,7 @@ struct IocConfig {
     std::vector<CompoundMotorEntry> compound_motors;
     std::vector<StateMachineEntry> state_machines;
     std::optional<NotifyEntry> notify;
+    std::vector<CollisionZoneEntry> collision_zones;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

@@ -336,6 +336,8 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     if (!cfg_.compound_motors.empty()) compound_ = std::make_unique<automation::CompoundMotors>(cfg_.compound_motors, cfg_.prefix, db_);
     if (!cfg_.state_machines.empty())
         fsms_ = std::make_unique<automation::StateMachines>(cfg_.state_machines, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; });
+    if (!cfg_.collision_zones.empty())
+        zones_ = std::make_unique<automation::CollisionZones>(cfg_.collision_zones, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; });
     if (cfg_.notify) {
         notifier_ = std::make_unique<automation::Notifier>(*cfg_.notify, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; });
         if (fsms_) fsms_->on_latch([this](const std::string& m, const std::string& why) { notifier_->latched(m, why); });
@@ -854,6 +856,7 @@ void Ioc::bring_up() {
     if (compound_) compound_->start(); // their reals and inputs: here, or other IOCs' (run() connects those)
     if (fsms_) fsms_->start();
     if (notifier_) notifier_->start();
+    if (zones_) zones_->start(); // after the compound motors: their puts to the reals are checked too
     plcs_->set_epics_state(12); // initHookAfterIocBuilt
     brought_up_ = true;
 }
@@ -872,6 +875,7 @@ void Ioc::publish() {
     if (compound_) compound_->poll();
     if (fsms_) fsms_->poll();
     if (notifier_) notifier_->poll();
+    if (zones_) zones_->poll();
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) {
         b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)

@@ -4,6 +4,7 @@
 // the cycle. The IOC loop thread owns the PV database and the CA server.
 #pragma once
 
+#include "automation/collision.hpp"
 #include "automation/compound_motor.hpp"
 #include "automation/notifier.hpp"
 #include "automation/smart_control.hpp"
@@ -87,6 +88,7 @@ public:
     automation::CompoundMotors* compound_motors() { return compound_.get(); } // compound_motors: (or none)
     automation::StateMachines* state_machines() { return fsms_.get(); }         // state_machines: (or none)
     automation::Notifier* notifier() { return notifier_.get(); }                // notify: (or none)
+    automation::CollisionZones* collision_zones() { return zones_.get(); }      // collision_zones: (or none)
     // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
     // (`beamctl signals`). Frozen once the IOC is built.
     const registry::Registry& signals() const { return registry_; }
@@ -173,6 +175,7 @@ private:
     std::unique_ptr<automation::CompoundMotors> compound_; // virtual motors over motor records (compound_motors:)
     std::unique_ptr<automation::StateMachines> fsms_;      // state machines with an error latch (state_machines:)
     std::unique_ptr<automation::Notifier> notifier_;       // email and webhooks (notify:)
+    std::unique_ptr<automation::CollisionZones> zones_;    // forbidden joint regions (collision_zones:)
     std::unique_ptr<IocFlyScan> flyscan_; // position compare and capture (pcomp:, capture:)
     bool brought_up_ = false;
     std::unique_ptr<pv::Autosave> autosave_; // ioc.yaml autosave:

@@ -345,3 +345,20 @@ notify:
             assert len(srv.posts) == 1
     finally:
         srv.close()
+
+
+def test_the_collision_zone_refuses_a_move_into_it_and_stops_a_jog(tmp_path, prefix):
+    with running_snd(tmp_path, prefix):
+        assert put_status(prefix + "T1:X", 60.0, timeout=30) == ECA_NORMAL  # the arm in (l = 136: fine)
+        assert put_status(prefix + "T1:L", 600.0, timeout=30) == ECA_PUTFAIL  # off the table with the arm in
+        assert get(prefix + "t1_table:Refused") == 1
+        assert get_str(prefix + "t1_table:Message").startswith(f"move of {prefix}T1:L to 600 refused")
+        assert abs(get(prefix + "T1:L.RBV") - 136.2865) < 1e-3
+        # a jog is not a target: the zone stops it on the way
+        epics.caput(prefix + "T1:L.JVEL", 50, wait=True)
+        epics.caput(prefix + "T1:L.JOGF", 1)
+        assert wait_for(lambda: get(prefix + "t1_table:Stopped") == 1, 20)
+        epics.caput(prefix + "T1:L.JOGF", 0)
+        assert wait_for(lambda: get(prefix + "T1:L.DMOV") == 1, 10)
+        assert 400 < get(prefix + "T1:L.RBV") < 500
+        assert get(prefix + "t1_table:Inside") == 0

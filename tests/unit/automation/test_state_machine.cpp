@@ -5,6 +5,8 @@
 // whose author is logged; auxiliary machines are guards on other machines' states.
 #include "automation/state_machine.hpp"
 
+#include "db_rig.hpp"
+
 #include "core/error.hpp"
 #include "pv/db_file.hpp"
 #include "pv/publish.hpp"
@@ -80,9 +82,7 @@ config::StateMachineEntry primary() {
     return e;
 }
 
-struct Rig {
-    pv::Database db;
-    double now = 0;
+struct Rig : test::DbRig {
     std::unique_ptr<StateMachines> sm;
     std::vector<std::string> latches;
     explicit Rig(std::vector<config::StateMachineEntry> cfg = {bearing(), primary()}) {
@@ -91,26 +91,8 @@ struct Rig {
         db.init_records();
         sm->start();
         sm->on_latch([this](const std::string& m, const std::string& why) { latches.push_back(m + ": " + why); });
+        poll = [this] { sm->poll(); };
         run(0.1);
-    }
-    void run(double seconds) {
-        for (double end = now + seconds; now < end;) {
-            now += 0.01;
-            db.scan_periodic(now);
-            sm->poll();
-        }
-    }
-    pv::PutStatus put(const std::string& n, double v) {
-        pv::Address a;
-        if (!db.resolve(n, a)) throw std::runtime_error("no " + n);
-        return db.put(a, pv::Prim::Double, &v, 1);
-    }
-    double get(const std::string& n) {
-        pv::Address a;
-        if (!db.resolve(n, a)) throw std::runtime_error("no " + n);
-        double x = 0;
-        db.get(a, pv::Prim::Double, &x, 1);
-        return x;
     }
     std::string text(const std::string& n) { return pv::get_text(*db.find(n)); }
     // The bearing landed, then flying; the main machine in normal operation.

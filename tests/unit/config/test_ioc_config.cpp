@@ -475,3 +475,23 @@ TEST(IocConfig, Notify) {
     EXPECT_NE(e[3].find("a rule names one of state_machine: or pv:"), std::string::npos) << e[3];
     EXPECT_NE(e[4].find("LOUD"), std::string::npos) << e[4];
 }
+
+TEST(IocConfig, CollisionZones) {
+    config::IocConfig c = config::IocConfig::parse("ioc: {name: T}\n"
+                                                   "collision_zones:\n"
+                                                   "  - {name: z, axes: {l: \"M:l\", x: \"M:x\"}, forbidden: \"l > 5 and x > 4\", lookahead: 0.5}\n",
+                                                   "/cfg/ioc.yaml");
+    ASSERT_EQ(c.collision_zones.size(), 1u);
+    EXPECT_EQ(c.collision_zones[0].axes[1], std::make_pair(std::string("x"), std::string("M:x")));
+    EXPECT_EQ(c.collision_zones[0].forbidden, "l > 5 and x > 4");
+    EXPECT_EQ(c.collision_zones[0].lookahead_s, 0.5);
+    const auto e = errors_of("ioc: {name: T}\n"
+                             "collision_zones:\n"
+                             "  - {name: z, axes: {}, lookahead: 20}\n"
+                             "  - {name: z, axes: {a: \"M:a\"}, forbidden: \"a > 1\"}\n");
+    ASSERT_EQ(e.size(), 4u) << ::testing::PrintToString(e);
+    EXPECT_NE(e[0].find("missing required key 'forbidden'"), std::string::npos) << e[0];
+    EXPECT_NE(e[1].find("needs at least one axis"), std::string::npos) << e[1];
+    EXPECT_NE(e[2].find("lookahead"), std::string::npos) << e[2];
+    EXPECT_NE(e[3].find("collision zone 'z' is defined twice"), std::string::npos) << e[3];
+}
