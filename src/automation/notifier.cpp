@@ -175,7 +175,6 @@ Notifier::Notifier(const config::NotifyEntry& cfg, const std::string& prefix, pv
     for (const char* r : {"LastMessage", "LastError"})
         f.records.push_back(pv::generated_record("waveform", p_ + r, {{"FTVL", "CHAR"}, {"NELM", "512"}}));
     db_.load(f);
-    thread_ = std::thread([this] { worker(); });
 }
 
 Notifier::~Notifier() {
@@ -189,6 +188,10 @@ Notifier::~Notifier() {
 }
 
 void Notifier::start() {
+    // The delivery thread starts here, not in the constructor: the IOC blocks SIGTERM/SIGINT in
+    // every thread before it brings the engine up (Ioc::run), and a thread made earlier would take
+    // a stop signal's default action (killing the process without its safe stop).
+    if (!thread_.joinable()) thread_ = std::thread([this] { worker(); });
     for (Rule& r : rules_) {
         if (r.cfg.pv.empty()) continue;
         r.record = db_.find(r.cfg.pv.substr(0, r.cfg.pv.find('.')));

@@ -30,7 +30,8 @@ public:
     Notifier(const Notifier&) = delete;
     Notifier& operator=(const Notifier&) = delete;
 
-    // After init_records: the PV rules' records (Error naming the rule when one is not here).
+    // After init_records: the PV rules' records (Error naming the rule when one is not here), and
+    // the delivery thread.
     void start();
     // A state machine latched (StateMachines::on_latch).
     void latched(const std::string& machine, const std::string& error);

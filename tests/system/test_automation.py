@@ -362,3 +362,15 @@ def test_the_collision_zone_refuses_a_move_into_it_and_stops_a_jog(tmp_path, pre
         assert wait_for(lambda: get(prefix + "T1:L.DMOV") == 1, 10)
         assert 400 < get(prefix + "T1:L.RBV") < 500
         assert get(prefix + "t1_table:Inside") == 0
+
+
+def test_sigterm_during_a_compound_move_stops_safely_and_exits_0(tmp_path, prefix):
+    """The example has every automation part (the notifier's delivery thread among them): a stop
+    signal mid-move takes the IOC's safe stop, exit code 0."""
+    with running_snd(tmp_path, prefix) as srv:
+        epics.caput(prefix + "E1", 4.0)  # about 6 s of motion
+        assert wait_for(lambda: get(prefix + "E1.DMOV") == 0, 5)
+        time.sleep(0.5)
+        assert srv.stop() == 0
+        assert "stopping" in srv.stderr()
+        srv.start()  # running_config stops it again and checks it is alive
