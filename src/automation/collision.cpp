@@ -2,6 +2,7 @@
 #include "automation/collision.hpp"
 
 #include "automation/expression_names.hpp"
+#include "automation/number_text.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "plc/program.hpp"
@@ -22,11 +23,7 @@ log::Logger lg("collision");
 constexpr double kRecordPollS = 0.1; // how old a motor record's RBV may be (it polls its driver at 10 Hz)
 constexpr int kPathSamples = 200;    // points checked along a move's path
 
-std::string fmt(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.6g", v);
-    return b;
-}
+std::string fmt(double v) { return number_text(v, 6); }
 
 } // namespace
 
@@ -124,8 +121,8 @@ void CollisionZones::start() {
                     }
                     to[k] = target;
                     const bool start_inside = zz->inside(from);
+                    std::vector<double> x(from.size());
                     for (int i = start_inside ? kPathSamples : 1; i <= kPathSamples; ++i) { // from inside: only the end counts
-                        std::vector<double> x(from.size());
                         for (std::size_t j = 0; j < x.size(); ++j) x[j] = from[j] + (to[j] - from[j]) * i / kPathSamples;
                         if (!zz->inside(x)) continue;
                         ++zz->refused;

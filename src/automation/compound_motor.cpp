@@ -3,6 +3,7 @@
 
 #include "automation/expression_names.hpp"
 #include "automation/motor_port.hpp"
+#include "automation/number_text.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "plc/program.hpp"
@@ -19,11 +20,7 @@ namespace {
 
 log::Logger lg("compound");
 
-std::string fmt(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.9g", v);
-    return b;
-}
+std::string fmt(double v) { return number_text(v, 9); }
 
 plc::Program compile(const std::string& code, const std::string& where, const std::string& what, ExpressionNames& host) {
     plc::CompileOptions o;
@@ -334,7 +331,7 @@ private:
 } // namespace
 
 CompoundMotors::CompoundMotors(const std::vector<config::CompoundMotorEntry>& cfg, const std::string& prefix, pv::Database& db)
-    : prefix_(prefix), db_(db) {
+    : db_(db) {
     pv::DbFile f;
     for (const auto& c : cfg) {
         auto g = std::make_unique<Group>(c, db);

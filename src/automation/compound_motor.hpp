@@ -60,7 +60,6 @@ public:
 
     struct Group; // internal
 private:
-    std::string prefix_;
     pv::Database& db_;
     std::vector<std::unique_ptr<Group>> groups_;
 };

@@ -1,6 +1,7 @@
 // Motor records for automation, here or through Channel Access (see motor_port.hpp).
 #include "automation/motor_port.hpp"
 
+#include "automation/number_text.hpp"
 #include "ca/client.hpp"
 #include "core/error.hpp"
 
@@ -12,11 +13,7 @@ namespace beamctl::automation {
 
 namespace {
 
-std::string fmt(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.6g", v);
-    return b;
-}
+std::string fmt(double v) { return number_text(v, 6); }
 
 // Success is the callback's word and the position (see motor_port.hpp). `done` is called once:
 // emptied when called.

@@ -3,6 +3,7 @@
 
 #include "automation/expression_names.hpp"
 #include "automation/motor_port.hpp"
+#include "automation/number_text.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "plc/program.hpp"
@@ -25,11 +26,7 @@ constexpr const char* kResult = "fsm_result_"; // where an expression's value go
 constexpr const char* kMbbStrings[16] = {"ZRST", "ONST", "TWST", "THST", "FRST", "FVST", "SXST", "SVST",
                                          "EIST", "NIST", "TEST", "ELST", "TVST", "TTST", "FTST", "FFST"};
 
-std::string fmt(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.9g", v);
-    return b;
-}
+std::string fmt(double v) { return number_text(v, 9); }
 
 std::string utc_now() {
     const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());

@@ -79,7 +79,6 @@ private:
     pv::PutStatus request(Machine& m, int to);
     pv::PutStatus acknowledge(Machine& m);
     void run(Machine& m, double now);
-    void enter(Machine& m, int state);
 };
 
 } // namespace beamctl::automation
