@@ -290,6 +290,13 @@ void StateMachines::latch(Machine& m, const std::string& why) {
     if (latch_hook_ && m.latch >= 0) latch_hook_(m.cfg.name, why);
 }
 
+bool StateMachines::latch(const std::string& machine, const std::string& why) {
+    Machine* m = find(machine);
+    if (!m || m->latch < 0) return false;
+    if (!m->latched()) latch(*m, why); // already latched: the first error stands
+    return true;
+}
+
 pv::PutStatus StateMachines::request(Machine& m, int to) {
     const auto& c = m.cfg;
     auto refuse = [&](const std::string& why) {

@@ -58,6 +58,9 @@ public:
     // Called when a machine latches (notification): machine name, error text.
     using LatchHook = std::function<void(const std::string& machine, const std::string& error)>;
     void on_latch(LatchHook hook);
+    // Latches `machine` from outside (a failed alignment plan): as a failed transition does.
+    // False when there is no such machine or it has no latch state.
+    bool latch(const std::string& machine, const std::string& why);
 
     // What the PVs say, for tests and the command line: -1 when there is no such machine.
     int state(const std::string& machine) const;

@@ -275,7 +275,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
     cfg.path = path;
     YamlNode root = rd.root();
     if (root.is_null()) rd.error(rd.top(), "empty configuration (needs at least ioc:)");
-    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control", "compound_motors", "state_machines", "notify", "collision_zones"},
+    if (!root.keys({"ioc", "engine", "buses", "axes", "plugins", "plcs", "kinematics", "storages", "luts", "m2m", "db", "bridges", "ca", "autosave", "pvt", "pcomp", "capture", "feedback", "detectors", "smart_control", "compound_motors", "state_machines", "notify", "collision_zones", "plans"},
                    {{"web", "it is not supported by this version of beamctl yet", true}}) ||
         root.is_null()) {
         rd.take_errors(errors);
@@ -1006,6 +1006,138 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         e.forbidden = z.required("forbidden", " (an expression, true inside the forbidden region)").string().value_or("");
         e.lookahead_s = z["lookahead"].number(between(0, 10)).value_or(0.2);
         cfg.collision_zones.push_back(std::move(e));
+    }
+    std::set<std::string> plan_names;
+    for (YamlNode pl : root["plans"].list()) {
+        if (!pl.keys({"name", "type", "desc", "args", "names", "axes", "points", "snake", "relative", "return", "dwell",
+                      "detectors", "triggers", "signal", "motor", "center", "passes", "model", "sigma", "max_reduced_chi2",
+                      "min_r_squared", "max_width", "latch", "steps", "directory"}))
+            continue;
+        PlanEntry e;
+        e.where = pl.where();
+        e.name = pl.required("name", " (its PVs are $(P)<name>:...)").string().value_or("");
+        check_name_part(pl["name"], e.name, "plan", plan_names, false);
+        const std::string type = pl.required("type", " (scan, grid, list, align or sequence)")
+                                     .one_of({"scan", "grid", "list", "align", "sequence"}).value_or("scan");
+        using T = PlanEntry::Type;
+        e.type = type == "grid" ? T::Grid : type == "list" ? T::List : type == "align" ? T::Align : type == "sequence" ? T::Sequence : T::Scan;
+        e.desc = pl["desc"].string().value_or("");
+        auto expr = [](const YamlNode& n, const std::string& fallback) { return n ? n.string().value_or(fallback) : fallback; };
+        for (const auto& [n, v] : pl["args"].entries()) {
+            if (n.empty() || !(std::isalpha(static_cast<unsigned char>(n[0])) || n[0] == '_') ||
+                n.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_") != std::string::npos)
+                v.error(SB() << "argument '" << n << "' should be a name (letters, digits, _)");
+            e.args.emplace_back(n, v.number().value_or(0));
+        }
+        for (const auto& [n, v] : pl["names"].entries()) e.names.emplace_back(n, v.string().value_or(""));
+        e.relative = pl["relative"].boolean().value_or(false);
+        if (pl.has("return")) e.return_to_start = pl["return"].boolean().value_or(false);
+        e.dwell = expr(pl["dwell"], "0");
+        for (const auto& [n, v] : pl["detectors"].entries()) e.detectors.emplace_back(n, v.string().value_or(""));
+        for (const auto& [n, v] : pl["triggers"].entries()) e.triggers.emplace_back(n, v.number().value_or(0));
+        e.signal = pl["signal"].string().value_or("");
+        e.directory = pl["directory"].string().value_or("/tmp");
+        const bool stepping = e.type == T::Scan || e.type == T::Grid || e.type == T::List;
+        if (stepping) {
+            for (YamlNode a : pl.required("axes", " (a list of {motor, start, stop} / {motor, positions})").list()) {
+                if (!a.keys({"motor", "start", "stop", "points", "positions"})) continue;
+                PlanEntry::Axis x;
+                x.where = a.where();
+                x.motor = a.required("motor", " (a motor record)").string().value_or("");
+                if (e.type == T::List) {
+                    for (YamlNode p : a.required("positions", " (a list of positions)").list()) x.positions.push_back(p.string().value_or("0"));
+                    if (a.has("start") || a.has("stop") || a.has("points")) a.error("a list plan's axis has positions:, not start/stop/points");
+                } else {
+                    x.start = expr(a.required("start", " (a position, or relative with relative: true)"), "0");
+                    x.stop = expr(a.required("stop", ""), "0");
+                    if (e.type == T::Grid) x.points = expr(a.required("points", " (this axis's points)"), "2");
+                    else if (a.has("points")) a["points"].error("a scan's points: is the plan's (all its axes move together)");
+                    if (a.has("positions")) a["positions"].error("positions: is for a list plan");
+                }
+                e.axes.push_back(std::move(x));
+            }
+            if (e.type == T::Scan) e.points = expr(pl.required("points", " (points of the scan)"), "2");
+            if (e.type == T::List && !e.axes.empty()) {
+                for (const auto& x : e.axes)
+                    if (x.positions.size() != e.axes[0].positions.size() || x.positions.empty())
+                        pl["axes"].error("every axis of a list plan needs the same (nonzero) number of positions");
+            }
+            e.snake = pl["snake"].boolean().value_or(false);
+            if (e.snake && e.type != T::Grid) pl["snake"].error("snake: is for a grid plan");
+        }
+        if (e.type == T::Align) {
+            e.motor = pl.required("motor", " (the motor aligned)").string().value_or("");
+            e.center = pl["center"].string().value_or("");
+            for (YamlNode p : pl.required("passes", " (a list of {range, points}: coarse to fine)").list()) {
+                if (!p.keys({"range", "points"})) continue;
+                PlanEntry::Pass x;
+                x.where = p.where();
+                x.range = expr(p.required("range", " (the scan's full width)"), "0");
+                x.points = expr(p.required("points", ""), "2");
+                e.passes.push_back(std::move(x));
+            }
+            e.model = pl["model"].one_of({"lorentzian", "gaussian", "edge"}).value_or("lorentzian");
+            e.sigma = pl["sigma"].string().value_or("");
+            e.max_reduced_chi2 = pl["max_reduced_chi2"].number(above(0)).value_or(0);
+            e.min_r_squared = pl["min_r_squared"].number(between(0, 1)).value_or(0);
+            e.max_width = pl["max_width"].number(above(0)).value_or(0);
+            if (e.max_reduced_chi2 > 0 && e.sigma.empty())
+                pl["max_reduced_chi2"].error("needs sigma: (a point's standard deviation), else chi^2 is in the signal's units squared");
+            e.latch = pl["latch"].string().value_or("");
+            if (!e.latch.empty()) {
+                bool known = false;
+                for (const auto& m : cfg.state_machines) known = known || m.name == e.latch;
+                if (!known) pl["latch"].error(SB() << "'" << e.latch << "' is not one of state_machines:");
+            }
+        } else {
+            for (const char* k : {"motor", "center", "passes", "model", "sigma", "max_reduced_chi2", "min_r_squared", "max_width", "latch"})
+                if (pl.has(k)) pl[k].error(SB() << k << ": is for an align plan");
+        }
+        if (stepping || e.type == T::Align) {
+            if (e.detectors.empty()) pl.required("detectors", " (name: PV, read at each point)");
+        } else {
+            for (const char* k : {"axes", "points", "detectors", "triggers", "signal", "dwell", "relative", "return"})
+                if (pl.has(k)) pl[k].error(SB() << k << ": is for a scan, grid, list or align plan");
+        }
+        if (e.type == T::Sequence) {
+            for (YamlNode st : pl.required("steps", " (a list of {plan: NAME, args}, {move: {MOTOR: POSITION}}, {put: PV, value})").list()) {
+                if (!st.keys({"plan", "args", "move", "put", "value", "wait"})) continue;
+                PlanEntry::Step x;
+                x.where = st.where();
+                const int kinds = st.has("plan") + st.has("move") + st.has("put");
+                if (kinds != 1) {
+                    st.error("a step is one of plan: NAME (with args:), move: {MOTOR: POSITION}, put: PV (with value:)");
+                    continue;
+                }
+                using K = PlanEntry::Step::Kind;
+                if (st.has("plan")) {
+                    x.kind = K::Plan;
+                    x.plan = st["plan"].string().value_or("");
+                    for (const auto& [n, v] : st["args"].entries()) x.args.emplace_back(n, v.string().value_or("0"));
+                    const PlanEntry* target = nullptr;
+                    for (const auto& q : cfg.plans) target = q.name == x.plan ? &q : target;
+                    if (!target) st["plan"].error(SB() << "'" << x.plan << "' is not a plan defined above this one");
+                    else if (target->type == T::Sequence) st["plan"].error(SB() << "'" << x.plan << "' is a sequence (a step runs a scan, grid, list or align plan)");
+                    else
+                        for (const auto& [n, v] : x.args) {
+                            bool known = false;
+                            for (const auto& a : target->args) known = known || a.first == n;
+                            if (!known) st["args"][n].error(SB() << "'" << x.plan << "' has no argument '" << n << "'");
+                        }
+                } else if (st.has("move")) {
+                    x.kind = K::Move;
+                    for (const auto& [n, v] : st["move"].entries()) x.moves.emplace_back(n, v.string().value_or("0"));
+                    if (x.moves.empty()) st["move"].error("needs at least one MOTOR: POSITION");
+                } else {
+                    x.kind = K::Put;
+                    x.pv = st["put"].string().value_or("");
+                    x.value = expr(st.required("value", " (the number written)"), "0");
+                    x.wait = st["wait"].boolean().value_or(true);
+                }
+                e.steps.push_back(std::move(x));
+            }
+        }
+        cfg.plans.push_back(std::move(e));
     }
     rd.take_errors(errors);
     return cfg;

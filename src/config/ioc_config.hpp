@@ -448,6 +448,60 @@ struct CollisionZoneEntry {
     std::string where;
 };
 
+// `plans:` (docs/automation.md): step scans (scan, grid, list), alignment by a curve fit (align:
+// seed 003's rocking curve) and sequences of them, run inside the IOC from PVs $(P)<name>:...
+// Numbers marked "expr" are a number or an expression (the PLC's language) over the plan's `args`
+// and `names`, evaluated when the run (or its step) starts.
+struct PlanEntry {
+    enum class Type { Scan, Grid, List, Align, Sequence };
+    struct Axis {                 // scan/grid: start..stop; list: positions
+        std::string motor;        // a motor record (here or another IOC's)
+        std::string start, stop;  // expr
+        std::string points;       // expr (grid: this axis's; scan: the plan's)
+        std::vector<std::string> positions; // list: expr each
+        std::string where;
+    };
+    struct Pass {                 // align: one scan of `range` (full width) centred on the centre so far
+        std::string range, points; // expr
+        std::string where;
+    };
+    struct Step {                 // sequence
+        enum class Kind { Plan, Move, Put } kind = Kind::Plan;
+        std::string plan;                                      // Plan: another plan (not a sequence)
+        std::vector<std::pair<std::string, std::string>> args; // Plan: its arg -> expr
+        std::vector<std::pair<std::string, std::string>> moves; // Move: motor -> expr (moved together)
+        std::string pv, value;                                  // Put: PV, expr
+        bool wait = true;                                       // Put: with a put-callback
+        std::string where;
+    };
+    Type type = Type::Scan;
+    std::string name;                                         // PVs $(P)<name>:...
+    std::string desc;
+    std::vector<std::pair<std::string, double>> args;         // run-time parameters and their defaults
+    std::vector<std::pair<std::string, std::string>> names;   // expression name -> PV (read when used)
+    std::vector<Axis> axes;                                   // scan, grid, list
+    std::string points;                                       // scan: expr
+    bool snake = false;                                       // grid: inner axis alternates direction
+    bool relative = false;                                    // positions relative to where the motors are
+    std::optional<bool> return_to_start;                      // default: relative
+    std::string dwell = "0";                                  // [s] expr: after the move, before reading
+    std::vector<std::pair<std::string, std::string>> detectors; // name -> PV read at each point
+    std::vector<std::pair<std::string, double>> triggers;     // PV -> value put (callback) before the dwell
+    std::string signal;                                       // expr over detectors; "": the first detector
+    // align
+    std::string motor;                                        // the motor aligned
+    std::string center;                                       // expr; "": where the motor is
+    std::vector<Pass> passes;
+    std::string model = "lorentzian";                         // lorentzian, gaussian, edge
+    std::string sigma;                                        // expr over detectors and signal: a point's standard deviation
+    double max_reduced_chi2 = 0, min_r_squared = 0, max_width = 0; // 0: not checked
+    std::string latch;                                        // a state machine latched when the alignment fails
+    // sequence
+    std::vector<Step> steps;
+    std::string directory = "/tmp";                           // one HDF5/NeXus file a run ("": none)
+    std::string where;
+};
+
 // `detectors: {area_detector: [{cam, image, hdf, stats, bus, size, pixel_size, centre, ...}]}`: a
 // simulated camera of the beam behind areaDetector's PV sets (docs/detectors.md).
 struct AreaDetectorEntry {
@@ -497,6 +551,7 @@ struct IocConfig {
     std::vector<StateMachineEntry> state_machines;
     std::optional<NotifyEntry> notify;
     std::vector<CollisionZoneEntry> collision_zones;
+    std::vector<PlanEntry> plans;
 
     // Reads the file, expanding its macro references first (expand_ioc_macros) with `macros`
     // (`beamctl run -m`).

@@ -332,15 +332,18 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_);
     detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s);
     area_ = std::make_unique<IocAreaDetector>(cfg_, db_, EventLoop::now_s);
-    if (cfg_.smart_control) smart_ = std::make_unique<automation::SmartControl>(*cfg_.smart_control, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; }); // the engine's clock: virtual in tests
+    auto engine_clock = [this] { return double(clock_.now_ns()) * 1e-9; }; // automation's clock: virtual in tests
+    if (cfg_.smart_control) smart_ = std::make_unique<automation::SmartControl>(*cfg_.smart_control, cfg_.prefix, db_, engine_clock);
     if (!cfg_.compound_motors.empty()) compound_ = std::make_unique<automation::CompoundMotors>(cfg_.compound_motors, cfg_.prefix, db_);
-    if (!cfg_.state_machines.empty())
-        fsms_ = std::make_unique<automation::StateMachines>(cfg_.state_machines, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; });
-    if (!cfg_.collision_zones.empty())
-        zones_ = std::make_unique<automation::CollisionZones>(cfg_.collision_zones, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; });
+    if (!cfg_.state_machines.empty()) fsms_ = std::make_unique<automation::StateMachines>(cfg_.state_machines, cfg_.prefix, db_, engine_clock);
+    if (!cfg_.collision_zones.empty()) zones_ = std::make_unique<automation::CollisionZones>(cfg_.collision_zones, cfg_.prefix, db_, engine_clock);
     if (cfg_.notify) {
-        notifier_ = std::make_unique<automation::Notifier>(*cfg_.notify, cfg_.prefix, db_, [this] { return double(clock_.now_ns()) * 1e-9; });
+        notifier_ = std::make_unique<automation::Notifier>(*cfg_.notify, cfg_.prefix, db_, engine_clock);
         if (fsms_) fsms_->on_latch([this](const std::string& m, const std::string& why) { notifier_->latched(m, why); });
+    }
+    if (!cfg_.plans.empty()) {
+        plans_ = std::make_unique<automation::Plans>(cfg_.plans, cfg_.prefix, cfg_.name, db_, engine_clock);
+        plans_->set_state_machines(fsms_.get());
     }
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
@@ -857,6 +860,7 @@ void Ioc::bring_up() {
     if (fsms_) fsms_->start();
     if (notifier_) notifier_->start();
     if (zones_) zones_->start(); // after the compound motors: their puts to the reals are checked too
+    if (plans_) plans_->start();
     plcs_->set_epics_state(12); // initHookAfterIocBuilt
     brought_up_ = true;
 }
@@ -876,6 +880,7 @@ void Ioc::publish() {
     if (fsms_) fsms_->poll();
     if (notifier_) notifier_->poll();
     if (zones_) zones_->poll();
+    if (plans_) plans_->poll();
     for (std::size_t k = 0; k < cycle_stats_.size(); ++k) cycle_stats_[k] = cycle(k).stats(); // the engine items' devices read them
     for (auto& b : buses_) {
         b.bus->snapshot(); // this look's cycle: what bus-entry records read (Bus::looked)
@@ -961,11 +966,16 @@ int Ioc::run() {
     // automation's CA client (compound motors and state machines over other IOCs' PVs); goes
     // before the loop
     std::unique_ptr<ca::Client> automation_client;
-    if ((compound_ && compound_->needs_client()) || (fsms_ && fsms_->needs_client())) {
+    if ((compound_ && compound_->needs_client()) || (fsms_ && fsms_->needs_client()) || (plans_ && plans_->needs_client())) {
         automation_client = std::make_unique<ca::Client>(loop, ca::ClientConfig::from_env());
         if (compound_) compound_->connect(*automation_client);
         if (fsms_) fsms_->connect(*automation_client);
+        if (plans_) plans_->connect(*automation_client);
     }
+    // A plan steps on at once when a motion or a dwell ends, not at the next 10 ms poll. A timer
+    // outlives nothing: the loop (and its timers) goes before the plans. 50 us late, so that the
+    // engine clock the plan compares with has surely passed the dwell's end.
+    if (plans_) plans_->set_scheduler([this, &loop](double delay_s) { loop.call_after(delay_s > 0 ? delay_s + 50e-6 : 0, [this] { plans_->poll(); }); });
     ca::ServerConfig sc = ca::ServerConfig::from_env();
     if (cfg_.ca_port) sc.set_port(*cfg_.ca_port, cfg_.path + ": ca: port");
     ca::Server server(loop, db_, sc);
@@ -1066,6 +1076,7 @@ int Ioc::run() {
     loop.run();
     if (autosave_) autosave_->flush(); // a clean stop saves what changed since the last save
     shutdown(&signals);
+    if (plans_) plans_->set_scheduler({}); // the loop goes now
     return 0;
 }
 
@@ -1077,6 +1088,7 @@ void Ioc::shutdown(LoopSignals* signals) {
     std::printf("stopping: stopping axes, disabling drives, buses to SAFEOP\n");
     std::fflush(stdout);
     LOG_INFO(lg, "stopping: stopping axes, disabling drives, buses to SAFEOP");
+    if (plans_) plans_->abort_all("the IOC is stopping"); // their motors stop, their files are written
     auto again = [&] {
         if (signals && signals->stop_pending()) {
             std::fprintf(stderr, "second signal: exiting at once\n");

@@ -6,6 +6,7 @@
 
 #include "automation/collision.hpp"
 #include "automation/compound_motor.hpp"
+#include "automation/plan.hpp"
 #include "automation/notifier.hpp"
 #include "automation/smart_control.hpp"
 #include "automation/state_machine.hpp"
@@ -89,6 +90,7 @@ public:
     automation::StateMachines* state_machines() { return fsms_.get(); }         // state_machines: (or none)
     automation::Notifier* notifier() { return notifier_.get(); }                // notify: (or none)
     automation::CollisionZones* collision_zones() { return zones_.get(); }      // collision_zones: (or none)
+    automation::Plans* plans() { return plans_.get(); }                         // plans: (or none)
     // Every signal of this IOC: bus entries, axis and PLC variables, with owners and writers
     // (`beamctl signals`). Frozen once the IOC is built.
     const registry::Registry& signals() const { return registry_; }
@@ -176,6 +178,7 @@ private:
     std::unique_ptr<automation::StateMachines> fsms_;      // state machines with an error latch (state_machines:)
     std::unique_ptr<automation::Notifier> notifier_;       // email and webhooks (notify:)
     std::unique_ptr<automation::CollisionZones> zones_;    // forbidden joint regions (collision_zones:)
+    std::unique_ptr<automation::Plans> plans_;             // scans, alignments, sequences (plans:)
     std::unique_ptr<IocFlyScan> flyscan_; // position compare and capture (pcomp:, capture:)
     bool brought_up_ = false;
     std::unique_ptr<pv::Autosave> autosave_; // ioc.yaml autosave:
