@@ -9,6 +9,7 @@
 //   rcp-sim  stand in for a rapid-control-prototyping machine
 //   ca-repeater  the Channel Access repeater (also when invoked as `caRepeater`, EPICS's name)
 //   esi import   turn vendor ESI XML into catalog entries (catalog/*.yaml)
+#include "automation/plan_client.hpp"
 #include "ca/access_security.hpp"
 #include "ca/ca_link.hpp"
 #include "ca/repeater.hpp"
@@ -590,6 +591,23 @@ int main(int argc, char** argv) {
     sigcmd->add_option("pattern", sig_pattern, "Glob of signal names, e.g. 'ec0.s3.*' or 'ax1.traj.*'");
 
     PlcCheckOptions plco;
+    auto* plancmd = app.add_subcommand("plan", "Plans of a running IOC: scans, alignments, sequences (docs/automation.md)");
+    plancmd->require_subcommand(1);
+    IocOptions plano;
+    automation::PlanRunOptions planrun;
+    auto* planruncmd = plancmd->add_subcommand(
+        "run", "Start PLAN of the IOC of ioc.yaml with NAME=VALUE arguments, follow it, exit 0 when it is Done (Ctrl-C aborts it)");
+    planruncmd->add_option("-m,--macros", plano.macros, "Macros for the IOC file's $(NAME) references")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    planruncmd->add_option("--timeout", planrun.connect_timeout_s, "Seconds to wait for the IOC's PVs")->check(CLI::Range(0.1, 3600.0));
+    planruncmd->add_flag("-q,--quiet", planrun.quiet, "Print only the result");
+    planruncmd->add_option("file", plano.file, "IOC configuration (ioc.yaml)")->required();
+    planruncmd->add_option("plan", planrun.plan, "The plan (beamctl plan list ioc.yaml)")->required();
+    planruncmd->add_option("args", planrun.args, "The plan's arguments, NAME=VALUE");
+    IocOptions planlisto;
+    auto* planlistcmd = plancmd->add_subcommand("list", "List the plans of an IOC file with their arguments");
+    planlistcmd->add_option("file", planlisto.file, "IOC configuration (ioc.yaml)")->required();
     auto* plccmd = app.add_subcommand("plc", "Soft PLC tools");
     plccmd->require_subcommand(1);
     auto* plccheck = plccmd->add_subcommand("check", "Compile PLC files and report every error (exit 1 on any)");
@@ -711,6 +729,8 @@ int main(int argc, char** argv) {
             return run_softioc(soft);
         }
         if (*plccheck) return run_plc_check(plco);
+        if (*planruncmd) return automation::run_plan_client(plano.load(), planrun, std::cout, std::cerr);
+        if (*planlistcmd) return automation::list_plans(planlisto.load(), std::cout);
         if (*esiimport) return ethercat::run_esi_import(esio, std::cout, std::cerr);
         if (*axischeck) return ioc::run_axis_check(axis_file, axis_encoders, macro_options(axis_macros));
         if (*shellcmd) return pv::run_shell_client(shello);
