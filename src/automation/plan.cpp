@@ -1001,6 +1001,8 @@ pv::PutStatus Plans::start_run(Plan& p) {
     r.t0 = clock_();
     p.args = p.next_args;
     r.use(p);
+    for (auto& st : p.steps) // a sequence holds its step plans for the whole run
+        if (st.plan && !st.plan->run) r.use(*st.plan);
     std::string args_text;
     for (std::size_t i = 0; i < p.args.size(); ++i) args_text += (i ? " " : "") + p.cfg.args[i].first + "=" + fmt(p.args[i]);
     r.data.title = p.cfg.name + (p.cfg.desc.empty() ? "" : ": " + p.cfg.desc);
