@@ -30,7 +30,7 @@ def running_snd(tmp_path, prefix):
     d = EXAMPLES / "snd"
     cfg = (d / "ioc.yaml").read_text()
     cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
-    cfg = cfg.replace("file: snd_motors.db", f"file: {d / 'snd_motors.db'}").replace('"SND:', f'"{prefix}')
+    cfg = cfg.replace("file: snd_", f"file: {d}/snd_").replace('"SND:', f'"{prefix}')
     assert '"SND:' not in cfg
     return running_config(tmp_path, prefix, cfg, lambda: abs(get(prefix + "E1.RBV") - 8.0) < 1e-3, timeout=20)
 
@@ -276,7 +276,7 @@ def test_a_latch_sends_an_email_and_a_webhook_once(tmp_path, prefix):
         d = EXAMPLES / "snd"
         cfg = (d / "ioc.yaml").read_text()
         cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
-        cfg = cfg.replace("file: snd_motors.db", f"file: {d / 'snd_motors.db'}").replace('"SND:', f'"{prefix}')
+        cfg = cfg.replace("file: snd_", f"file: {d}/snd_").replace('"SND:', f'"{prefix}')
         cfg = cfg.replace("port: 8025", f"port: {srv.smtp_port}").replace("127.0.0.1:8026", f"127.0.0.1:{srv.http_port}")
         with running_config(tmp_path, prefix, cfg, lambda: get_str(prefix + "snd:State") == "parked", timeout=20):
             assert put_status(prefix + "snd:Request", "normal_operation") == ECA_PUTFAIL  # the guard: latches
@@ -306,7 +306,7 @@ def test_an_unreachable_mail_server_is_retried_logged_and_never_blocks_control(t
     d = EXAMPLES / "snd"
     cfg = (d / "ioc.yaml").read_text()
     cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
-    cfg = cfg.replace("file: snd_motors.db", f"file: {d / 'snd_motors.db'}").replace('"SND:', f'"{prefix}')
+    cfg = cfg.replace("file: snd_", f"file: {d}/snd_").replace('"SND:', f'"{prefix}')
     cfg = cfg.replace("port: 8025", f"port: {port}").replace('  webhooks: ["http://127.0.0.1:8026/snd"]\n', "")
     cfg = cfg.replace("  min_interval: 60", "  min_interval: 60\n  retries: 2\n  retry_interval: 0.2")
     with running_config(tmp_path, prefix, cfg, lambda: get_str(prefix + "snd:State") == "parked", timeout=20):
