@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The figures of docs/detectors.md and docs/feedback.md, made from running IOCs with pyepics and
+"""The figures of docs/detectors.md, docs/feedback.md and docs/automation.md, made from running IOCs with pyepics and
 Debian's python3-matplotlib (Agg: no display needed):
 
   docs/img/feedback_residual.png  examples/bpm: QE1's PosY (10 ms averages) for 3 s with the fast
@@ -7,6 +7,9 @@ Debian's python3-matplotlib (Agg: no display needed):
   docs/img/camera_spot.png        examples/bpm: one frame of the camera (image1:ArrayData) with
                                   Stats1's centroid and sigma
   docs/img/mca_spectrum.png       examples/detectors: a 2 s spectrum of mca1 with two ROIs
+  docs/img/rocking_curve.png      examples/snd: the rocking curve of T1's first crystal
+                                  (SND:rock_t1_th1), both passes and their Lorentzian fits, from
+                                  the run's HDF5 file (Debian's python3-h5py)
 
   /usr/bin/python3 docs/plots/make_plots.py [BEAMCTL=build/release/beamctl]
 (BEAMCTL_PLOTS_OUT=DIR writes them to DIR instead; tests/system/test_plots.py does.)
@@ -50,6 +53,7 @@ class Ioc:
         cfg = (ROOT / "examples" / example / "ioc.yaml").read_text()
         cfg = cfg.replace("plant: plant.yaml", f"plant: {ROOT / 'examples' / example / 'plant.yaml'}")
         cfg = cfg.replace("file: ../", f"file: {ROOT / 'examples'}/")
+        cfg = cfg.replace("file: snd_", f"file: {ROOT / 'examples' / example}/snd_")
         path = Path(self.dir.name) / "ioc.yaml"
         path.write_text(cfg)
         env = dict(os.environ, EPICS_CAS_SERVER_PORT=str(PORT))
@@ -154,8 +158,50 @@ def spectrum():
     print("mca_spectrum.png:", ", ".join(f"{r[2]} {int(r[3])}" for r in rois))
 
 
+def rocking_curve():
+    import h5py
+
+    ioc = Ioc("snd", "SND:rock_t1_th1:Start")
+    try:
+        path = ioc.dir.name
+        epics.caput("SND:rock_t1_th1:FilePath", np.frombuffer(path.encode() + b"\0", dtype=np.uint8), wait=True)
+        epics.caput("SND:rock_t1_th1:Start", 1, wait=True, timeout=120)
+        status = epics.caget("SND:rock_t1_th1:Status", as_string=True)
+        truth = epics.caget("SND:Beam:ThB") + epics.caget("SND:Sim:T1:TH1:Offset")
+        fwhm = epics.caget("SND:Sim:FWHM")
+        file = bytes(epics.caget("SND:rock_t1_th1:File")).split(b"\0")[0].decode()
+        with h5py.File(file, "r") as f:
+            passes = []
+            for name in ("rock_t1_th1_pass1", "rock_t1_th1_pass2"):
+                g = f["entry"][name]
+                passes.append((g["SND_T1_TH1"][:], g["signal"][:], g["fit"][:], dict(g.attrs)))
+    finally:
+        ioc.close()
+    if status != "Done":
+        raise SystemExit(f"rock_t1_th1 ended {status}")
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3.2), sharey=True)
+    for k, (ax, (x, y, fit, a)) in enumerate(zip(axes, passes)):
+        fine = np.linspace(x.min(), x.max(), 400)
+        g = a["fit_width"] / 2
+        ax.plot(x, y, ".", ms=4, label="T1:DH / DI")
+        ax.plot(fine, a["fit_background"] + a["fit_amplitude"] / (1 + ((fine - a["fit_center"]) / g) ** 2), lw=0.9,
+                label="Lorentzian fit")
+        ax.axvline(truth, color="k", lw=0.6, ls="--", label="truth")
+        ax.set_title(f"pass {k + 1}: {len(x)} points; centre {a['fit_center']:.5f} ± {a['fit_center_err']:.1e}\n"
+                     f"FWHM {a['fit_width']:.5f}, reduced χ² {a['fit_reduced_chi2']:.2f}", fontsize=8)
+        ax.set_xlabel("SND:T1:TH1 [deg]")
+    axes[0].set_ylabel("downstream / upstream")
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"examples/snd: SND:rock_t1_th1 (truth {truth:.5f} deg, FWHM {fwhm} deg)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(OUT / "rocking_curve.png", dpi=110)
+    c = passes[1][3]["fit_center"]
+    print("rocking_curve.png:", f"centre {c:.6f} truth {truth:.6f} error {abs(c - truth) / fwhm * 100:.3f} % of the width")
+
+
 if __name__ == "__main__":
     OUT.mkdir(parents=True, exist_ok=True)
     residual()
     camera()
     spectrum()
+    rocking_curve()
