@@ -842,26 +842,29 @@ Plans::Plan* Plans::find(const std::string& name) const {
     return nullptr;
 }
 
-// Parses Args ("a=1 b=2", or commas) into the plan's next arguments.
-static bool parse_args(Plan& p, const std::string& text, std::string& why) {
+bool parse_plan_args(const std::vector<std::pair<std::string, double>>& declared, const std::string& text,
+                     std::vector<double>& out, std::string& why) {
     std::vector<double> v;
-    for (const auto& a : p.cfg.args) v.push_back(a.second);
+    std::string names;
+    for (const auto& [n, d] : declared) v.push_back(d), names += (names.empty() ? "" : ", ") + n;
     std::string t = text;
     for (char& c : t)
-        if (c == ',' || c == ';') c = ' ';
+        if (c == ',' || c == ';' || c == '\t' || c == '\n' || c == '\r') c = ' ';
     std::istringstream is(t);
     for (std::string item; is >> item;) {
         const std::size_t eq = item.find('=');
-        const int k = eq == std::string::npos ? -1 : p.arg_index(item.substr(0, eq));
         if (eq == std::string::npos) return (why = "argument '" + item + "' should be name=value"), false;
-        if (k < 0) return (why = "'" + item.substr(0, eq) + "' is not an argument of " + p.cfg.name + " (it takes " + p.arg_list() + ")"), false;
+        const std::string name = item.substr(0, eq), num = item.substr(eq + 1);
+        int k = -1;
+        for (std::size_t i = 0; i < declared.size(); ++i)
+            if (declared[i].first == name) k = int(i);
+        if (k < 0) return (why = "'" + name + "' is not an argument of the plan (it takes " + (names.empty() ? "none" : names) + ")"), false;
         char* end = nullptr;
-        const std::string num = item.substr(eq + 1);
-        const double x = std::strtod(num.c_str(), &end);
-        if (num.empty() || *end || !std::isfinite(x)) return (why = "argument " + item.substr(0, eq) + ": '" + num + "' is not a number"), false;
+        const double x = num.empty() ? NAN : std::strtod(num.c_str(), &end);
+        if (num.empty() || *end || !std::isfinite(x)) return (why = "argument " + name + ": '" + num + "' is not a number"), false;
         v[std::size_t(k)] = x;
     }
-    p.next_args = v;
+    out = std::move(v);
     return true;
 }
 
@@ -914,7 +917,7 @@ void Plans::start() {
         };
         p.args_r->put_hook = [this, pl](pv::Record& r, const pv::FieldDesc&) {
             std::string why;
-            if (parse_args(*pl, pv::get_text(r), why)) return pv::PutStatus::Ok;
+            if (parse_plan_args(pl->cfg.args, pv::get_text(r), pl->next_args, why)) return pv::PutStatus::Ok;
             pv::set_text(db_, *pl->message_r, "Args: " + why);
             LOG_WARN(lg, pl->cfg.name << ": Args refused: " << why);
             return pv::PutStatus::Failed;

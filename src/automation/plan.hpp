@@ -42,6 +42,13 @@ namespace beamctl::automation {
 
 class StateMachines;
 
+// Parses a run's arguments, "name=value ..." (spaces, commas or semicolons between them), into the
+// values of the plan's declared `args` (defaults where not given): false with why on a name the
+// plan does not take or a value that is not a finite number. Text from clients (the Args PV, the
+// command line): any bytes are safe.
+bool parse_plan_args(const std::vector<std::pair<std::string, double>>& declared, const std::string& text,
+                     std::vector<double>& out, std::string& why);
+
 class Plans {
 public:
     // Compiles every expression and loads the records into `db` (before init_records). Throws

@@ -2,6 +2,7 @@
 #include "automation/plan_client.hpp"
 
 #include "automation/number_text.hpp"
+#include "automation/plan.hpp"
 #include "ca/client.hpp"
 #include "core/error.hpp"
 #include "core/event_loop.hpp"
@@ -65,21 +66,12 @@ int run_plan_client(const config::IocConfig& cfg, const PlanRunOptions& o, std::
         return 2;
     }
     std::string args;
-    for (const std::string& a : o.args) { // checked here too, for a clear message before anything moves
-        const std::size_t eq = a.find('=');
-        bool known = false;
-        for (const auto& [n, v] : plan->args) known = known || (eq != std::string::npos && a.substr(0, eq) == n);
-        char* end = nullptr;
-        const std::string num = eq == std::string::npos ? std::string() : a.substr(eq + 1);
-        const double x = std::strtod(num.c_str(), &end);
-        if (!known || num.empty() || *end || !std::isfinite(x)) {
-            std::string names;
-            for (const auto& [n, v] : plan->args) names += (names.empty() ? "" : ", ") + n;
-            err << o.plan << ": argument '" << a << "' should be NAME=NUMBER with NAME one of "
-                << (names.empty() ? "(none: the plan takes no arguments)" : names) << "\n";
-            return 2;
-        }
-        args += (args.empty() ? "" : " ") + a;
+    for (const std::string& a : o.args) args += (args.empty() ? "" : " ") + a;
+    std::vector<double> values;
+    std::string why;
+    if (!parse_plan_args(plan->args, args, values, why)) { // the IOC's own parser: a clear message before anything moves
+        err << o.plan << ": " << why << "\n";
+        return 2;
     }
 
     block_stop_signals();

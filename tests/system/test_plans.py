@@ -142,7 +142,7 @@ def test_beamctl_plan_run_starts_follows_and_reports_and_ctrl_c_aborts(tmp_path,
         assert "rock_t1_th1: centre " in r.stdout and f"rock_t1_th1: file {tmp_path}/rock_t1_th1_" in r.stdout
         # arguments are checked before anything moves
         r = plan_cli(cfg, "rock_t1_th1", "dwel=1")
-        assert r.returncode == 2 and "should be NAME=NUMBER with NAME one of dwell" in r.stderr
+        assert r.returncode == 2 and "'dwel' is not an argument of the plan (it takes dwell)" in r.stderr, r.stderr
         r = plan_cli(cfg, "nope")
         assert r.returncode == 2 and "no plan 'nope'" in r.stderr
         r = subprocess.run([str(BEAMCTL), "plan", "list", str(cfg)], capture_output=True, text=True, timeout=30)

@@ -245,7 +245,7 @@ TEST(Plan, StartIsRefusedWhileRunningBadArgsAreRefusedAndARefusedMoveFailsTheRun
     Rig r("  - {name: s, type: scan, args: {stop: 1}, axes: [{motor: M:x, start: 0, stop: stop}], points: 3, detectors: {y: D:lin}, directory: DIR}\n");
     r.set_text("P:s:Args", "nope=1");
     EXPECT_EQ(r.last_put, pv::PutStatus::Failed);
-    EXPECT_NE(r.text("P:s:Message").find("'nope' is not an argument of s (it takes stop)"), std::string::npos) << r.text("P:s:Message");
+    EXPECT_NE(r.text("P:s:Message").find("'nope' is not an argument of the plan (it takes stop)"), std::string::npos) << r.text("P:s:Message");
     r.set_text("P:s:Args", "stop=abc");
     EXPECT_EQ(r.last_put, pv::PutStatus::Failed);
     ASSERT_EQ(r.start("s"), pv::PutStatus::Ok);
