@@ -210,3 +210,66 @@ def test_the_seeds_alignment_procedure_aligns_every_crystal(tmp_path, prefix):
             scans = [k for k in f["entry"] if k.startswith("s")]
             assert "s2_split_t1_y1_pass1" in scans and "s12_rock_t3_th_pass2" in scans, scans
             assert f["entry"].attrs["status"] == "Done"
+
+
+def test_sigterm_during_a_plan_aborts_it_writes_its_file_and_exits_0(tmp_path, prefix):
+    with running_snd(tmp_path, prefix) as srv:
+        p = prefix + "th1_scan:"
+        set_text(p + "FilePath", str(tmp_path))
+        epics.caput(p + "Start", 1)
+        assert wait_for(lambda: get(p + "Point") >= 3, 20)
+        assert srv.stop() == 0
+        files = list(tmp_path.glob("th1_scan_*.h5"))
+        assert len(files) == 1, files
+        with h5py.File(files[0], "r") as f:
+            assert f["entry"].attrs["status"] == "Aborted"
+            assert f["entry"].attrs["message"] == "aborted: the IOC is stopping"
+            assert len(f["entry/th1_scan/signal"]) >= 3
+        srv.start()  # running_config stops it again and checks it is alive
+
+
+def test_a_plan_scans_another_iocs_motor_and_reads_its_detector_through_ca(tmp_path, prefix):
+    """IOC A (beamctl softioc) serves a motor record and a detector following it; IOC B's plan
+    scans and aligns them through its Channel Access client."""
+    from conftest import IocServer, RunServer, acquire_port, forget_pvs, release_port, require_binary
+    require_binary()
+    a_prefix = prefix + "A:"
+    (tmp_path / "a.db").write_text(
+        'record(motor, "$(P)m") { field(DTYP, "Sim Motor") field(MRES, "0.001") field(RDBD, "0.001") field(VELO, "5")'
+        ' field(ACCL, "0.05") field(DLLM, "-10") field(DHLM, "10") }\n'
+        'record(calc, "$(P)det") { field(INPA, "$(P)m.RBV CP") field(CALC, "10+100/(1+((A-1.5)/0.1)^2)") }\n')
+    a_port = acquire_port()
+    a = IocServer(tmp_path, [tmp_path / "a.db"], a_port, macros=f"P={a_prefix}", name="a").start()
+    b_port = None
+    try:
+        cfg = f"""ioc: {{name: B, prefix: "{prefix}"}}
+plans:
+  - {{name: s, type: scan, axes: [{{motor: "{a_prefix}m", start: 0, stop: 2}}], points: 11, detectors: {{d: "{a_prefix}det"}},
+     directory: "{tmp_path}"}}
+  - {{name: a, type: align, motor: "{a_prefix}m", detectors: {{d: "{a_prefix}det"}}, passes: [{{range: 1.5, points: 31}}],
+     min_r_squared: 0.99, directory: ""}}
+"""
+        (tmp_path / "b.yaml").write_text(cfg)
+        b_port = acquire_port()
+        b = RunServer(tmp_path, tmp_path / "b.yaml", b_port)
+        b.extra_env = {"EPICS_CA_ADDR_LIST": f"127.0.0.1:{a_port}", "EPICS_CA_AUTO_ADDR_LIST": "NO"}
+        b.start()
+        try:
+            assert put_status(prefix + "s:Start", 1, timeout=60) == ECA_NORMAL, text(prefix + "s:Message")
+            y = get(prefix + "s:Y")
+            want = [10 + 100 / (1 + ((0.2 * k - 1.5) / 0.1) ** 2) for k in range(11)]
+            assert len(y) == 11 and max(abs(y - np.array(want))) < 0.5, (y, want)  # read after each arrival
+            assert abs(get(a_prefix + "m.RBV") - 2) < 2e-3
+            assert put_status(prefix + "a:Start", 1, timeout=60) == ECA_NORMAL, text(prefix + "a:Message")
+            assert abs(get(prefix + "a:Center") - 1.5) < 0.002  # 1 % of the FWHM (0.2)
+            assert abs(get(a_prefix + "m.RBV") - 1.5) < 2e-3
+        finally:
+            b.stop()
+            b.kill()
+    finally:
+        a.stop()
+        a.kill()
+        forget_pvs(prefix)
+        release_port(a_port)
+        if b_port:
+            release_port(b_port)
