@@ -40,21 +40,14 @@ std::string label_of(const std::string& pv) {
     return s;
 }
 
-std::string iso_time() {
+// Local time now, strftime's `format` ("%Y-%m-%dT%H:%M:%S%z" for the file's times, "%Y%m%d-%H%M%S"
+// for its name).
+std::string local_time(const char* format) {
     const std::time_t t = std::time(nullptr);
     std::tm tm{};
     localtime_r(&t, &tm);
     char b[40];
-    std::strftime(b, sizeof b, "%Y-%m-%dT%H:%M:%S%z", &tm);
-    return b;
-}
-
-std::string file_stamp() {
-    const std::time_t t = std::time(nullptr);
-    std::tm tm{};
-    localtime_r(&t, &tm);
-    char b[40];
-    std::strftime(b, sizeof b, "%Y%m%d-%H%M%S", &tm);
+    std::strftime(b, sizeof b, format, &tm);
     return b;
 }
 
@@ -1009,7 +1002,7 @@ pv::PutStatus Plans::start_run(Plan& p) {
     std::string args_text;
     for (std::size_t i = 0; i < p.args.size(); ++i) args_text += (i ? " " : "") + p.cfg.args[i].first + "=" + fmt(p.args[i]);
     r.data.title = p.cfg.name + (p.cfg.desc.empty() ? "" : ": " + p.cfg.desc);
-    r.data.attributes = {{"plan", p.cfg.name}, {"args", args_text}, {"ioc", ioc_name_}, {"start_time", iso_time()},
+    r.data.attributes = {{"plan", p.cfg.name}, {"args", args_text}, {"ioc", ioc_name_}, {"start_time", local_time("%Y-%m-%dT%H:%M:%S%z")},
                          {"run", std::to_string(r.number)}};
     std::string why;
     r.task = make_task(p, r, p.cfg.name, why);
@@ -1038,8 +1031,8 @@ void Plans::finish(Run& r) {
     // the file: whatever the ending
     const std::string dir = pv::get_text(*p.filepath_r);
     if (!dir.empty()) {
-        const std::string path = dir + "/" + p.cfg.name + "_" + file_stamp() + "_" + std::to_string(r.number) + ".h5";
-        r.data.attributes.push_back({"end_time", iso_time()});
+        const std::string path = dir + "/" + p.cfg.name + "_" + local_time("%Y%m%d-%H%M%S") + "_" + std::to_string(r.number) + ".h5";
+        r.data.attributes.push_back({"end_time", local_time("%Y-%m-%dT%H:%M:%S%z")});
         r.data.attributes.push_back({"status", kStatusNames[st]});
         r.data.attributes.push_back({"message", msg});
         if (r.overhead_n > 0) r.data.attributes.push_back({"overhead_ms", fmt(1e3 * r.overhead_sum / double(r.overhead_n))});

@@ -26,13 +26,22 @@ def bragg(kev):
     return math.degrees(math.asin(HC / (2 * D_SI220 * kev)))
 
 
-def running_snd(tmp_path, prefix):
+def snd_config(prefix, mail_port=None, http_port=None):
+    """examples/snd/ioc.yaml under `prefix`, its files found, its mail and webhook servers moved."""
     d = EXAMPLES / "snd"
     cfg = (d / "ioc.yaml").read_text()
     cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
     cfg = cfg.replace("file: snd_", f"file: {d}/snd_").replace('"SND:', f'"{prefix}')
+    if mail_port:
+        cfg = cfg.replace("port: 8025", f"port: {mail_port}")
+    if http_port:
+        cfg = cfg.replace("127.0.0.1:8026", f"127.0.0.1:{http_port}")
     assert '"SND:' not in cfg
-    return running_config(tmp_path, prefix, cfg, lambda: abs(get(prefix + "E1.RBV") - 8.0) < 1e-3, timeout=20)
+    return cfg
+
+
+def running_snd(tmp_path, prefix):
+    return running_config(tmp_path, prefix, snd_config(prefix), lambda: abs(get(prefix + "E1.RBV") - 8.0) < 1e-3, timeout=20)
 
 
 def test_e1_moves_every_crystal_arm_and_the_diagnostic(tmp_path, prefix):
@@ -273,11 +282,7 @@ def test_a_latch_sends_an_email_and_a_webhook_once(tmp_path, prefix):
     import json
     srv = MailAndHooks()
     try:
-        d = EXAMPLES / "snd"
-        cfg = (d / "ioc.yaml").read_text()
-        cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
-        cfg = cfg.replace("file: snd_", f"file: {d}/snd_").replace('"SND:', f'"{prefix}')
-        cfg = cfg.replace("port: 8025", f"port: {srv.smtp_port}").replace("127.0.0.1:8026", f"127.0.0.1:{srv.http_port}")
+        cfg = snd_config(prefix, srv.smtp_port, srv.http_port)
         with running_config(tmp_path, prefix, cfg, lambda: get_str(prefix + "snd:State") == "parked", timeout=20):
             assert put_status(prefix + "snd:Request", "normal_operation") == ECA_PUTFAIL  # the guard: latches
             assert wait_for(lambda: srv.mails and srv.posts, 10), (srv.mails, srv.posts)
@@ -303,11 +308,7 @@ def test_an_unreachable_mail_server_is_retried_logged_and_never_blocks_control(t
     srv = MailAndHooks()
     port = srv.smtp_port
     srv.close()  # nobody listens there now
-    d = EXAMPLES / "snd"
-    cfg = (d / "ioc.yaml").read_text()
-    cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
-    cfg = cfg.replace("file: snd_", f"file: {d}/snd_").replace('"SND:', f'"{prefix}')
-    cfg = cfg.replace("port: 8025", f"port: {port}").replace('  webhooks: ["http://127.0.0.1:8026/snd"]\n', "")
+    cfg = snd_config(prefix, port).replace('  webhooks: ["http://127.0.0.1:8026/snd"]\n', "")
     cfg = cfg.replace("  min_interval: 60", "  min_interval: 60\n  retries: 2\n  retry_interval: 0.2")
     with running_config(tmp_path, prefix, cfg, lambda: get_str(prefix + "snd:State") == "parked", timeout=20):
         assert put_status(prefix + "snd:Request", "normal_operation") == ECA_PUTFAIL

@@ -16,24 +16,14 @@ import numpy as np
 import epics
 
 from conftest import _put_done, BEAMCTL, ECA_NORMAL, ECA_PUTFAIL, connect, put_status, running_config, wait_for
-from test_automation import EXAMPLES, MailAndHooks, get, get_str
+from test_automation import MailAndHooks, get, get_str, snd_config
 
 CRYSTALS = ("T1:TH1", "T1:TH2", "T4:TH2", "T4:TH1", "T2:TH", "T3:TH")
 
 
-def snd_config(prefix, srv=None):
-    d = EXAMPLES / "snd"
-    cfg = (d / "ioc.yaml").read_text()
-    cfg = cfg.replace("ioc: {name: SND}", f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}')
-    cfg = cfg.replace("file: snd_", f"file: {d}/snd_").replace('"SND:', f'"{prefix}')
-    if srv:
-        cfg = cfg.replace("port: 8025", f"port: {srv.smtp_port}").replace("127.0.0.1:8026", f"127.0.0.1:{srv.http_port}")
-    assert '"SND:' not in cfg
-    return cfg
-
-
 def running_snd(tmp_path, prefix, srv=None):
-    return running_config(tmp_path, prefix, snd_config(prefix, srv), lambda: get_str(prefix + "rock_t1_th1:Status") == "Idle",
+    cfg = snd_config(prefix, srv.smtp_port, srv.http_port) if srv else snd_config(prefix)
+    return running_config(tmp_path, prefix, cfg, lambda: get_str(prefix + "rock_t1_th1:Status") == "Idle",
                           timeout=20)
 
 
