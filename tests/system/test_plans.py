@@ -263,3 +263,30 @@ plans:
         release_port(a_port)
         if b_port:
             release_port(b_port)
+
+
+def test_the_primary_machines_auto_alignment_runs_the_procedure_and_a_failure_latches(tmp_path, prefix):
+    """Seed 003: "transitioning to the auto-alignment begins execution of the alignment procedure";
+    the transition's step is the plan's Start with a put-callback, so a failed alignment fails it."""
+    from test_automation import wait_state
+    with running_snd(tmp_path, prefix):
+        fsm, bearing = prefix + "snd:", prefix + "bearing_t1:"
+        set_text(prefix + "align:FilePath", "")
+        for state in ("landed", "flying"):
+            assert put_status(bearing + "Request", state) == ECA_NORMAL
+            assert wait_state(prefix, "bearing_t1", state)
+        for state in ("normal_operation", "online_calibration"):
+            assert put_status(fsm + "Request", state) == ECA_NORMAL
+            assert wait_state(prefix, "snd", state)
+        assert put_status(prefix + "Sim:T4:TH2:Offset", 1.0) == ECA_NORMAL  # t4.th2's peak far away: its rocking curve fails
+        assert put_status(fsm + "Request", "auto_alignment") == ECA_NORMAL
+        assert wait_for(lambda: get_str(prefix + "align:Status") == "Running", 5)
+        assert get(fsm + "Busy") == 1 and get_str(fsm + "Transition") == "auto_align"
+        assert wait_for(lambda: get_str(prefix + "align:Status") == "Failed", 120)
+        assert wait_state(prefix, "snd", "error_latch")
+        error = text(fsm + "Error")
+        assert "plan align failed" in error and "rock_t4_th2" in error and "fit refused" in error, error
+        for done in ("split_t1_y1", "rock_t1_th1", "rock_t1_th2"):  # the steps before it had run
+            assert get_str(prefix + done + ":Status") == "Done", done
+        assert get_str(prefix + "rock_t4_th2:Status") == "Failed"
+        assert get_str(prefix + "rock_t4_th1:Status") == "Idle"  # never reached
