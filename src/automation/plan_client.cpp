@@ -8,6 +8,7 @@
 #include "core/event_loop.hpp"
 #include "core/signals.hpp"
 
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <memory>
@@ -109,7 +110,9 @@ int run_plan_client(const config::IocConfig& cfg, const PlanRunOptions& o, std::
                         out << o.plan << ": not started: " << msg << "\n";
                         rc = 1;
                     } else {
-                        out << o.plan << ": " << name << ": " << msg << "\n";
+                        std::string lower = name;
+                        for (char& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
+                        out << o.plan << ": " << name << (msg == lower ? std::string() : ": " + msg) << "\n"; // "Done", "Failed: why"
                         if (align && st == 3 && std::isfinite(center))
                             out << o.plan << ": centre " << number_text(center, 8) << ", width " << number_text(width, 6) << "\n";
                         if (!file.empty()) out << o.plan << ": file " << file << "\n";
