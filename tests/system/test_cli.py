@@ -10,7 +10,7 @@ from epics import ca
 from conftest import (BEAMCTL, REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port,
                       require_binary, wait_for)
 
-SUBCOMMANDS = ["softioc", "db", "run", "scanner", "check", "signals", "plc", "axis", "rcp-sim", "sim", "shell",
+SUBCOMMANDS = ["softioc", "db", "run", "scanner", "check", "signals", "plan", "plc", "axis", "rcp-sim", "sim", "shell",
                "ca-repeater", "esi"]
 
 
