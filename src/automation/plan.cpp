@@ -165,6 +165,7 @@ struct Plans::Run {
     long overhead_n = 0;
     std::string latch;       // a state machine to latch (an align step failed)
     std::string abort_why;   // who aborted: "" (the Abort PV), "the IOC is stopping"
+    std::vector<std::string> motors; // the motor records it may move (no other run may move them)
     Run(Plans& p, Plan& t) : plans(p), top(t) {}
 
     pv::Database& db() { return plans.db_; }
@@ -991,8 +992,23 @@ pv::PutStatus Plans::start_run(Plan& p) {
     if (p.run) return refuse(p.run->top.cfg.name == p.cfg.name ? "already running" : "in use by " + p.run->top.cfg.name);
     for (const auto& st : p.steps)
         if (st.plan && st.plan->run) return refuse("its step plan " + st.plan->cfg.name + " is running");
+    // the motors this run may move: no two runs drive one motor
+    std::vector<std::string> motors;
+    auto add = [&](const std::string& pv) { motors.push_back(pv.substr(0, pv.find('.'))); };
+    for (const auto& m : p.motor_pvs) add(m);
+    for (const auto& st : p.cfg.steps)
+        for (const auto& [m, v] : st.moves) add(m);
+    for (const auto& st : p.steps)
+        if (st.plan)
+            for (const auto& m : st.plan->motor_pvs) add(m);
+    for (const auto& other : runs_)
+        if (!other->ended)
+            for (const auto& m : motors)
+                if (std::find(other->motors.begin(), other->motors.end(), m) != other->motors.end())
+                    return refuse(m + " is in use by the plan " + other->top.cfg.name);
     auto run = std::make_unique<Run>(*this, p);
     Run& r = *run;
+    r.motors = std::move(motors);
     r.number = ++p.runs;
     r.t0 = clock_();
     p.args = p.next_args;

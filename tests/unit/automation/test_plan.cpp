@@ -362,3 +362,22 @@ TEST(Plan, BadConfigurationIsRefusedNamingWhere) {
         EXPECT_NE(std::string(x.what()).find("M:x start"), std::string::npos) << x.what();
     }
 }
+
+TEST(Plan, TwoRunsNeverDriveOneMotor) {
+    Rig r("  - {name: s, type: scan, axes: [{motor: M:x, start: 0, stop: 1}], points: 3, dwell: 0.5, detectors: {y: D:lin}, directory: \"\"}\n"
+          "  - {name: t, type: list, axes: [{motor: M:x, positions: [2]}], detectors: {y: D:lin}, directory: \"\"}\n"
+          "  - {name: u, type: list, axes: [{motor: M:y, positions: [2]}], detectors: {y: D:lin}, directory: \"\"}\n"
+          "  - {name: q, type: sequence, steps: [{move: {M:x: 3}}], directory: \"\"}\n");
+    ASSERT_EQ(r.start("s"), pv::PutStatus::Ok);
+    r.run(0.05);
+    EXPECT_EQ(r.put("P:t:Start", 1), pv::PutStatus::Failed);
+    EXPECT_EQ(r.text("P:t:Message"), "M:x is in use by the plan s");
+    EXPECT_EQ(r.put("P:q:Start", 1), pv::PutStatus::Failed) << "a sequence's move step counts too";
+    EXPECT_EQ(r.put("P:u:Start", 1), pv::PutStatus::Ok) << "another motor: runs alongside";
+    ASSERT_TRUE(r.finish());
+    r.run(5);
+    EXPECT_EQ(r.status("u"), "Done");
+    EXPECT_EQ(r.put("P:t:Start", 1), pv::PutStatus::Ok) << "free again once the run ended";
+    r.run(5);
+    EXPECT_EQ(r.status("t"), "Done");
+}
