@@ -23,6 +23,8 @@
 #include "feedback/epid_record.hpp"
 #include "pv/autosave.hpp"
 #include "pv/database.hpp"
+#include "pv/dbd_file.hpp"
+#include "core/error_list.hpp"
 #include "pv/db_shell.hpp"
 #include "pv/shell_server.hpp"
 #include "pv/db_file.hpp"
@@ -78,10 +80,13 @@ MacroMap macro_options(const std::vector<std::string>& defs) {
     return macros;
 }
 
+// Every error of every file in one run: each file's errors, then those of resolving the links.
 void load_databases(pv::Database& db, const DbOptions& o) {
     MacroMap macros = macro_options(o.macros);
-    for (auto& f : o.files) db.load(pv::load_db_file(f, macros, o.include_path));
-    db.init_records();
+    ErrorList errs;
+    for (auto& f : o.files) errs.capture([&] { db.load(pv::load_db_file(f, macros, o.include_path)); });
+    errs.capture([&] { db.init_records(); });
+    errs.throw_if_any();
 }
 
 // `beamctl plc check`: compiles PLC files and reports every error; with --ioc, against that
@@ -567,7 +572,10 @@ int main(int argc, char** argv) {
     dbcmd->add_option("-I,--include", dbo.include_path, "Search path for include \"file\"")
         ->allow_extra_args(false)
         ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
-    dbcmd->add_option("files", dbo.files, "Database files (.db)")->required();
+    bool dbd = false;
+    dbcmd->add_flag("--dbd", dbd,
+                    "Print the record types beamctl serves as a .dbd (every field, its type, menu, access and initial value)");
+    dbcmd->add_option("files", dbo.files, "Database files (.db), or one ioc.yaml");
 
     IocOptions runo, checko;
     auto* runcmd = app.add_subcommand("run", "Run an IOC: buses, RT engine, PVs and CA server (ioc.yaml)");
@@ -766,7 +774,15 @@ int main(int argc, char** argv) {
             ioc.signals().print(std::cout, sig_pattern);
             return ioc.signals().match(sig_pattern).empty() ? 1 : 0;
         }
+        if (*dbcmd && dbd) {
+            pv::write_dbd(std::cout, pv::RecordTypes::global());
+            return 0;
+        }
         if (*dbcmd) {
+            if (dbo.files.empty()) {
+                std::fprintf(stderr, "beamctl db: give database files (or an ioc.yaml), or --dbd\n");
+                return 2;
+            }
             if (dbo.files.size() == 1 && dbo.files[0].size() > 5 &&
                 (dbo.files[0].ends_with(".yaml") || dbo.files[0].ends_with(".yml"))) {
                 rt::MonotonicClock clock;

@@ -46,11 +46,12 @@ template <typename T> T sat(double v) {
     return T(v);
 }
 
-// Writes one metadata limit of the element type at p.
+// Writes one metadata limit of the element type at p. As base's db_access.c, DBR_CTRL_CHAR and
+// DBR_CTRL_SHORT limits are the DBR_GR_LONG ones truncated (a limit of -100 reads 156 as a char).
 void put_limit(uint8_t* p, Prim prim, double v) {
     switch (prim) {
-    case Prim::Short: put16(p, uint16_t(sat<int16_t>(v))); break;
-    case Prim::Char: *p = sat<uint8_t>(v); break;
+    case Prim::Short: put16(p, uint16_t(sat<int32_t>(v))); break;
+    case Prim::Char: *p = uint8_t(sat<int32_t>(v)); break;
     case Prim::Long: put32(p, uint32_t(sat<int32_t>(v))); break;
     case Prim::Float: putf32(p, float(v)); break;
     case Prim::Double: putf64(p, v); break;

@@ -63,9 +63,9 @@ double read_double(const Elements& e, uint32_t i) {
 }
 
 int64_t read_int(const Elements& e, uint32_t i) {
-    if (!is_integer_dbf(e.type)) {
+    if (!is_integer_dbf(e.type)) { // a double read as an integer: saturated to 32 bits (x86's cast)
         double d = read_double(e, i);
-        return saturate<int64_t>(d);
+        return saturate<int32_t>(d);
     }
     const char* p = static_cast<const char*>(e.data) + std::size_t(i) * e.stride;
     switch (e.type) {
@@ -240,8 +240,10 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
                 copy_string(d, kStringSize, strs[v]);
             else if (f.menu && v < f.menu->choices.size())
                 copy_string(d, kStringSize, f.menu->choices[v]);
-            else if (f.menu || n > 0)
+            else if (f.menu)
                 copy_string(d, kStringSize, "Illegal_Value");
+            else if (n > 0) // a state without a string, or none (mbbi's 65535): empty, as softIoc
+                d[0] = 0;
             else
                 std::snprintf(d, kStringSize, "%u", unsigned(v));
         } else if (e.type == Dbf::Float || e.type == Dbf::Double) {
@@ -251,11 +253,13 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
         }
         break;
     }
-    // dest may be unaligned (inside a message buffer): store through memcpy.
-    case Prim::Short: store(dest, saturate_int<int16_t>(read_int(e, i))); break;
-    case Prim::Enum: store(dest, saturate_int<uint16_t>(read_int(e, i))); break;
+    // dest may be unaligned (inside a message buffer): store through memcpy. An integer field
+    // read as a narrower integer type is truncated as base's dbConvert does (a C cast: a longout
+    // of -7 read as DBR_ENUM is 65529); a floating-point one is saturated first.
+    case Prim::Short: store(dest, int16_t(read_int(e, i))); break;
+    case Prim::Enum: store(dest, uint16_t(read_int(e, i))); break;
     case Prim::Char: store(dest, uint8_t(read_int(e, i))); break;
-    case Prim::Long: store(dest, saturate_int<int32_t>(read_int(e, i))); break;
+    case Prim::Long: store(dest, int32_t(read_int(e, i))); break;
     case Prim::Float: store(dest, float(read_double(e, i))); break;
     case Prim::Double: store(dest, read_double(e, i)); break;
     }

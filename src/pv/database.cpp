@@ -2,6 +2,7 @@
 
 #include "core/error.hpp"
 #include "core/error_list.hpp"
+#include "core/log.hpp"
 #include "pv/convert.hpp"
 
 #include <algorithm>
@@ -61,6 +62,7 @@ Database::~Database() {
 }
 
 namespace {
+log::Logger lg("pv.db");
 bool is_val(const FieldDesc& f) { return f.name[0] == 'V' && f.name[1] == 'A' && f.name[2] == 'L' && !f.name[3]; }
 bool is_named(const FieldDesc& f, const char* n) { return std::strcmp(f.name, n) == 0; }
 
@@ -118,14 +120,24 @@ static bool known_epics_type(std::string_view t) {
 // Fields of EPICS base's standard record types that beamctl's records do not implement.
 static bool known_epics_field(std::string_view f) {
     static const char* known[] = {
-        "ASP", "BKPT", "MLOK", "MLIS", "PPN", "PPNR", "SPVT", "RSET", "DSET", "DPVT", "RDES", "LSET",
-        "UTAG", "TIME", "SIML", "SIOL", "SIMS", "SIMM", "SSCN", "SDLY", "OLDSIMM", "SIMPVT", "LINR",
-        "EGUF", "EGUL", "AOFF", "ASLO", "ESLO", "EOFF", "ROFF", "RVAL", "ORAW", "ORBV", "RBV", "PBRK",
-        "INIT", "LBRK", "OMOD", "SVAL", "SIOL", "IVOA", "IVOV", "OROC",
+        "UTAG", "SIML", "SIOL", "SIMS", "SIMM", "SSCN", "SDLY", "OLDSIMM", "LINR",
+        "EGUF", "EGUL", "AOFF", "ASLO", "ESLO", "EOFF", "ROFF", "RVAL", "ORAW", "ORBV", "RBV",
+        "INIT", "LBRK", "OMOD", "SVAL", "IVOA", "IVOV", "OROC",
         "AFTC", "AFVL", "MPST", "APST", "HASH", "BUSY", "NORD", "BPTR", "RARM", "OLDN", "WAIT", "OUTV",
         "CLCV", "OCLV", "INAV", "INBV", "INCV", "INDV", "INEV", "INFV", "INGV", "INHV", "INIV",
-        "INJV", "INKV", "INLV", "RPCL", "ORPC", "EPVT", "DLYA", "TPRO", "RPVT"};
+        "INJV", "INKV", "INLV", "DLYA", "TPRO", "OOPT", "OOCH", "NLST", "HIGH", "AMSG", "NAMSG"};
     for (const char* k : known)
+        if (f == k) return true;
+    return false;
+}
+
+// Fields of base's records that are DBF_NOACCESS (pointers and private state): no database may set
+// them (base's dbPutString refuses them too).
+static bool noaccess_epics_field(std::string_view f) {
+    static const char* noaccess[] = {"ASP", "BKPT", "MLOK", "MLIS", "PPN", "PPNR", "SPVT", "RSET", "DSET",
+                                     "DPVT", "RDES", "LSET", "TIME", "SIMPVT", "PBRK", "RPVT", "WDPT",
+                                     "WDOG", "EPVT", "RPCL", "ORPC", "BPTR", "CVT", "PVT", "SADR"};
+    for (const char* k : noaccess)
         if (f == k) return true;
     return false;
 }
@@ -133,6 +145,9 @@ static bool known_epics_field(std::string_view f) {
 void Database::apply_field(Record& rec, const DbField& f, const std::string& file) {
     (void)file;
     const FieldDesc* fd = rec.type().find(f.name);
+    if (!fd && noaccess_epics_field(f.name))
+        throw Error(SB() << f.loc.str() << ": field " << f.name << " of record " << rec.name()
+                         << " is DBF_NOACCESS: no database may set it (as in EPICS base)");
     if (!fd && known_epics_field(f.name))
         throw Error(SB() << f.loc.str() << ": field " << f.name << " of record type " << rec.type().name()
                          << " is not supported by beamctl (record " << rec.name() << ")");
@@ -149,6 +164,10 @@ void Database::apply_field(Record& rec, const DbField& f, const std::string& fil
     std::string err;
     if (!parse_field(rec, *fd, f.value, &err))
         throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": " << err);
+    if (fd->menu == &kMenuSoftDtyp)
+        if (const char* why = dtyp_refusal(rec.type().name(), rec.dtyp))
+            throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": DTYP \"" << f.value
+                             << "\": record type " << rec.type().name() << " " << why);
     if (is_link(fd->dbf))
         if (auto& st = field_ref<Link>(rec, *fd).state; st && st->spec) st->spec->loc = f.loc;
     if (is_val(*fd)) rec.udf = 0; // a VAL given in the file defines the value
@@ -192,11 +211,13 @@ std::string link_text(const Record& r, const Link& l) {
 }
 
 void Database::load(const DbFile& file, const RecordTypes& types) {
-    // Validate and build everything first, so a file with an error adds nothing.
+    // Validate and build everything first, so a file with an error adds nothing; every error of
+    // the file is reported (each field of each record), not the first only.
     struct Pending {
         std::unique_ptr<Record> fresh; // new record, or null when merging into an existing one
         Record* rec;
     };
+    ErrorList errs;
     std::vector<Pending> todo;
     std::unordered_map<std::string, Record*> created;
     for (const DbRecord& dr : file.records) {
@@ -206,15 +227,18 @@ void Database::load(const DbFile& file, const RecordTypes& types) {
             if (it != created.end()) existing = it->second;
         }
         if (existing) {
-            if (dr.type != "*" && dr.type != existing->type().name())
-                throw Error(SB() << dr.loc.str() << ": record " << dr.name << " already exists with type "
-                                 << existing->type().name() << ", not " << dr.type);
-            for (const DbField& f : dr.fields) apply_field(*existing, f, dr.loc.file);
+            if (dr.type != "*" && dr.type != existing->type().name()) {
+                errs.add(SB() << dr.loc.str() << ": record " << dr.name << " already exists with type "
+                              << existing->type().name() << ", not " << dr.type);
+                continue;
+            }
+            for (const DbField& f : dr.fields) errs.capture([&] { apply_field(*existing, f, dr.loc.file); });
             continue;
         }
-        if (dr.type == "*")
-            throw Error(SB() << dr.loc.str() << ": record(\"*\", \"" << dr.name
-                             << "\") modifies a record that does not exist");
+        if (dr.type == "*") {
+            errs.add(SB() << dr.loc.str() << ": record(\"*\", \"" << dr.name << "\") modifies a record that does not exist");
+            continue;
+        }
         const RecordType* t = types.find(dr.type);
         if (!t) {
             SB sb;
@@ -224,18 +248,27 @@ void Database::load(const DbFile& file, const RecordTypes& types) {
                 sb << dr.loc.str() << ": unknown record type '" << dr.type << "' (supported:";
             for (auto& n : types.names()) sb << " " << n;
             sb << ")";
-            throw Error(sb);
+            errs.add(sb);
+            continue;
         }
-        if (dr.name.empty() || dr.name.size() > 60)
-            throw Error(SB() << dr.loc.str() << ": record name '" << dr.name
-                             << "' must have 1 to 60 characters");
+        if (dr.name.empty() || dr.name.size() > 60) {
+            errs.add(SB() << dr.loc.str() << ": record name '" << dr.name << "' must have 1 to 60 characters");
+            continue;
+        }
+        bool bad_name = false;
         for (char c : dr.name)
-            if (c == '.' || c == ' ' || c == '"' || c == '\'' || c == '$' || c == '{' || c == '}')
-                throw Error(SB() << dr.loc.str() << ": record name '" << dr.name
-                                 << "' contains the character '" << c << "'");
+            if (c == '.' || c == ' ' || c == '"' || c == '\'' || c == '$' || c == '{' || c == '}') {
+                errs.add(SB() << dr.loc.str() << ": record name '" << dr.name << "' contains the character '" << c
+                              << "'");
+                bad_name = true;
+                break;
+            }
+        if (bad_name) continue;
         auto rec = t->create();
         copy_string(rec->name_, sizeof rec->name_, dr.name);
-        for (const DbField& f : dr.fields) apply_field(*rec, f, dr.loc.file);
+        bool ok = true;
+        for (const DbField& f : dr.fields) ok &= errs.capture([&] { apply_field(*rec, f, dr.loc.file); });
+        if (!ok) continue;
         for (const DbInfo& i : dr.infos) rec->info_.emplace_back(i.name, i.value);
         for (const std::string& a : dr.aliases) rec->aliases_.push_back(a);
         created[dr.name] = rec.get();
@@ -244,20 +277,22 @@ void Database::load(const DbFile& file, const RecordTypes& types) {
     }
     for (const DbAlias& a : file.aliases) {
         if (!find(a.record) && !created.count(a.record))
-            throw Error(SB() << a.loc.str() << ": alias '" << a.alias << "' names record '" << a.record
-                             << "' which does not exist");
+            errs.add(SB() << a.loc.str() << ": alias '" << a.alias << "' names record '" << a.record
+                          << "' which does not exist");
     }
     for (auto& p : todo) {
         for (auto& a : p.rec->aliases_)
             if (find(a) || created.count(a))
-                throw Error(SB() << "alias '" << a << "' of record " << p.rec->name()
-                                 << " clashes with an existing name");
+                errs.add(SB() << "alias '" << a << "' of record " << p.rec->name() << " clashes with an existing name");
     }
+    for (const DbAlias& a : file.aliases)
+        if (find(a.alias) || created.count(a.alias))
+            errs.add(SB() << a.loc.str() << ": alias '" << a.alias << "' already exists");
+    errs.throw_if_any();
     for (auto& p : todo) add(std::move(p.fresh));
     for (auto& p : todo)
         for (auto& a : p.rec->aliases_) aliases_[a] = p.rec;
     for (const DbAlias& a : file.aliases) {
-        if (find(a.alias)) throw Error(SB() << a.loc.str() << ": alias '" << a.alias << "' already exists");
         Record* r = find(a.record);
         aliases_[a.alias] = r;
         r->aliases_.push_back(a.alias);
@@ -429,8 +464,13 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
     case Link::Kind::Empty:
     case Link::Kind::Constant: return true;
     case Link::Kind::Hw: {
-        if (r.dtyp == 0 && r.type().find("DTYP") && r.type().find("DTYP")->menu == &kMenuSoftDtyp)
-            return fail(SB() << "the hardware address '@" << l.s().address << "' needs DTYP \"beamctl\"");
+        const FieldDesc* dtyp_fd = r.type().find("DTYP");
+        bool soft_menu = dtyp_fd && dtyp_fd->menu == &kMenuSoftDtyp;
+        if (soft_menu && (r.dtyp == kDtypTimestamp || r.dtyp == kDtypGetenv || r.dtyp == kDtypStdio))
+            return true; // INST_IO soft device support: the record reads the text itself
+        if (soft_menu && soft_dtyp(r.dtyp))
+            return fail(SB() << "the hardware address '@" << l.s().address << "' needs DTYP \"beamctl\" (DTYP \""
+                             << kMenuSoftDtyp.choices[r.dtyp] << "\" has no hardware)");
         if (!binder_)
             return fail(SB() << "the hardware address '@" << l.s().address
                              << "' needs device support (DTYP), and this database has none");
@@ -1156,8 +1196,19 @@ void Database::post(Record& r, const FieldDesc* f, unsigned mask) {
     }
 }
 
-void Database::call_after(Record& r, double seconds) {
-    delays_.push_back({&r, (clock_ ? clock_() : now_s_) + std::max(0.0, seconds)});
+void Database::call_after(Record& r, double seconds, int tag) {
+    delays_.push_back({&r, (clock_ ? clock_() : now_s_) + std::max(0.0, seconds), tag});
+}
+
+void Database::note_record_error(const Record& r, const std::string& why) {
+    std::string m = SB() << "record " << r.name() << ": " << why;
+    LOG_ERR(lg, m);
+    record_errors_.push_back(std::move(m));
+}
+
+void Database::rescan(Record& r) {
+    remove_from_scan(r);
+    add_to_scan(r);
 }
 
 void Database::scan_periodic(double now_s) {
@@ -1169,8 +1220,9 @@ void Database::scan_periodic(double now_s) {
             continue;
         }
         Record* r = delays_[i].rec;
+        int tag = delays_[i].tag;
         delays_.erase(delays_.begin() + std::ptrdiff_t(i));
-        r->on_delay();
+        r->on_delay(tag);
     }
     for (auto& s : scans_) {
         if (s.next_s == 0) s.next_s = now_s;

@@ -152,7 +152,13 @@ public:
     // Calls r.on_delay() once `seconds` have passed on the clock of scan_periodic (the owner
     // calls it every 10 ms: delays have that resolution; tests drive it in virtual time), counted
     // from now on the clock set by set_clock, or else from scan_periodic's last time.
-    void call_after(Record& r, double seconds);
+    void call_after(Record& r, double seconds, int tag = 0);
+    // Puts r on the scan list its SCAN field now names (a record changed its own SCAN).
+    void rescan(Record& r);
+    // Errors of records that loaded but cannot work (Record::init_error: an SNAM no library
+    // provides), "record NAME: why", in order; each is logged when it happens.
+    void note_record_error(const Record& r, const std::string& why);
+    const std::vector<std::string>& record_errors() const { return record_errors_; }
     // The clock scan_periodic is given (an IOC: EventLoop::now_s), so that a delay asked for
     // before the first scan counts from the right time.
     void set_clock(std::function<double()> now) { clock_ = std::move(now); }
@@ -232,9 +238,11 @@ private:
     struct Poll {
         Record* rec;
         double next_s;
+        int tag = 0; // call_after's tag (Record::on_delay(tag))
     };
     std::vector<Poll> polls_; // records that poll their device (Record::poll_period_s)
     std::vector<Poll> delays_; // call_after: (record, when)
+    std::vector<std::string> record_errors_;
     struct IoIntr {
         Record* rec;
         std::vector<LinkDevice*> devices; // of its links, found when io_intr_stale_ is set

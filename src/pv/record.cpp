@@ -33,7 +33,55 @@ const Menu kMenuIvoa{"menuIvoa",
                      {"Continue normally", "Don't drive outputs", "Set output to IVOV"}};
 // "beamctl": links with "@address" reach the engine's signals (an IOC's device support); the
 // asyn names are ecmccfg's, whose "@asyn(...)...ec0.s3.entry?" addresses mean the same there.
-const Menu kMenuSoftDtyp{"DTYP", {"Soft Channel", "beamctl", "asynInt32", "asynFloat64", "asynUInt32Digital"}};
+// base's soft device supports (devSoft.dbd) follow; asyn's other interfaces (ecmccfg's templates
+// name them) are choices too: such a record needs its "@" address bound by the IOC.
+const Menu kMenuSoftDtyp{"DTYP",
+                         {"Soft Channel", "beamctl", "asynInt32", "asynFloat64", "asynUInt32Digital",
+                          "Raw Soft Channel", "Async Soft Channel", "Soft Timestamp", "getenv", "stdio",
+                          "asynInt64", "asynInt8ArrayIn", "asynInt8ArrayOut", "asynInt16ArrayIn",
+                          "asynInt16ArrayOut", "asynInt32ArrayIn", "asynInt32ArrayOut", "asynInt64ArrayIn",
+                          "asynInt64ArrayOut", "asynFloat32ArrayIn", "asynFloat32ArrayOut",
+                          "asynFloat64ArrayIn", "asynFloat64ArrayOut", "asynOctetRead", "asynOctetWrite",
+                          "asynOctetWriteRead", "asynOctetCmdResponse", "asynOctetWriteBinary",
+                          "asynInt32Average", "asynFloat64Average", "asynInt32TimeSeries",
+                          "asynFloat64TimeSeries", "General Time", "Db State"}};
+
+bool soft_dtyp(uint16_t dtyp) {
+    return dtyp == kDtypSoft || dtyp == kDtypRawSoft || dtyp == kDtypAsyncSoft;
+}
+
+const char* dtyp_refusal(std::string_view type, uint16_t dtyp) {
+    // base's devSoft.dbd: which record types have which of its device supports
+    auto in = [&](std::initializer_list<std::string_view> types) {
+        for (auto t : types)
+            if (t == type) return true;
+        return false;
+    };
+    switch (dtyp) {
+    case kDtypRawSoft:
+        if (in({"ai", "ao", "bi", "bo", "mbbi", "mbbo", "mbbiDirect", "mbboDirect"})) return nullptr;
+        return "has no \"Raw Soft Channel\" device support (base has it for ai ao bi bo mbbi mbbo mbbiDirect "
+               "mbboDirect)";
+    case kDtypAsyncSoft:
+        if (in({"ai", "ao", "bi", "bo", "calcout", "int64in", "int64out", "longin", "longout", "lso", "mbbi",
+                "mbbiDirect", "mbbo", "mbboDirect", "printf", "stringin", "stringout"}))
+            return nullptr;
+        return "has no \"Async Soft Channel\" device support";
+    case kDtypTimestamp:
+        if (in({"ai", "stringin"})) return nullptr;
+        return "has no \"Soft Timestamp\" device support (base has it for ai and stringin)";
+    case kDtypGetenv:
+        if (in({"stringin", "lsi"})) return nullptr;
+        return "has no \"getenv\" device support (base has it for stringin and lsi)";
+    case kDtypStdio:
+        if (in({"stringout", "lso", "printf"})) return nullptr;
+        return "has no \"stdio\" device support (base has it for stringout, lso and printf)";
+    case kDtypGeneralTime:
+    case kDtypDbState:
+        return "device support \"General Time\" / \"Db State\" is not provided by beamctl";
+    default: return nullptr;
+    }
+}
 const Menu kMenuPriority{"menuPriority", {"LOW", "MEDIUM", "HIGH"}};
 const Menu kMenuOif{"aoOIF", {"Full", "Incremental"}};
 
@@ -131,6 +179,9 @@ std::vector<FieldDesc> Record::common_fields() {
         BEAMCTL_MENU(R, PRIO, prio, kMenuPriority, 0),
         BEAMCTL_FIELD(R, TPRO, tpro, UChar, 0),
         BEAMCTL_FIELD(R, FLNK, flnk, FwdLink, 0),
+        BEAMCTL_FIELD(R, AMSG, amsg, String, kReadOnly),
+        BEAMCTL_FIELD(R, NAMSG, namsg, String, kReadOnly),
+        BEAMCTL_FIELD(R, UTAG, utag, Int64, kReadOnly),
     };
 }
 
@@ -176,10 +227,11 @@ int16_t Record::precision(const FieldDesc& f) const {
     return (f.dbf == Dbf::Float || f.dbf == Dbf::Double) ? 15 : 0; // recGblGetPrec default
 }
 
-bool Record::set_sevr(uint16_t new_stat, uint16_t new_sevr) {
+bool Record::set_sevr(uint16_t new_stat, uint16_t new_sevr, std::string_view msg) {
     if (nsev < new_sevr) {
         nsta = new_stat;
         nsev = new_sevr;
+        copy_string(namsg, sizeof namsg, msg);
         return true;
     }
     return false;
@@ -187,11 +239,15 @@ bool Record::set_sevr(uint16_t new_stat, uint16_t new_sevr) {
 
 unsigned Record::reset_alarms() {
     uint16_t prev_stat = stat, prev_sevr = sevr;
+    unsigned stat_mask = 0;
+    if (std::strncmp(namsg, amsg, sizeof amsg) != 0) { // recGblResetAlarms: AMSG follows NAMSG
+        std::memcpy(amsg, namsg, sizeof amsg);
+        stat_mask = kDbeAlarm;
+    }
     stat = nsta;
     sevr = nsev;
     nsta = 0;
     nsev = 0;
-    unsigned stat_mask = 0;
     if (prev_sevr != sevr) {
         stat_mask = kDbeAlarm;
         post("SEVR", kDbeValue);
@@ -199,6 +255,7 @@ unsigned Record::reset_alarms() {
     if (prev_stat != stat) stat_mask |= kDbeValue;
     if (!stat_mask) return 0;
     post("STAT", stat_mask);
+    post("AMSG", stat_mask);
     if (!ackt || sevr >= acks) {
         acks = sevr;
         post("ACKS", kDbeValue);
@@ -220,8 +277,16 @@ void Record::async_done(PutStatus st) {
     if (db_) db_->async_complete(*this, st);
 }
 
-void Record::call_after(double seconds) {
-    if (db_) db_->call_after(*this, seconds);
+void Record::call_after(double seconds, int tag) {
+    if (db_) db_->call_after(*this, seconds, tag);
+}
+
+void Record::rescan() {
+    if (db_) db_->rescan(*this);
+}
+
+void Record::init_error(const std::string& why) {
+    if (db_) db_->note_record_error(*this, why);
 }
 
 void Record::stamp_time() {

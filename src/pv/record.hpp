@@ -26,6 +26,16 @@ struct Menu {
     const char* name;
     std::vector<const char*> choices;
 };
+// DTYP choices of kMenuSoftDtyp with a meaning of their own (their index in the menu).
+enum SoftDtyp : uint16_t {
+    kDtypSoft = 0, kDtypBeamctl = 1, kDtypRawSoft = 5, kDtypAsyncSoft = 6, kDtypTimestamp = 7,
+    kDtypGetenv = 8, kDtypStdio = 9, kDtypGeneralTime = 32, kDtypDbState = 33,
+};
+// A soft device support (no "@" address: Soft Channel, Raw Soft Channel, Async Soft Channel).
+bool soft_dtyp(uint16_t dtyp);
+// Why record type `type` cannot have DTYP choice `dtyp` of kMenuSoftDtyp (as base's devSoft.dbd
+// lists them), or nullptr when it can.
+const char* dtyp_refusal(std::string_view type, uint16_t dtyp);
 extern const Menu kMenuScan, kMenuPini, kMenuAlarmSevr, kMenuAlarmStat, kMenuYesNo, kMenuFtype,
     kMenuPostOnChange, kMenuPostAlways, kMenuOmsl, kMenuIvoa, kMenuSoftDtyp, kMenuPriority, kMenuOif;
 
@@ -167,12 +177,23 @@ public:
     virtual void poll_tick() {}
     // A delay the record asked for with call_after() has passed (calcout ODLY, seq DLYn).
     virtual void on_delay() {}
-    // Asks the database to call on_delay() after `seconds` of its clock (scan_periodic's time).
-    void call_after(double seconds);
+    // The same for a delay asked for with a tag (bo HIGH, simulation's SDLY: one record, two
+    // kinds of delay); tag 0 is on_delay().
+    virtual void on_delay(int tag) {
+        if (tag == 0) on_delay();
+    }
+    // Asks the database to call on_delay(tag) after `seconds` of its clock (scan_periodic's time).
+    void call_after(double seconds, int tag = 0);
+    // Moves the record to the scan list of its SCAN field (simulation mode's SSCN swap).
+    void rescan();
+    // init(): this record cannot work as configured, but the database loads (as EPICS's
+    // recGblRecordError at iocInit): the error is kept in Database::record_errors and logged.
+    void init_error(const std::string& why);
 
     // --- alarm helpers (recGbl) ---
-    // Raises the new alarm if `sevr` is above the pending one (recGblSetSevr).
-    bool set_sevr(uint16_t stat, uint16_t sevr);
+    // Raises the new alarm if `sevr` is above the pending one (recGblSetSevr); the alarm message
+    // (AMSG after processing) is `msg`, or empty.
+    bool set_sevr(uint16_t stat, uint16_t sevr, std::string_view msg = {});
     // Moves the pending alarm into STAT/SEVR, posts them; returns DBE_ALARM if they changed.
     unsigned reset_alarms();
     // The record's timestamp: now, or TSEL's record's (a database link), or left to device
@@ -238,6 +259,9 @@ public:
     uint8_t putf = 0, rpro = 0, lcnt = 0;
     uint16_t prio = 0;   // scan priority LOW/MEDIUM/HIGH (one scan thread here: informational)
     Link flnk;           // forward link: processed after this record
+    char amsg[40] = {};  // alarm message of STAT/SEVR (recGblSetSevrMsg)
+    char namsg[40] = {}; // pending alarm message (NSTA/NSEV)
+    int64_t utag = 0;    // user tag (base's DBF_UINT64, held here as DBF_INT64): device support sets it
 
     static std::vector<FieldDesc> common_fields(); // dbCommon part of every type's table
 

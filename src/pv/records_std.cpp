@@ -8,41 +8,163 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <ctime>
+#include <string>
 
 namespace beamctl::pv {
 namespace {
 using namespace support;
 
+// The conversion fields of ai and ao (base's order of use: ROFF, ASLO/AOFF, LINR with
+// ESLO/EOFF, breakpoint tables refused at init).
+template <typename R> void add_conversion_fields(std::vector<FieldDesc>& v) {
+    auto add = {
+        BEAMCTL_MENU(R, LINR, linr, kMenuConvert, kProcess),
+        BEAMCTL_FIELD(R, EGUF, eguf, Double, kProcess | kEgu),
+        BEAMCTL_FIELD(R, EGUL, egul, Double, kProcess | kEgu),
+        BEAMCTL_FIELD(R, AOFF, aoff, Double, kProcess),
+        BEAMCTL_FIELD(R, ASLO, aslo, Double, kProcess),
+        BEAMCTL_FIELD(R, ESLO, eslo, Double, kProcess),
+        BEAMCTL_FIELD(R, EOFF, eoff, Double, kProcess),
+        BEAMCTL_FIELD(R, ROFF, roff, ULong, kProcess),
+        BEAMCTL_FIELD(R, RVAL, rval, Long, kProcess),
+        BEAMCTL_FIELD(R, ORAW, oraw, Long, kReadOnly),
+        BEAMCTL_FIELD(R, INIT, init_flag, Short, kReadOnly),
+        BEAMCTL_FIELD(R, LBRK, lbrk, Short, kReadOnly),
+    };
+    v.insert(v.end(), add.begin(), add.end());
+}
+// aiRecord/aoRecord init_record: a breakpoint table is refused by name (beamctl ships none);
+// "old device support" without EOFF: EOFF = EGUL when ESLO is 1 and EOFF 0, kept for SLOPE.
+template <typename R> void init_conversion(R& r) {
+    if (r.linr > kLinrLinear)
+        throw Error(SB() << "LINR \"" << kMenuConvert.choices[r.linr] << "\" names breakpoint table "
+                         << kMenuConvert.choices[r.linr]
+                         << ", which beamctl does not provide (it ships no breakpoint tables); use SLOPE or "
+                            "LINEAR with ESLO/EOFF, or a calc record");
+    r.init_flag = 1;
+    double eoff = r.eoff, eslo = r.eslo;
+    if (r.eslo == 1.0 && r.eoff == 0.0) r.eoff = r.egul;
+    if (r.linr == kLinrSlope) {
+        r.eoff = eoff;
+        r.eslo = eslo;
+    }
+}
+
 struct AiRecord : AnalogBase<AiRecord> {
     using AnalogBase::AnalogBase;
     Link inp;
     double smoo = 0;
+    uint16_t linr = 0;
+    double eguf = 0, egul = 0, aoff = 0, aslo = 1, eslo = 1, eoff = 0;
+    uint32_t roff = 0;
+    int32_t rval = 0, oraw = 0;
+    int16_t init_flag = 0, lbrk = 0;
+    double aftc = 0, afvl = 0;
+    double sval = 0;
+    Simulation sim;
     bool smoothed = false; // a value was read before (smoothing starts from the second)
     const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* rval_fd = type().find("RVAL");
+    const FieldDesc* sval_fd = type().find("SVAL");
+    const FieldDesc* simm_fd = type().find("SIMM");
     static std::vector<FieldDesc> fields() {
         using R = AiRecord;
         auto v = analog_fields(common_fields());
-        auto add = {BEAMCTL_FIELD(R, INP, inp, InLink, 0), BEAMCTL_FIELD(R, SMOO, smoo, Double, 0)};
+        auto add = {BEAMCTL_FIELD(R, INP, inp, InLink, 0), BEAMCTL_FIELD(R, SMOO, smoo, Double, 0),
+                    BEAMCTL_FIELD(R, AFTC, aftc, Double, 0), BEAMCTL_FIELD(R, AFVL, afvl, Double, kReadOnly),
+                    BEAMCTL_FIELD(R, SVAL, sval, Double, 0)};
         v.insert(v.end(), add.begin(), add.end());
+        add_conversion_fields<R>(v);
+        add_simulation_fields<R>(v, true, false);
         return v;
     }
     void init() override {
-        if (load_constant(inp, *val_fd)) udf = std::isnan(val);
+        sim_init(*this, sim, *simm_fd);
+        load_constant(sim.siol, *sval_fd);
+        init_conversion(*this);
+        if (dtyp == kDtypRawSoft) {
+            load_constant(inp, *rval_fd); // devAiSoftRaw: a constant INP is RVAL
+        } else if (load_constant(inp, *val_fd)) {
+            udf = std::isnan(val);
+        }
+        oraw = rval;
+    }
+    PutStatus special(const FieldDesc& f) override {
+        sim_special(*this, sim, f, simm_fd);
+        if (is(f, "LINR") || is(f, "EGUF") || is(f, "EGUL")) {
+            if (linr > kLinrLinear) return PutStatus::BadValue; // no breakpoint tables
+            init_flag = 1;
+        }
+        return PutStatus::Ok;
+    }
+    // aiRecord's convert(): RVAL to VAL through ROFF, ASLO/AOFF and LINR; then smoothing.
+    void convert() {
+        double v = double(rval) + double(roff);
+        if (aslo != 0.0) v *= aslo;
+        v += aoff;
+        if (linr == kLinrSlope || linr == kLinrLinear) v = v * eslo + eoff;
+        if (smoo != 0.0 && std::isfinite(val)) {
+            if (init_flag) val = v; // initial condition
+            val = v * (1.0 - smoo) + val * smoo;
+        } else {
+            val = v;
+        }
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        double before = val;
-        if (soft_read(*this, inp, *val_fd)) { // devAiSoft: the value, smoothed by SMOO
-            if (smoo != 0 && smoothed && std::isfinite(before)) val = val * (1 - smoo) + before * smoo;
-            smoothed = true;
+        EpicsTime last = time;
+        bool convert_raw = false;
+        if (step == SimStep::Now) {
+            if (read_link(sim.siol, *sval_fd) || sim.siol.kind != Link::Kind::Db) {
+                if (sim.simm == 1) {
+                    val = sval;
+                    udf = std::isnan(val);
+                } else {
+                    rval = int32_t(std::floor(sval));
+                    convert_raw = true;
+                }
+            }
+        } else if (dtyp == kDtypRawSoft) { // devAiSoftRaw: INP into RVAL, then converted
+            if (inp.kind != Link::Kind::Db && inp.kind != Link::Kind::Hw) convert_raw = true;
+            else convert_raw = read_link(inp, *rval_fd);
+        } else if (dtyp == kDtypTimestamp) { // devTimestampAI: the time now, in EPICS seconds
+            time = EpicsTime::now();
+            val = time.sec + time.nsec * 1e-9;
+            udf = 0;
+        } else {
+            double before = val;
+            if (soft_read(*this, inp, *val_fd)) { // devAiSoft: the value, smoothed by SMOO
+                if (smoo != 0 && smoothed && std::isfinite(before)) val = val * (1 - smoo) + before * smoo;
+                smoothed = true;
+            }
         }
-        stamp_time();
-        udf = std::isnan(val); // aiRecord: soft channel with a constant input defines VAL
-        analog_alarms();
-        if (unsigned m = analog_monitor_mask()) post(val_fd, m);
+        if (convert_raw) {
+            convert();
+            udf = std::isnan(val);
+        }
+        if (dtyp != kDtypTimestamp) stamp_time();
+        if (dtyp == kDtypSoft && step == SimStep::Off) udf = std::isnan(val); // soft: VAL defines it
+        limit_alarms<double>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm, aftc, &afvl,
+                             seconds_between(time, last));
+        if (unsigned m = analog_monitor_mask()) {
+            post(val_fd, m);
+            if (oraw != rval) {
+                post(rval_fd, m);
+                oraw = rval;
+            }
+        }
+        init_flag = 0;
         pact = 0;
         return ProcessResult::Done;
+    }
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
     }
     void metadata(const FieldDesc& f, Metadata& md) const override {
         analog_metadata(f, md, hopr, lopr);
@@ -54,8 +176,18 @@ struct AoRecord : AnalogBase<AoRecord> {
     double oval = 0, drvh = 0, drvl = 0, oroc = 0, pval = 0, ivov = 0;
     Link dol, out;
     uint16_t omsl = 0, oif = 0, ivoa = 0;
+    uint16_t linr = 0;
+    double eguf = 0, egul = 0, aoff = 0, aslo = 0, eslo = 1, eoff = 0;
+    uint32_t roff = 0;
+    int32_t rval = 0, oraw = 0, rbv = 0, orbv = 0;
+    int16_t init_flag = 0, lbrk = 0;
+    uint8_t omod = 0;
+    Simulation sim;
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* oval_fd = type().find("OVAL");
+    const FieldDesc* rval_fd = type().find("RVAL");
+    const FieldDesc* rbv_fd = type().find("RBV");
+    const FieldDesc* simm_fd = type().find("SIMM");
     static std::vector<FieldDesc> fields() {
         using R = AoRecord;
         auto v = analog_fields(common_fields());
@@ -71,40 +203,108 @@ struct AoRecord : AnalogBase<AoRecord> {
             BEAMCTL_FIELD(R, OUT, out, OutLink, 0),
             BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
             BEAMCTL_FIELD(R, IVOV, ivov, Double, 0),
+            BEAMCTL_FIELD(R, RBV, rbv, Long, kReadOnly),
+            BEAMCTL_FIELD(R, ORBV, orbv, Long, kReadOnly),
+            BEAMCTL_FIELD(R, OMOD, omod, UChar, kReadOnly),
         };
         v.insert(v.end(), add.begin(), add.end());
+        add_conversion_fields<R>(v);
+        add_simulation_fields<R>(v, true, true);
         return v;
     }
     void init() override {
+        sim_init(*this, sim, *simm_fd);
         if (load_constant(dol, *val_fd)) udf = std::isnan(val);
+        init_conversion(*this);
+        oval = pval = val;
+        mlst = alst = lalm = val;
+        oraw = rval;
+        orbv = rbv;
     }
-    ProcessResult process() override {
-        pact = 1;
-        if (omsl == 1 && (dol.is_db() || dol.kind == Link::Kind::Hw)) { // closed_loop: VAL from DOL
-            double v = 0;
-            if (read_link(dol, v)) {
-                val = oif == 1 ? val + v : v; // Incremental adds to VAL
-                udf = std::isnan(val);
-            }
+    PutStatus special(const FieldDesc& f) override {
+        sim_special(*this, sim, f, simm_fd);
+        if (is(f, "LINR") || is(f, "EGUF") || is(f, "EGUL")) {
+            if (linr > kLinrLinear) return PutStatus::BadValue; // no breakpoint tables
+            init_flag = 1;
         }
-        double value = val;
+        return PutStatus::Ok;
+    }
+    // aoRecord's convert(): drive limits, OROC, then OVAL to RVAL (LINR, AOFF/ASLO, ROFF, rounded).
+    void convert(double value) {
         if (drvh > drvl) value = std::clamp(value, drvl, drvh);
         val = value;
         pval = value;
-        double prev = oval;
-        if (oroc != 0 && std::isfinite(prev)) {
-            double diff = value - prev;
-            if (diff < -oroc) value = prev - oroc;
-            else if (diff > oroc) value = prev + oroc;
+        if (oroc != 0) {
+            double diff = value - oval;
+            if (diff < 0) {
+                if (oroc < -diff) value = oval - oroc;
+            } else if (oroc < diff) {
+                value = oval + oroc;
+            }
         }
+        omod = oval != value;
         oval = value;
+        if (linr == kLinrSlope || linr == kLinrLinear) value = eslo == 0.0 ? 0 : (value - eoff) / eslo;
+        value -= aoff;
+        if (aslo != 0) value /= aslo;
+        value -= double(roff);
+        if (value >= 0.0)
+            rval = value >= 0x7fffffff - 0.5 ? 0x7fffffff : int32_t(value + 0.5);
+        else
+            rval = value > 0.5 - 2147483648.0 ? int32_t(value - 0.5) : int32_t(0x80000000u);
+    }
+    // writeValue: the device (Soft Channel: OVAL; Raw: RVAL) or, simulated, SIOL.
+    void write_value(bool simulated) {
+        if (simulated) write_link(sim.siol, sim.simm == 1 ? *oval_fd : *rval_fd);
+        else write_link(out, dtyp == kDtypRawSoft ? *rval_fd : *oval_fd);
+    }
+    ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
+        pact = 1;
+        if (!sim.resuming) {
+            double value = val;
+            bool ok = true;
+            if (omsl == 1 && (dol.is_db() || dol.kind == Link::Kind::Hw)) { // closed_loop: VAL from DOL
+                double v = 0;
+                ok = read_link(dol, v);
+                if (ok) value = oif == 1 ? val + v : v; // Incremental adds to VAL
+            }
+            if (ok) convert(value);
+            udf = std::isnan(val);
+            stamp_time();
+        }
         analog_alarms();
-        soft_write(*this, out, *oval_fd, ivoa, [this] { oval = ivov; });
-        stamp_time();
-        if (unsigned m = analog_monitor_mask()) post(val_fd, m);
-        if (oval != prev) post(oval_fd, kDbeValue | kDbeLog);
+        if (nsev < kInvalid || ivoa == 0) {
+            write_value(step == SimStep::Now);
+        } else if (ivoa == 2) { // Set output to IVOV
+            if (!sim.resuming) {
+                val = ivov;
+                convert(ivov);
+            }
+            write_value(step == SimStep::Now);
+        }
+        unsigned m = analog_monitor_mask();
+        if (m) post(val_fd, m);
+        if (omod) m |= kDbeValue | kDbeLog;
+        if (m) {
+            omod = 0;
+            post(oval_fd, m);
+            if (oraw != rval) {
+                post(rval_fd, m | kDbeValue | kDbeLog);
+                oraw = rval;
+            }
+            if (orbv != rbv) {
+                post(rbv_fd, m | kDbeValue | kDbeLog);
+                orbv = rbv;
+            }
+        }
+        init_flag = 0;
         pact = 0;
         return ProcessResult::Done;
+    }
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
     }
     void metadata(const FieldDesc& f, Metadata& md) const override {
         analog_metadata(f, md, drvh, drvl);
@@ -116,17 +316,23 @@ using LonginRecord = IntegerInRecord<int32_t>;  // record_support.hpp, shared wi
 using LongoutRecord = IntegerOutRecord<int32_t>;
 
 // ---------------------------------------------------------------- binary (bi, bo)
+constexpr int kHighDelayTag = 0x4819; // bo HIGH: the pulse's end (Record::on_delay)
+
 template <typename Self> struct BinaryBase : Record {
     using Record::Record;
     uint16_t val = 0;
     char znam[26] = {}, onam[26] = {};
     uint16_t zsv = 0, osv = 0, cosv = 0;
-    uint32_t rval = 0, mask = 0;
+    uint32_t rval = 0, mask = 0, oraw = 0, sval = 0;
+    int32_t rbv = 0, orbv = 0;
     uint16_t lalm = 0, mlst = 0;
     Link inp, dol, out; // Soft Channel: bi INP; bo DOL (OMSL closed_loop) and OUT
     uint16_t omsl = 0, ivoa = 0, ivov = 0;
+    Simulation sim;
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* rval_fd = type().find("RVAL");
+    const FieldDesc* sval_fd = type().find("SVAL");
+    const FieldDesc* simm_fd = type().find("SIMM");
 
     static std::vector<FieldDesc> binary_fields(std::vector<FieldDesc> v) {
         using R = Self;
@@ -138,6 +344,7 @@ template <typename Self> struct BinaryBase : Record {
             BEAMCTL_MENU(R, OSV, osv, kMenuAlarmSevr, kProcess),
             BEAMCTL_MENU(R, COSV, cosv, kMenuAlarmSevr, kProcess),
             BEAMCTL_FIELD(R, RVAL, rval, ULong, kProcess),
+            BEAMCTL_FIELD(R, ORAW, oraw, ULong, kReadOnly),
             BEAMCTL_FIELD(R, MASK, mask, ULong, 0),
             BEAMCTL_FIELD(R, LALM, lalm, UShort, kReadOnly),
             BEAMCTL_FIELD(R, MLST, mlst, UShort, kReadOnly),
@@ -147,6 +354,7 @@ template <typename Self> struct BinaryBase : Record {
     }
     PutStatus special(const FieldDesc& f) override {
         if (&f == val_fd && val > 1) return PutStatus::BadValue; // two states only
+        sim_special(*this, sim, f, simm_fd);
         return PutStatus::Ok;
     }
     int enum_strings(const FieldDesc& f, const char* out[kEnumStates]) const override {
@@ -156,20 +364,63 @@ template <typename Self> struct BinaryBase : Record {
         return 2;
     }
     void init() override {
-        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
-    }
-    void binary_process(bool output) {
-        uint32_t old_rval = rval;
-        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
-        if (output && omsl == 1 && soft_read(*this, dol, *val_fd)) {
-            if (val > 1) val = 1; // boRecord: any non-zero DOL value is 1
+        if (simm_fd) {
+            sim_init(*this, sim, *simm_fd);
+            if (sval_fd) load_constant(sim.siol, *sval_fd);
+        }
+        if (dtyp == kDtypRawSoft && load_constant(inp, *rval_fd)) { // devBiSoftRaw
+            val = rval ? 1 : 0;
+            udf = 0;
+        } else if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) {
             udf = 0;
         }
-        if (output) rval = mask ? (val ? mask : 0) : val;
-        else if (rval != old_rval) val = rval ? 1 : 0;
+        oraw = rval;
+        orbv = rbv;
+    }
+    // bo: VAL to RVAL (MASK: a one is MASK).
+    void to_raw() { rval = mask ? (val ? mask : 0) : val; }
+    void write_value(SimStep step) {
+        if (step == SimStep::Now) write_link(sim.siol, sim.simm == 1 ? *val_fd : *rval_fd);
+        else write_link(out, dtyp == kDtypRawSoft ? *rval_fd : *val_fd);
+    }
+    void binary_process(bool output, SimStep step) {
+        if (!output) {
+            if (step == SimStep::Now) { // simulated: SIOL into SVAL, YES as VAL, RAW as RVAL
+                if (read_link(sim.siol, *sval_fd) || sim.siol.kind != Link::Kind::Db) {
+                    if (sim.simm == 1) val = uint16_t(sval);
+                    else rval = sval, val = rval ? 1 : 0;
+                    udf = 0;
+                }
+            } else if (dtyp == kDtypRawSoft) { // devBiSoftRaw: RVAL, masked, then VAL
+                if (soft_read(*this, inp, *rval_fd)) {
+                    if (mask) rval &= mask;
+                    val = rval ? 1 : 0;
+                    udf = 0;
+                }
+            } else if (soft_read(*this, inp, *val_fd)) {
+                udf = 0;
+            }
+        }
+        if (output && !sim.resuming) {
+            if (omsl == 1 && soft_read(*this, dol, *val_fd)) {
+                if (val > 1) val = 1; // boRecord: any non-zero DOL value is 1
+                udf = 0;
+            }
+            to_raw();
+        }
         const uint16_t sevr_of[2] = {zsv, osv};
         state_alarms(*this, val, 2, sevr_of, kNoAlarm, cosv, lalm);
-        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { val = ivov ? 1 : 0; });
+        if (output) {
+            if (nsev < kInvalid || ivoa == 0) {
+                write_value(step);
+            } else if (ivoa == 2) { // Set output to IVOV
+                if (!sim.resuming) {
+                    val = ivov ? 1 : 0;
+                    to_raw();
+                }
+                write_value(step);
+            }
+        }
         stamp_time();
         unsigned m = reset_alarms();
         if (mlst != val) {
@@ -177,7 +428,14 @@ template <typename Self> struct BinaryBase : Record {
             mlst = val;
         }
         if (m) post(val_fd, m);
-        if (rval != old_rval) post(rval_fd, kDbeValue | kDbeLog);
+        if (oraw != rval) {
+            post(rval_fd, m | kDbeValue | kDbeLog);
+            oraw = rval;
+        }
+        if (output && orbv != rbv) {
+            post("RBV", m | kDbeValue | kDbeLog);
+            orbv = rbv;
+        }
     }
 };
 
@@ -187,18 +445,30 @@ struct BiRecord : BinaryBase<BiRecord> {
         using R = BiRecord;
         auto v = binary_fields(common_fields());
         v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        v.push_back(BEAMCTL_FIELD(R, SVAL, sval, ULong, 0));
+        add_simulation_fields<R>(v, true, false);
         return v;
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        binary_process(false);
+        binary_process(false, step);
         pact = 0;
         return ProcessResult::Done;
     }
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
+    }
 };
 
+// bo: HIGH > 0 makes a one a pulse: HIGH seconds after the processing that wrote it (the last
+// one, when it is written again before), VAL returns to 0 and the record processes (boRecord's
+// myCallbackFunc).
 struct BoRecord : BinaryBase<BoRecord> {
     using BinaryBase::BinaryBase;
+    double high = 0; // [s]
+    int high_pending = 0; // HIGH delays asked for and not yet passed
     void metadata(const FieldDesc& f, Metadata& md) const override {
         Record::metadata(f, md);
         if (&f == val_fd) md.ctrl_hi = 65535; // boRecord's get_control_double (as softIoc serves)
@@ -207,13 +477,36 @@ struct BoRecord : BinaryBase<BoRecord> {
         using R = BoRecord;
         auto v = binary_fields(common_fields());
         add_output_fields<R>(v, Dbf::UShort);
+        v.push_back(BEAMCTL_FIELD(R, HIGH, high, Double, 0));
+        v.push_back(BEAMCTL_FIELD(R, RBV, rbv, Long, kReadOnly));
+        v.push_back(BEAMCTL_FIELD(R, ORBV, orbv, Long, kReadOnly));
+        add_simulation_fields<R>(v, true, true);
         return v;
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        binary_process(true);
+        binary_process(true, step);
+        if (val == 1 && high > 0) {
+            ++high_pending;
+            call_after(high, kHighDelayTag);
+        }
         pact = 0;
         return ProcessResult::Done;
+    }
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) return sim_resume(*this, sim);
+        if (tag != kHighDelayTag || --high_pending > 0 || !database()) return; // a later one 
+        if (pact) { // busy (simulation delay): the pulse ends after another HIGH
+            if (val == 1 && high > 0) {
+                ++high_pending;
+                call_after(high, kHighDelayTag);
+            }
+            return;
+        }
+        val = 0;
+        database()->process(*this);
     }
 };
 
@@ -238,7 +531,7 @@ struct BusyRecord : BinaryBase<BusyRecord> {
     }
     ProcessResult process() override {
         pact = 1;
-        binary_process(true);
+        binary_process(true, SimStep::Off);
         pact = 0; // busy, but not in processing: the owner's put of 0 processes it
         if (val != 0) {
             if (high > 0) call_after(high);
@@ -271,14 +564,20 @@ template <typename Self> struct MbbBase : Record {
     uint32_t vals[16] = {};
     uint16_t sevs[16] = {};
     uint16_t unsv = 0, cosv = 0;
-    uint32_t rval = 0, mask = 0;
+    uint32_t rval = 0, mask = 0, oraw = 0, sval = 0;
+    int32_t rbv = 0, orbv = 0;
     int16_t nobt = 0, shft = 0;
     uint16_t lalm = 0, mlst = 0;
     uint8_t sdef = 0;
+    double aftc = 0, afvl = 0;
     Link inp, dol, out; // Soft Channel: mbbi INP; mbbo DOL (OMSL closed_loop) and OUT
     uint16_t omsl = 0, ivoa = 0, ivov = 0;
+    Simulation sim;
+    uint32_t raw_mask = 0; // Raw Soft Channel's mask (MASK, or all bits without NOBT), shifted
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* rval_fd = type().find("RVAL");
+    const FieldDesc* sval_fd = type().find("SVAL");
+    const FieldDesc* simm_fd = type().find("SIMM");
 
     static std::vector<FieldDesc> mbb_fields(std::vector<FieldDesc> v) {
         using R = Self;
@@ -295,6 +594,7 @@ template <typename Self> struct MbbBase : Record {
             BEAMCTL_MENU(R, UNSV, unsv, kMenuAlarmSevr, kProcess),
             BEAMCTL_MENU(R, COSV, cosv, kMenuAlarmSevr, kProcess),
             BEAMCTL_FIELD(R, RVAL, rval, ULong, kProcess),
+            BEAMCTL_FIELD(R, ORAW, oraw, ULong, kReadOnly),
             BEAMCTL_FIELD(R, MASK, mask, ULong, 0),
             BEAMCTL_FIELD(R, NOBT, nobt, Short, 0),
             BEAMCTL_FIELD(R, SHFT, shft, Short, 0),
@@ -307,16 +607,60 @@ template <typename Self> struct MbbBase : Record {
     }
     void init() override {
         update_sdef();
-        if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
+        if (mask == 0 && nobt > 0 && nobt <= 32) mask = uint32_t((uint64_t(1) << nobt) - 1); // from NOBT
+        raw_mask = nobt == 0 ? 0xffffffffu : mask;
+        if (shft > 0 && shft < 32) raw_mask <<= shft;
+        if (simm_fd) {
+            sim_init(*this, sim, *simm_fd);
+            if (sval_fd) load_constant(sim.siol, *sval_fd);
+        }
+        if (dtyp == kDtypRawSoft && load_constant(inp, *rval_fd)) {
+            to_val();
+            udf = 0;
+        } else if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) {
+            udf = 0;
+        }
+        oraw = rval;
+        orbv = rbv;
     }
+    // init_common: states are defined when any value or string is set.
     void update_sdef() {
         sdef = 0;
         for (int i = 0; i < 16; ++i)
-            if (vals[i]) sdef = 1;
+            if (vals[i] || strs[i][0]) sdef = 1;
+    }
+    // mbbi convert: RVAL (shifted down by SHFT) to the state whose value it is (65535: none), or
+    // to itself without states.
+    void to_val() {
+        uint32_t r = rval;
+        if (shft > 0 && shft < 32) r >>= shft;
+        if (!sdef) {
+            val = uint16_t(r);
+            return;
+        }
+        val = 65535;
+        for (int i = 0; i < 16; ++i)
+            if (vals[i] == r) {
+                val = uint16_t(i);
+                break;
+            }
+    }
+    // mbbo convert: VAL to its state's value (or itself), shifted up by SHFT; false: VAL > 15.
+    bool to_raw() {
+        if (sdef) {
+            if (val > 15) return false;
+            rval = vals[val];
+        } else {
+            rval = val;
+        }
+        if (shft > 0 && shft < 32) rval <<= shft;
+        return true;
     }
     PutStatus special(const FieldDesc& f) override {
         if (&f == val_fd && val > 15) return PutStatus::BadValue; // sixteen states only
-        if (f.name[2] == 'V' && f.name[3] == 'L' && !f.name[4]) update_sdef();
+        sim_special(*this, sim, f, simm_fd);
+        if ((f.name[2] == 'V' && f.name[3] == 'L' && !f.name[4]) || (f.name[2] == 'S' && f.name[3] == 'T' && !f.name[4]))
+            update_sdef();
         return PutStatus::Ok;
     }
     int enum_strings(const FieldDesc& f, const char* out[kEnumStates]) const override {
@@ -328,21 +672,78 @@ template <typename Self> struct MbbBase : Record {
         }
         return n;
     }
-    void mbb_process(bool output) {
-        uint32_t old_rval = rval;
-        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
-        if (output && omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
-        if (output) rval = sdef ? (val < 16 ? vals[val] : 0) : val;
-        state_alarms(*this, val, 16, sevs, unsv, cosv, lalm);
-        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { val = ivov; });
+    void write_value(SimStep step) {
+        if (step == SimStep::Now) {
+            write_link(sim.siol, sim.simm == 1 ? *val_fd : *rval_fd);
+        } else if (dtyp == kDtypRawSoft) { // devMbboSoftRaw: RVAL & MASK
+            uint32_t keep = rval;
+            rval &= raw_mask;
+            write_link(out, *rval_fd);
+            rval = keep;
+        } else {
+            write_link(out, *val_fd);
+        }
+    }
+    void mbb_process(bool output, SimStep step) {
+        EpicsTime last = time;
+        if (!output) {
+            if (step == SimStep::Now) {
+                if (read_link(sim.siol, *sval_fd) || sim.siol.kind != Link::Kind::Db) {
+                    if (sim.simm == 1) val = uint16_t(sval);
+                    else rval = sval, to_val();
+                    udf = 0;
+                }
+            } else if (dtyp == kDtypRawSoft) { // devMbbiSoftRaw: RVAL & MASK, then the state
+                if (soft_read(*this, inp, *rval_fd)) {
+                    rval &= raw_mask;
+                    to_val();
+                    udf = 0;
+                }
+            } else if (soft_read(*this, inp, *val_fd)) {
+                udf = 0;
+            }
+        }
+        if (output && !sim.resuming) {
+            if (omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
+            if (!to_raw()) set_sevr(kStatSoft, kInvalid);
+        }
         stamp_time();
+        if (!output && aftc > 0 && !udf) { // mbbi's alarm filter over the state's severity
+            uint16_t alarm = val > 15 ? unsv : sevs[val];
+            bool first = afvl == 0;
+            int filtered = alarm_filter(aftc, afvl, alarm, seconds_between(time, last));
+            if (!first) alarm = uint16_t(filtered);
+            set_sevr(kStatState, alarm);
+            if (val != lalm && !set_sevr(kStatCos, cosv)) lalm = val;
+        } else {
+            if (udf) afvl = 0;
+            state_alarms(*this, val, 16, sevs, unsv, cosv, lalm);
+        }
+        if (output) {
+            if (nsev < kInvalid || ivoa == 0) {
+                write_value(step);
+            } else if (ivoa == 2) {
+                if (!sim.resuming) {
+                    val = ivov;
+                    to_raw();
+                }
+                write_value(step);
+            }
+        }
         unsigned m = reset_alarms();
         if (mlst != val) {
             m |= kDbeValue | kDbeLog;
             mlst = val;
         }
         if (m) post(val_fd, m);
-        if (rval != old_rval) post(rval_fd, kDbeValue | kDbeLog);
+        if (oraw != rval) {
+            post(rval_fd, m | kDbeValue | kDbeLog);
+            oraw = rval;
+        }
+        if (output && orbv != rbv) {
+            post("RBV", m | kDbeValue | kDbeLog);
+            orbv = rbv;
+        }
     }
 };
 
@@ -352,13 +753,22 @@ struct MbbiRecord : MbbBase<MbbiRecord> {
         using R = MbbiRecord;
         auto v = mbb_fields(common_fields());
         v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        v.push_back(BEAMCTL_FIELD(R, AFTC, aftc, Double, 0));
+        v.push_back(BEAMCTL_FIELD(R, AFVL, afvl, Double, kReadOnly));
+        v.push_back(BEAMCTL_FIELD(R, SVAL, sval, ULong, 0));
+        add_simulation_fields<R>(v, true, false);
         return v;
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        mbb_process(false);
+        mbb_process(false, step);
         pact = 0;
         return ProcessResult::Done;
+    }
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
     }
 };
 
@@ -368,25 +778,82 @@ struct MbboRecord : MbbBase<MbboRecord> {
         using R = MbboRecord;
         auto v = mbb_fields(common_fields());
         add_output_fields<R>(v, Dbf::UShort);
+        v.push_back(BEAMCTL_FIELD(R, RBV, rbv, Long, kReadOnly));
+        v.push_back(BEAMCTL_FIELD(R, ORBV, orbv, Long, kReadOnly));
+        add_simulation_fields<R>(v, true, true);
         return v;
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        mbb_process(true);
+        mbb_process(true, step);
         pact = 0;
         return ProcessResult::Done;
+    }
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
     }
 };
 
 // ---------------------------------------------------------------- strings (stringin, stringout)
+// epicsTimeToStrftime: strftime (local time) with %f / %0<n>f for the fraction of the second
+// (n digits, at most 9; %f is 9). Returns false when the text does not fit in `size`.
+bool format_epics_time(std::string_view fmt, const EpicsTime& t, char* out, std::size_t size) {
+    std::string result;
+    time_t posix = time_t(int64_t(t.sec) + EpicsTime::kPosixEpochOffset);
+    std::tm tm{};
+    localtime_r(&posix, &tm);
+    std::string piece;
+    auto flush = [&] {
+        if (piece.empty()) return;
+        char buf[256];
+        std::size_t n = std::strftime(buf, sizeof buf, piece.c_str(), &tm);
+        result.append(buf, n);
+        piece.clear();
+    };
+    for (std::size_t i = 0; i < fmt.size(); ++i) {
+        if (fmt[i] == '%' && i + 1 < fmt.size()) {
+            if (fmt[i + 1] == '%') {
+                piece += "%%";
+                ++i;
+                continue;
+            }
+            std::size_t j = i + 1;
+            unsigned width = 0;
+            while (j < fmt.size() && fmt[j] >= '0' && fmt[j] <= '9') width = width * 10 + unsigned(fmt[j++] - '0');
+            if (j < fmt.size() && fmt[j] == 'f' && (j == i + 1 || width > 0)) {
+                flush();
+                if (j == i + 1 || width > 9) width = 9;
+                static const uint32_t div[] = {1000000000, 100000000, 10000000, 1000000, 100000,
+                                               10000,      1000,      100,      10,      1};
+                uint32_t frac = std::min<uint32_t>(t.nsec + div[width] / 2, 999999999) / div[width];
+                char buf[16];
+                std::snprintf(buf, sizeof buf, "%0*u", int(width), unsigned(frac));
+                result += buf;
+                i = j;
+                continue;
+            }
+        }
+        piece += fmt[i];
+    }
+    flush();
+    if (result.size() >= size) return false;
+    copy_string(out, size, result);
+    return true;
+}
+
 template <typename Self> struct StringBase : Record {
     using Record::Record;
-    char val[40] = {}, oval[40] = {}, ivov[40] = {};
+    char val[40] = {}, oval[40] = {}, ivov[40] = {}, sval[40] = {};
     uint16_t mpst = 0, apst = 0; // On Change by default
     Link inp, dol, out; // Soft Channel: stringin INP; stringout DOL (OMSL closed_loop) and OUT
     uint16_t omsl = 0, ivoa = 0;
     bool output = false;
+    Simulation sim;
     const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* sval_fd = type().find("SVAL");
+    const FieldDesc* simm_fd = type().find("SIMM");
     static std::vector<FieldDesc> string_fields(std::vector<FieldDesc> v) {
         using R = Self;
         auto add = {
@@ -399,15 +866,74 @@ template <typename Self> struct StringBase : Record {
         return v;
     }
     void init() override {
+        sim_init(*this, sim, *simm_fd);
+        if (sval_fd) load_constant(sim.siol, *sval_fd);
         if (load_constant(inp, *val_fd) || load_constant(dol, *val_fd)) udf = 0;
     }
+    PutStatus special(const FieldDesc& f) override {
+        sim_special(*this, sim, f, simm_fd);
+        return PutStatus::Ok;
+    }
+    // The INST_IO text of INP/OUT ("@text") for the soft device supports that take one.
+    std::string_view address(const Link& l) const {
+        return l.kind == Link::Kind::Hw ? std::string_view(l.s().address) : std::string_view();
+    }
+    void read_value(SimStep step) {
+        if (step == SimStep::Now) {
+            if (read_link(sim.siol, *sval_fd) || sim.siol.kind != Link::Kind::Db) {
+                std::memcpy(val, sval, sizeof val);
+                udf = 0;
+            }
+        } else if (dtyp == kDtypTimestamp) { // devTimestampSI: the time now, formatted by INP
+            time = EpicsTime::now();
+            if (format_epics_time(address(inp), time, val, sizeof val)) {
+                udf = 0;
+            } else {
+                udf = 1;
+                set_sevr(kStatUdf, udfs);
+            }
+        } else if (dtyp == kDtypGetenv) { // devSiEnviron: the environment variable INP names
+            std::string name(address(inp));
+            if (const char* v = std::getenv(name.c_str())) {
+                copy_string(val, sizeof val, v);
+                udf = 0;
+            } else {
+                val[0] = 0;
+                udf = 1;
+                set_sevr(kStatUdf, udfs, "No such ENV");
+            }
+        } else if (soft_read(*this, inp, *val_fd)) {
+            udf = 0;
+        }
+    }
+    void write_value(SimStep step) {
+        if (step == SimStep::Now) {
+            write_link(sim.siol, *val_fd);
+        } else if (dtyp == kDtypStdio) { // devSoStdio: OUT "@stdout", "@stderr" or "@errlog"
+            std::string_view where = address(out);
+            std::FILE* f = where == "stderr" || where == "errlog" ? stderr : stdout;
+            std::fprintf(f, "%.*s\n", int(strnlen(val, sizeof val)), val);
+            std::fflush(f);
+        } else {
+            write_link(out, *val_fd);
+        }
+    }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        if (!output && soft_read(*this, inp, *val_fd)) udf = 0;
-        if (output && omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
+        if (!output) read_value(step);
+        if (output && !sim.resuming && omsl == 1 && soft_read(*this, dol, *val_fd)) udf = 0;
         if (udf) set_sevr(kStatUdf, udfs);
-        if (output) soft_write(*this, out, *val_fd, ivoa, [this] { std::memcpy(val, ivov, sizeof val); });
-        stamp_time();
+        if (output) {
+            if (nsev < kInvalid || ivoa == 0) {
+                write_value(step);
+            } else if (ivoa == 2) {
+                if (!sim.resuming) std::memcpy(val, ivov, sizeof val);
+                write_value(step);
+            }
+        }
+        if (dtyp != kDtypTimestamp) stamp_time();
         unsigned m = reset_alarms();
         bool changed = std::strncmp(oval, val, sizeof val) != 0;
         if (mpst == 1 || changed) m |= kDbeValue;
@@ -417,6 +943,9 @@ template <typename Self> struct StringBase : Record {
         pact = 0;
         return ProcessResult::Done;
     }
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
+    }
 };
 struct StringinRecord : StringBase<StringinRecord> {
     using StringBase::StringBase;
@@ -424,6 +953,8 @@ struct StringinRecord : StringBase<StringinRecord> {
         using R = StringinRecord;
         auto v = string_fields(common_fields());
         v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        v.push_back(BEAMCTL_FIELD(R, SVAL, sval, String, 0));
+        add_simulation_fields<R>(v, false, false);
         return v;
     }
 };
@@ -433,6 +964,7 @@ struct StringoutRecord : StringBase<StringoutRecord> {
         using R = StringoutRecord;
         auto v = string_fields(common_fields());
         add_output_fields<R>(v, Dbf::String);
+        add_simulation_fields<R>(v, false, true);
         return v;
     }
 };
@@ -469,7 +1001,17 @@ struct WaveformRecord : Record {
             BEAMCTL_FIELD(R, INP, inp, InLink, 0),
         };
         v.insert(v.end(), add.begin(), add.end());
+        add_simulation_fields<R>(v, false, false);
         return v;
+    }
+    Simulation sim;
+    const FieldDesc* simm_fd = type().find("SIMM");
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
+    }
+    PutStatus special(const FieldDesc& f) override {
+        sim_special(*this, sim, f, simm_fd);
+        return PutStatus::Ok;
     }
     static bool elem_type(uint16_t ftvl, Dbf& t, uint16_t& size) {
         switch (ftvl) {
@@ -495,6 +1037,7 @@ struct WaveformRecord : Record {
         if (nelm > 64u * 1024 * 1024)
             throw Error(SB() << "NELM " << nelm << " is too large (at most 67108864)");
         storage.assign(std::size_t(nelm) * size, 0);
+        sim_init(*this, sim, *simm_fd);
         if (load_constant(inp, *val_fd)) udf = 0;
     }
     Elements elements(const FieldDesc& f) override {
@@ -526,8 +1069,14 @@ struct WaveformRecord : Record {
     }
     uint32_t last_nord = 0;
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        if (soft_read(*this, inp, *val_fd)) udf = 0; // devWfSoft: up to NELM elements, NORD set
+        if (step == SimStep::Now) { // simulated: SIOL into VAL
+            if (sim.siol.kind == Link::Kind::Db && read_link(sim.siol, *val_fd)) udf = 0;
+        } else if (soft_read(*this, inp, *val_fd)) {
+            udf = 0; // devWfSoft: up to NELM elements, NORD set
+        }
         stamp_time();
         if (udf) set_sevr(kStatUdf, udfs);
         unsigned m = reset_alarms();

@@ -82,13 +82,26 @@ TEST_F(RecordsSub, SnamCanBeChangedToAnotherLoadedRoutineOnly) {
     EXPECT_EQ(gets("s.STAT"), "SOFT");
 }
 
-TEST_F(RecordsSub, AnUnknownRoutineIsAnInitErrorNamingRecordRoutineAndLibraries) {
-    std::string e = load_error(R"(record(sub, "bad") { field(SNAM, "nowhere") })");
+// As EPICS: the database loads, the error names record, routine and the libraries loaded, and only
+// that record fails (BAD_SUB/INVALID when processed) while the others work.
+TEST_F(RecordsSub, AnUnknownRoutineFailsOnlyItsRecordNamingRoutineAndLibraries) {
+    load(R"(
+record(sub, "bad") { field(SNAM, "nowhere") }
+record(aSub, "bad2") { field(INAM, "sub_sum") }
+record(sub, "good") { field(SNAM, "sub_sum") field(INPA, "2") field(INPB, "3") }
+)");
+    ASSERT_EQ(db.record_errors().size(), 2u);
+    const std::string& e = db.record_errors()[0];
     EXPECT_NE(e.find("record bad: SNAM 'nowhere'"), std::string::npos) << e;
     EXPECT_NE(e.find("record_routines_plugin"), std::string::npos) << e; // what is loaded
     EXPECT_NE(e.find("sub_sum"), std::string::npos) << e;
-    e = load_error(R"(record(aSub, "bad2") { field(INAM, "sub_sum") })"); // a sub routine
-    EXPECT_NE(e.find("record bad2: INAM 'sub_sum'"), std::string::npos) << e;
+    EXPECT_NE(db.record_errors()[1].find("record bad2: INAM 'sub_sum'"), std::string::npos) << db.record_errors()[1];
+    process("bad");
+    EXPECT_EQ(gets("bad.STAT"), "BAD_SUB");
+    EXPECT_EQ(gets("bad.SEVR"), "INVALID");
+    process("good");
+    EXPECT_DOUBLE_EQ(getd("good"), 5);
+    EXPECT_EQ(gets("good.SEVR"), "NO_ALARM");
 }
 
 TEST_F(RecordsSub, LoadingALibraryWithoutRoutinesFailsClearly) {
