@@ -791,6 +791,7 @@ int main(int argc, char** argv) {
                 return 0;
             }
             pv::Database db;
+            db.set_offline_devices(true); // device addresses are the IOC's to bind: printed as written
             load_databases(db, dbo);
             db.write_db(std::cout);
             return 0;

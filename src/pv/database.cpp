@@ -136,7 +136,8 @@ static bool known_epics_field(std::string_view f) {
 static bool noaccess_epics_field(std::string_view f) {
     static const char* noaccess[] = {"ASP", "BKPT", "MLOK", "MLIS", "PPN", "PPNR", "SPVT", "RSET", "DSET",
                                      "DPVT", "RDES", "LSET", "TIME", "SIMPVT", "PBRK", "RPVT", "WDPT",
-                                     "WDOG", "EPVT", "RPCL", "ORPC", "BPTR", "CVT", "PVT", "SADR"};
+                                     "WDOG", "EPVT", "RPCL", "ORPC", "BPTR", "CVT", "PVT", "SADR",
+                                     "CBAK", "BKLNK", "priv"};
     for (const char* k : noaccess)
         if (f == k) return true;
     return false;
@@ -274,6 +275,8 @@ void Database::load(const DbFile& file, const RecordTypes& types) {
         created[dr.name] = rec.get();
         Record* raw = rec.get();
         todo.push_back({std::move(rec), raw});
+        if (record_loc_files_.empty() || record_loc_files_.back() != dr.loc.file) record_loc_files_.push_back(dr.loc.file);
+        record_locs_[raw] = {uint32_t(record_loc_files_.size() - 1), dr.loc.line, dr.loc.col};
     }
     for (const DbAlias& a : file.aliases) {
         if (!find(a.record) && !created.count(a.record))
@@ -383,6 +386,7 @@ void Database::init_records() {
         uninitialised_.swap(batch);
         throw;
     }
+    ErrorList init_errors; // every record's, each with where the record was defined
     for (Record* r : batch) {
         // iocInit's doInitRecord0, before init_record: a record the file left undefined starts
         // with severity UDFS; one whose VAL the file set starts without alarm, its status still
@@ -391,12 +395,21 @@ void Database::init_records() {
         try {
             r->init();
         } catch (const Error& e) {
-            throw Error(SB() << "record " << r->name() << ": " << e.what());
+            std::string msg = SB() << "record " << r->name() << ": " << e.what();
+            auto at = record_locs_.find(r);
+            if (at != record_locs_.end())
+                init_errors.add(SourceLoc{record_loc_files_[at->second.file], at->second.line, at->second.col}, msg);
+            else
+                init_errors.add(msg);
+            continue;
         }
         r->initialised_ = true;
         add_to_scan(*r);
         if (r->poll_period_s() > 0) polls_.push_back({r, 0});
     }
+    std::unordered_map<const Record*, RecordLoc>().swap(record_locs_);
+    std::vector<std::string>().swap(record_loc_files_);
+    init_errors.throw_if_any();
     if (restore_hook_ && !batch.empty()) restore_hook_(); // autosave: after init, before PINI
     // PINI: YES, then RUN and RUNNING (this IOC runs as soon as it is initialised), each in PHAS
     // order (stable: load order within a phase), as iocInit's piniProcess.
@@ -442,7 +455,8 @@ void Database::resolve_links(const std::vector<Record*>& batch) {
         if (r->scan != 2 || std::find(bad.begin(), bad.end(), r) != bad.end()) continue;
         bool device = false;
         for (const FieldDesc& f : r->type().fields())
-            if (is_link(f.dbf) && field_ref<Link>(*r, f).kind == Link::Kind::Hw && field_ref<Link>(*r, f).device())
+            if (is_link(f.dbf) && field_ref<Link>(*r, f).kind == Link::Kind::Hw &&
+                (field_ref<Link>(*r, f).device() || (offline_devices_ && !soft_dtyp(r->dtyp))))
                 device = true;
         if (!device)
             errs.add(SB() << "record " << r->name() << ": SCAN \"I/O Intr\" needs device support with "
@@ -471,6 +485,7 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
         if (soft_menu && soft_dtyp(r.dtyp))
             return fail(SB() << "the hardware address '@" << l.s().address << "' needs DTYP \"beamctl\" (DTYP \""
                              << kMenuSoftDtyp.choices[r.dtyp] << "\" has no hardware)");
+        if (!binder_ && offline_devices_) return true; // kept as written, bound by no one
         if (!binder_)
             return fail(SB() << "the hardware address '@" << l.s().address
                              << "' needs device support (DTYP), and this database has none");
@@ -483,6 +498,7 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
     }
     const LinkSpec& spec = l.s();
     Record* t = find(spec.record);
+    if (!t && offline_devices_) return true; // offline: another file's (or IOC's) record, kept as written
     if (!t) {
         if (l.proc != Link::kCa && l.proc != Link::kCp && l.proc != Link::kCpp)
             return fail(SB() << "no record '" << spec.record << "' (a link to another server needs the CA modifier)");

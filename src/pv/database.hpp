@@ -153,6 +153,11 @@ public:
     // calls it every 10 ms: delays have that resolution; tests drive it in virtual time), counted
     // from now on the clock set by set_clock, or else from scan_periodic's last time.
     void call_after(Record& r, double seconds, int tag = 0);
+    // Offline (`beamctl db` of .db files): a hardware ("@...") address of a device DTYP is kept
+    // unbound when the database has no device support for it, and a link to a record that is not
+    // loaded is kept as written (softIoc would make it a CA link), instead of an error; nothing is
+    // served from such a database.
+    void set_offline_devices(bool on) { offline_devices_ = on; }
     // Puts r on the scan list its SCAN field now names (a record changed its own SCAN).
     void rescan(Record& r);
     // Errors of records that loaded but cannot work (Record::init_error: an SNAM no library
@@ -243,6 +248,14 @@ private:
     std::vector<Poll> polls_; // records that poll their device (Record::poll_period_s)
     std::vector<Poll> delays_; // call_after: (record, when)
     std::vector<std::string> record_errors_;
+    // Where each record not yet initialised was defined (init errors say it), until init_records.
+    struct RecordLoc {
+        uint32_t file;
+        int line, col;
+    };
+    std::unordered_map<const Record*, RecordLoc> record_locs_;
+    std::vector<std::string> record_loc_files_;
+    bool offline_devices_ = false;
     struct IoIntr {
         Record* rec;
         std::vector<LinkDevice*> devices; // of its links, found when io_intr_stale_ is set

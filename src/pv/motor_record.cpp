@@ -319,6 +319,16 @@ public:
             rtry = 10;
     double rdbd = 0, spdb = 0, dly = 0;
     int16_t stop = 0;
+    // synApps fields kept for databases that set them: FOF/VOF and SSET/SUSE are buttons for
+    // FOFF and SET; RHLM/RLLM are DHLM/DLLM in steps; SPAM (the ESS/PSI fork ecmccfg uses) is a
+    // debug-print mask; the Soft Channel device support's links (STOO DINP RINP LOCK), CARD, LRLV,
+    // RVEL, PP, MMAP/NMAP, ALST/MLST and the fork's MISV/MFLG/MINP are stored and do nothing here.
+    int16_t fof = 0, vof = 0, sset = 0, suse = 0, card = -1, pp_field = 0, spam = 15;
+    double rhlm = 0, rllm = 0, lrlv = 0, alst = 0, mlst = 0;
+    int32_t rvel = 0;
+    uint32_t mmap = 0, nmap = 0, mflg = 0;
+    uint16_t lock = 0, misv = 0;
+    Link stoo, dinp, rinp, minp;
     uint16_t spmg = kSpmgGo, lspg = kSpmgGo;
     int16_t homf = 0, homr = 0, jogf = 0, jogr = 0, twf = 0, twr = 0;
     double twv = 0;
@@ -689,6 +699,28 @@ std::vector<FieldDesc> MotorRecordImpl::fields() {
         BEAMCTL_FIELD(R, INIT, init_text, String, 0),
         BEAMCTL_FIELD(R, PREM, prem, String, 0),
         BEAMCTL_FIELD(R, POST, post_text, String, 0),
+        BEAMCTL_FIELD(R, FOF, fof, Short, kAsl0),
+        BEAMCTL_FIELD(R, VOF, vof, Short, kAsl0),
+        BEAMCTL_FIELD(R, SSET, sset, Short, kAsl0),
+        BEAMCTL_FIELD(R, SUSE, suse, Short, kAsl0),
+        BEAMCTL_FIELD(R, RHLM, rhlm, Double, kReadOnly),
+        BEAMCTL_FIELD(R, RLLM, rllm, Double, kReadOnly),
+        BEAMCTL_FIELD(R, CARD, card, Short, kReadOnly),
+        BEAMCTL_FIELD(R, LRLV, lrlv, Double, kReadOnly),
+        BEAMCTL_FIELD(R, RVEL, rvel, Long, kReadOnly),
+        BEAMCTL_FIELD(R, PP, pp_field, Short, kReadOnly),
+        BEAMCTL_FIELD(R, MMAP, mmap, ULong, kReadOnly),
+        BEAMCTL_FIELD(R, NMAP, nmap, ULong, kReadOnly),
+        BEAMCTL_FIELD(R, ALST, alst, Double, kReadOnly),
+        BEAMCTL_FIELD(R, MLST, mlst, Double, kReadOnly),
+        BEAMCTL_FIELD(R, STOO, stoo, OutLink, 0),
+        BEAMCTL_FIELD(R, DINP, dinp, InLink, 0),
+        BEAMCTL_FIELD(R, RINP, rinp, InLink, 0),
+        BEAMCTL_MENU(R, LOCK, lock, kMenuYesNo, 0),
+        BEAMCTL_FIELD(R, SPAM, spam, Short, 0),
+        BEAMCTL_MENU(R, MISV, misv, kMenuAlarmSevr, kProcess),
+        BEAMCTL_FIELD(R, MFLG, mflg, ULong, kReadOnly),
+        BEAMCTL_FIELD(R, MINP, minp, InLink, 0),
         BEAMCTL_FIELD(R, VERS, vers, Float, kReadOnly),
         BEAMCTL_FIELD(R, DMOV, dmov, Short, kReadOnly), // last: posted after all others
     };
@@ -1280,6 +1312,10 @@ void MotorRecordImpl::run(bool work) {
     bool was_done = dmov != 0;
     pact = 1;
     refresh();
+    if (mres != 0) { // RHLM/RLLM: the dial limits in steps (swapped for a negative MRES)
+        rhlm = (mres > 0 ? dhlm : dllm) / mres;
+        rllm = (mres > 0 ? dllm : dhlm) / mres;
+    }
     // the controller's requests (ECMC's SYNC / STOP from PLC code), counted since the first look
     if (!initialised_) {
         sync_seen_ = st_.sync_requests;
@@ -1341,6 +1377,16 @@ PutStatus MotorRecordImpl::special(const FieldDesc& f) {
         accu = 1;
     }
     if (n == "FRAC") frac = std::clamp(frac, 0.1f, 1.5f);
+    if (n == "FOF" || n == "VOF") { // motorRecord's special: a put to either sets FOFF
+        foff = n == "FOF" ? 1 : 0;
+        fof = vof = 0;
+        post("FOFF", kDbeValue | kDbeLog);
+    }
+    if (n == "SSET" || n == "SUSE") { // ... and SET
+        set = n == "SSET" ? 1 : 0;
+        sset = suse = 0;
+        post("SET", kDbeValue | kDbeLog);
+    }
     if (n == "SYNC" && sync_field) { // the targets take the readbacks (when nothing moves)
         sync_field = 0;
         if (phase_ == Phase::Idle && dmov) resync();

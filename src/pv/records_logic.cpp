@@ -32,6 +32,7 @@ const Menu kMenuCalcoutOopt{"calcoutOOPT",
                             {"Every Time", "On Change", "When Zero", "When Non-zero",
                              "Transition To Zero", "Transition To Non-zero"}};
 const Menu kMenuCalcoutDopt{"calcoutDOPT", {"Use CALC", "Use OCAL"}};
+const Menu kMenuCalcoutInav{"calcoutINAV", {"Ext PV NC", "Ext PV OK", "Local PV", "Constant"}};
 const Menu kMenuSelm{"seqSELM", {"All", "Specified", "Mask"}};
 const Menu kMenuSelSelm{"selSELM", {"Specified", "High Signal", "Low Signal", "Median Signal"}};
 
@@ -123,14 +124,23 @@ template <typename Self> struct CalcBase : AnalogBase<Self> {
 // ---------------------------------------------------------------- calc
 struct CalcRecord : CalcBase<CalcRecord> {
     using CalcBase::CalcBase;
-    static std::vector<FieldDesc> fields() { return calc_fields(); }
+    double aftc = 0, afvl = 0; // the alarm filter (as ai's)
+    static std::vector<FieldDesc> fields() {
+        using R = CalcRecord;
+        auto v = calc_fields();
+        v.push_back(BEAMCTL_FIELD(R, AFTC, aftc, Double, 0));
+        v.push_back(BEAMCTL_FIELD(R, AFVL, afvl, Double, kReadOnly));
+        return v;
+    }
     void init() override { calc_init(); }
     PutStatus special(const FieldDesc& f) override { return calc_special(f); }
     ProcessResult process() override {
         pact = 1;
+        EpicsTime last_time = time;
         evaluate();
         stamp_time();
-        analog_alarms();
+        limit_alarms<double>(*this, val, hihi, high, low, lolo, hhsv, hsv, lsv, llsv, hyst, lalm, aftc, &afvl,
+                             seconds_between(time, last_time));
         calc_monitor();
         pact = 0;
         return ProcessResult::Done;
@@ -166,15 +176,54 @@ struct CalcoutRecord : CalcBase<CalcoutRecord> {
             BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
             BEAMCTL_FIELD(R, IVOV, ivov, Double, 0),
             BEAMCTL_FIELD(R, OEVT, oevt, String, 0),
+            BEAMCTL_FIELD(R, CLCV, clcv, Long, 0),
+            BEAMCTL_FIELD(R, OCLV, oclv, Long, 0),
+            BEAMCTL_MENU(R, OUTV, outv, kMenuCalcoutInav, kReadOnly),
         };
         v.insert(v.end(), add.begin(), add.end());
+        add_link_status<R>(v, std::make_index_sequence<kN>{});
         return v;
+    }
+    // INAV..INUV: what each input link is (calcoutINAV), as base's checkLinks sets them.
+    uint16_t inav[kN] = {};
+    uint16_t outv = 0;
+    int32_t clcv = 0, oclv = 0; // 0: CALC / OCAL compiled (base: the postfix error code)
+    template <typename R, std::size_t... I> static void add_link_status(std::vector<FieldDesc>& v, std::index_sequence<I...>) {
+        static const char* const names[] = {"INAV", "INBV", "INCV", "INDV", "INEV", "INFV", "INGV", "INHV", "INIV",
+                                            "INJV", "INKV", "INLV", "INMV", "INNV", "INOV", "INPV", "INQV", "INRV",
+                                            "INSV", "INTV", "INUV"};
+        (v.push_back(FieldDesc{names[I], Dbf::Menu, kReadOnly, 2, &kMenuCalcoutInav,
+                               [](Record& r) -> void* { return &static_cast<R&>(r).inav[I]; }}),
+         ...);
+    }
+    static uint16_t link_status(const Link& l) {
+        if (l.kind != Link::Kind::Db) return 3; // Constant (an empty link is one)
+        if (RemoteLink* rl = l.remote()) return rl->connected() ? 1 : 0;
+        return 2; // Local PV
+    }
+    // checkLinks: a CA link's status follows its connection (posted when it changes).
+    void update_link_status() {
+        static const char* const names[] = {"INAV", "INBV", "INCV", "INDV", "INEV", "INFV", "INGV", "INHV", "INIV",
+                                            "INJV", "INKV", "INLV", "INMV", "INNV", "INOV", "INPV", "INQV", "INRV",
+                                            "INSV", "INTV", "INUV"};
+        for (int i = 0; i < kN; ++i) {
+            uint16_t st = link_status(inp[i]);
+            if (st == inav[i]) continue;
+            inav[i] = st;
+            post(names[i], kDbeValue | kDbeLog);
+        }
+        if (uint16_t st = link_status(out); st != outv) {
+            outv = st;
+            post("OUTV", kDbeValue | kDbeLog);
+        }
     }
     void init() override {
         calc_init();
         std::string why;
         if (!compile_calc(ocal_text, oprog, &why)) throw Error(SB() << "OCAL " << why);
         pval = val;
+        for (int i = 0; i < kN; ++i) inav[i] = link_status(inp[i]);
+        outv = link_status(out);
     }
     PutStatus special(const FieldDesc& f) override {
         if (&f == ocal_fd) {
@@ -222,6 +271,7 @@ struct CalcoutRecord : CalcBase<CalcoutRecord> {
     }
     ProcessResult process() override {
         pact = 1;
+        update_link_status();
         evaluate();
         analog_alarms();
         bool output = wants_output();
@@ -501,7 +551,7 @@ struct DfanoutRecord : AnalogBase<DfanoutRecord> {
 constexpr int kSelInputs = 12; // A..L
 struct SelRecord : AnalogBase<SelRecord> {
     using AnalogBase::AnalogBase;
-    uint16_t selm = 0, seln = 0;
+    uint16_t selm = 0, seln = 0, nlst = 0; // NLST: the SELN last posted
     Link nvl;
     Link inp[kSelInputs];
     double args[kSelInputs];
@@ -522,6 +572,7 @@ struct SelRecord : AnalogBase<SelRecord> {
             BEAMCTL_MENU(R, SELM, selm, kMenuSelSelm, 0),
             BEAMCTL_FIELD(R, SELN, seln, UShort, kProcess),
             BEAMCTL_FIELD(R, NVL, nvl, InLink, 0),
+            BEAMCTL_FIELD(R, NLST, nlst, UShort, kReadOnly),
         };
         v.insert(v.end(), add.begin(), add.end());
         add_inputs(v, std::make_index_sequence<kSelInputs>{});
@@ -559,7 +610,12 @@ struct SelRecord : AnalogBase<SelRecord> {
         if (ok) select();
         stamp_time();
         analog_alarms();
-        if (unsigned m = analog_monitor_mask()) post(val_fd, m);
+        unsigned m = analog_monitor_mask();
+        if (m) post(val_fd, m);
+        if (nlst != seln) { // selRecord's monitor: SELN posted when it changed
+            nlst = seln;
+            post("SELN", m | kDbeValue | kDbeLog);
+        }
         for (int i = 0; i < kSelInputs; ++i)
             if (!(args[i] == last[i]) && !(std::isnan(args[i]) && std::isnan(last[i]))) {
                 post(arg_fd[i], kDbeValue | kDbeLog);

@@ -36,9 +36,16 @@ template <typename Self> struct MbbDirectBase : Record {
     uint32_t rval = 0, oraw = 0, mask = 0;
     int32_t mlst = 0;
     uint8_t bits[kBits] = {};
+    int32_t sval = 0;
+    Simulation sim;
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* rval_fd = type().find("RVAL");
+    const FieldDesc* sval_fd = type().find("SVAL");
+    const FieldDesc* simm_fd = type().find("SIMM");
     FieldRun bit_fd; // B0..B1F
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
+    }
 
     static std::vector<FieldDesc> direct_fields(std::vector<FieldDesc> v, uint16_t bit_flags) {
         using R = Self;
@@ -63,6 +70,13 @@ template <typename Self> struct MbbDirectBase : Record {
     void direct_init() {
         bit_fd.bind(type(), kBitNames, kBits);
         if (mask == 0 && nobt >= 0 && nobt <= 32) mask = uint32_t((uint64_t(1) << nobt) - 1);
+        sim_init(*this, sim, *simm_fd);
+        if (sval_fd) load_constant(sim.siol, *sval_fd);
+    }
+    // Raw Soft Channel's mask: MASK shifted by SHFT (all bits without NOBT).
+    uint32_t raw_mask() const {
+        uint32_t m = nobt == 0 ? 0xffffffffu : mask;
+        return shft > 0 && shft < 32 ? m << shft : m;
     }
     void bits_from_val() {
         for (int i = 0; i < kBits; ++i) bits[i] = (uint32_t(val) >> i) & 1u;
@@ -80,9 +94,15 @@ struct MbbiDirectRecord : MbbDirectBase<MbbiDirectRecord> {
     static std::vector<FieldDesc> fields() {
         using R = MbbiDirectRecord;
         auto v = direct_fields(common_fields(), kProcess);
-        auto add = {BEAMCTL_FIELD(R, INP, inp, InLink, 0), BEAMCTL_FIELD(R, RVAL, rval, ULong, kProcess)};
+        auto add = {BEAMCTL_FIELD(R, INP, inp, InLink, 0), BEAMCTL_FIELD(R, RVAL, rval, ULong, kProcess),
+                    BEAMCTL_FIELD(R, SVAL, sval, Long, 0)};
         v.insert(v.end(), add.begin(), add.end());
+        add_simulation_fields<R>(v, true, false);
         return v;
+    }
+    PutStatus special(const FieldDesc& f) override {
+        sim_special(*this, sim, f, simm_fd);
+        return PutStatus::Ok;
     }
     void init() override {
         direct_init();
@@ -92,9 +112,24 @@ struct MbbiDirectRecord : MbbDirectBase<MbbiDirectRecord> {
         oraw = rval;
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        // devMbbiDirectSoft reads VAL itself (status 2: RVAL is not converted).
-        if (soft_read(*this, inp, *val_fd)) udf = 0;
+        if (step == SimStep::Now) { // SIOL into SVAL: YES as VAL, RAW as RVAL (shifted down)
+            if (read_link(sim.siol, *sval_fd) || sim.siol.kind != Link::Kind::Db) {
+                if (sim.simm == 1) val = sval;
+                else rval = uint32_t(sval), val = int32_t(shft > 0 && shft < 32 ? rval >> shft : rval);
+                udf = 0;
+            }
+        } else if (dtyp == kDtypRawSoft) { // devMbbiDirectSoftRaw: RVAL & MASK, then VAL = RVAL >> SHFT
+            if (soft_read(*this, inp, *rval_fd)) {
+                rval &= raw_mask();
+                val = int32_t(shft > 0 && shft < 32 ? rval >> shft : rval);
+                udf = 0;
+            }
+        } else if (soft_read(*this, inp, *val_fd)) { // devMbbiDirectSoft reads VAL itself
+            udf = 0;
+        }
         stamp_time();
         if (udf) set_sevr(kStatUdf, kInvalid);
         unsigned events = reset_alarms();
@@ -140,6 +175,7 @@ struct MbboDirectRecord : MbbDirectBase<MbboDirectRecord> {
             BEAMCTL_FIELD(R, IVOV, ivov, Long, 0),
         };
         v.insert(v.end(), add.begin(), add.end());
+        add_simulation_fields<R>(v, true, true);
         return v;
     }
     void convert() { rval = shft > 0 && shft < 32 ? uint32_t(val) << shft : uint32_t(val); }
@@ -163,6 +199,7 @@ struct MbboDirectRecord : MbbDirectBase<MbboDirectRecord> {
         orbv = rbv;
     }
     PutStatus special(const FieldDesc& f) override {
+        sim_special(*this, sim, f, simm_fd);
         int i = bit_index(f);
         if (i < 0) return PutStatus::Ok;
         if (omsl == 1) return PutStatus::Failed; // closed_loop: the bits belong to DOL
@@ -179,10 +216,27 @@ struct MbboDirectRecord : MbbDirectBase<MbboDirectRecord> {
         convert();
         return PutStatus::Ok;
     }
+    // writeValue: Soft Channel VAL, Raw Soft Channel RVAL & MASK, simulated SIOL (YES VAL, RAW RVAL).
+    void write_value(SimStep step) {
+        if (step == SimStep::Now) {
+            write_link(sim.siol, sim.simm == 1 ? *val_fd : *rval_fd);
+        } else if (dtyp == kDtypRawSoft) {
+            uint32_t keep = rval;
+            rval &= raw_mask();
+            write_link(out, *rval_fd);
+            rval = keep;
+        } else {
+            write_link(out, *val_fd);
+        }
+    }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
         bool ok = true;
-        if (omsl == 1 && linked(dol)) {
+        if (sim.resuming) {
+            // the delayed half: the value was taken before the delay
+        } else if (omsl == 1 && linked(dol)) {
             double v = 0;
             if (read_link(dol, v)) val = int32_t(uint32_t(int64_t(v)));
             else ok = false; // read_link raised LINK/INVALID
@@ -190,16 +244,21 @@ struct MbboDirectRecord : MbbDirectBase<MbboDirectRecord> {
             set_sevr(kStatUdf, udfs);
             ok = false;
         }
-        if (ok) {
+        if (ok && !sim.resuming) {
             udf = 0;
             bits_from_val();
             convert();
         }
         stamp_time();
-        soft_write(*this, out, *val_fd, ivoa, [this] {
-            val = ivov;
-            convert();
-        });
+        if (nsev < kInvalid || ivoa == 0) {
+            write_value(step);
+        } else if (ivoa == 2) { // Set output to IVOV
+            if (!sim.resuming) {
+                val = ivov;
+                convert();
+            }
+            write_value(step);
+        }
         bits_from_val();
         unsigned events = reset_alarms();
         if (mlst != val) {

@@ -978,6 +978,8 @@ struct WaveformRecord : Record {
     int16_t prec = 0;
     double hopr = 0, lopr = 0;
     uint16_t mpst = 0, apst = 0; // Always by default
+    int16_t rarm = 0, busy = 0;  // RARM: written by clients (no device rearms here); BUSY: not busy
+    uint32_t hash = 0;           // of the valid elements, for On Change posting (FNV-1a)
     std::vector<char> storage;   // NELM elements of FTVL
     char val_placeholder = 0;
     Link inp;
@@ -999,6 +1001,9 @@ struct WaveformRecord : Record {
             BEAMCTL_MENU(R, MPST, mpst, kMenuPostAlways, 0),
             BEAMCTL_MENU(R, APST, apst, kMenuPostAlways, 0),
             BEAMCTL_FIELD(R, INP, inp, InLink, 0),
+            BEAMCTL_FIELD(R, RARM, rarm, Short, kProcess),
+            BEAMCTL_FIELD(R, BUSY, busy, Short, kReadOnly),
+            BEAMCTL_FIELD(R, HASH, hash, ULong, 0),
         };
         v.insert(v.end(), add.begin(), add.end());
         add_simulation_fields<R>(v, false, false);
@@ -1082,6 +1087,18 @@ struct WaveformRecord : Record {
         unsigned m = reset_alarms();
         if (mpst == 0) m |= kDbeValue;
         if (apst == 0) m |= kDbeLog;
+        if (mpst == 1 || apst == 1) { // On Change: only when the valid elements changed (HASH)
+            Elements e = elements(*val_fd);
+            uint32_t h = 2166136261u;
+            const char* p = static_cast<const char*>(e.data);
+            for (std::size_t i = 0, n = std::size_t(e.count) * e.stride; i < n; ++i) h = (h ^ uint8_t(p[i])) * 16777619u;
+            if (h != hash) {
+                if (mpst == 1) m |= kDbeValue;
+                if (apst == 1) m |= kDbeLog;
+                hash = h;
+                post("HASH", kDbeValue);
+            }
+        }
         if (m) post(val_fd, m);
         if (nord != last_nord) {
             post(nord_fd, kDbeValue | kDbeLog);

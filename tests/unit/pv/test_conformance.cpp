@@ -365,3 +365,92 @@ TEST_F(Conformance, IntegersReadAsNarrowerTypesAreTruncated) {
     db.get(addr("lo"), Prim::Short, &sh, 1);
     EXPECT_EQ(sh, int16_t(70000 - 65536));
 }
+
+// ---------------------------------------------------------------- more record types
+
+TEST_F(Conformance, WaveformOnChangePostsOnlyWhenTheElementsChange) {
+    load(R"(
+record(waveform, "w") { field(NELM, "3") field(FTVL, "LONG") field(MPST, "On Change") }
+)");
+    struct Count : Subscription {
+        int n = 0;
+        void on_event(unsigned m) override {
+            if (m & kDbeValue) ++n;
+        }
+    } count;
+    count.addr = addr("w");
+    count.mask = kDbeValue;
+    db.subscribe(count);
+    int32_t a[3] = {1, 2, 3};
+    db.put(addr("w"), Prim::Long, a, 3);
+    int after_first = count.n;
+    db.put(addr("w"), Prim::Long, a, 3); // the same elements: no value event
+    EXPECT_EQ(count.n, after_first);
+    a[2] = 4;
+    db.put(addr("w"), Prim::Long, a, 3);
+    EXPECT_EQ(count.n, after_first + 1);
+    EXPECT_NE(getd("w.HASH"), 0);
+    db.unsubscribe(count);
+}
+
+TEST_F(Conformance, SelServesTheLastIndexAndCalcoutItsLinkStatus) {
+    load(R"(
+record(ao, "x") {}
+record(sel, "s") { field(SELM, "Specified") field(INPA, "x") field(INPB, "2") field(SELN, "1") }
+record(calcout, "co") { field(INPA, "x") field(INPB, "3") field(CALC, "A+B") field(OUT, "x") }
+record(calc, "c") { field(INPA, "x") field(CALC, "A") field(HIGH, "1") field(HSV, "MAJOR") field(AFTC, "5") }
+)");
+    process("s");
+    EXPECT_DOUBLE_EQ(getd("s.NLST"), 1);
+    EXPECT_DOUBLE_EQ(getd("s"), 2);
+    EXPECT_EQ(gets("co.INAV"), "Local PV");
+    EXPECT_EQ(gets("co.INBV"), "Constant");
+    EXPECT_EQ(gets("co.INCV"), "Constant"); // an empty link
+    EXPECT_EQ(gets("co.OUTV"), "Local PV");
+    EXPECT_DOUBLE_EQ(getd("co.CLCV"), 0);
+    put("x", 2);
+    process("c");
+    EXPECT_EQ(gets("c.SEVR"), "MAJOR");
+    put("x", 0);
+    process("c");
+    EXPECT_EQ(gets("c.SEVR"), "MAJOR"); // the filter holds HIGH's range
+}
+
+TEST_F(Conformance, MbbiDirectRawSoftChannelAndSimulation) {
+    load(R"(
+record(longout, "w") { field(VAL, "0xF3") }
+record(ao, "sim") { field(VAL, "5") }
+record(mbbiDirect, "raw") { field(DTYP, "Raw Soft Channel") field(INP, "w") field(NOBT, "4") field(SHFT, "4") }
+record(mbbiDirect, "s") { field(INP, "w") field(SIOL, "sim") field(SIMM, "YES") field(SIMS, "MAJOR") }
+record(mbboDirect, "o") { field(DTYP, "Raw Soft Channel") field(OUT, "w PP") field(NOBT, "2") }
+)");
+    process("raw");
+    EXPECT_DOUBLE_EQ(getd("raw.RVAL"), 0xF0); // 0xF3 & (0xF << 4)
+    EXPECT_DOUBLE_EQ(getd("raw"), 0xF);
+    process("s");
+    EXPECT_DOUBLE_EQ(getd("s"), 5);
+    EXPECT_EQ(gets("s.SEVR"), "MAJOR");
+    EXPECT_EQ(gets("s.STAT"), "SIMM");
+    put("o", 7);
+    EXPECT_DOUBLE_EQ(getd("w"), 3); // RVAL 7 & MASK 3
+}
+
+TEST_F(Conformance, InitErrorsOfEveryRecordNameWhereItWasDefined) {
+    std::string err = load_error(R"(record(calc, "c1") { field(CALC, "A+") }
+record(ai, "fine") {}
+record(calc, "c2") { field(CALC, "B*(") })");
+    EXPECT_NE(err.find("bad.db:1:"), std::string::npos) << err;
+    EXPECT_NE(err.find("record c1"), std::string::npos) << err;
+    EXPECT_NE(err.find("bad.db:3:"), std::string::npos) << err;
+    EXPECT_NE(err.find("record c2"), std::string::npos) << err;
+}
+
+TEST_F(Conformance, EveryFieldErrorOfAFileIsReportedAtOnce) {
+    std::string err = load_error(R"(record(ai, "a") { field(NOPE, "1") field(PREC, "x") }
+record(bo, "b") { field(HIGH, "z") }
+record(nosuchtype, "c") {})");
+    EXPECT_NE(err.find("NOPE"), std::string::npos) << err;
+    EXPECT_NE(err.find("PREC"), std::string::npos) << err;
+    EXPECT_NE(err.find("bad.db:2:"), std::string::npos) << err;
+    EXPECT_NE(err.find("nosuchtype"), std::string::npos) << err;
+}

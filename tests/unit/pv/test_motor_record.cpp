@@ -1262,3 +1262,22 @@ TEST_F(MotorTest, SyncStupAndAlarmLimits) {
     EXPECT_DOUBLE_EQ(md.alarm_high, 1);
     EXPECT_DOUBLE_EQ(md.alarm_hihi, 2);
 }
+
+// synApps' fields that databases set (ecmccfg's motor template sets SPAM): stored, and the
+// buttons FOF/VOF and SSET/SUSE set FOFF and SET; RHLM/RLLM are the dial limits in steps.
+TEST_F(MotorTest, SynAppsButtonFieldsAndRawLimits) {
+    load(R"(field(MRES, "0.001") field(DHLM, "5") field(DLLM, "-2") field(SPAM, "0"))");
+    EXPECT_DOUBLE_EQ(getd("m.SPAM"), 0);
+    EXPECT_EQ(put("m.FOF", 1), PutStatus::Ok);
+    EXPECT_EQ(gets("m.FOFF"), "Frozen");
+    EXPECT_EQ(put("m.VOF", 1), PutStatus::Ok);
+    EXPECT_EQ(gets("m.FOFF"), "Variable");
+    EXPECT_EQ(put("m.SSET", 1), PutStatus::Ok);
+    EXPECT_EQ(gets("m.SET"), "Set");
+    EXPECT_EQ(put("m.SUSE", 1), PutStatus::Ok);
+    EXPECT_EQ(gets("m.SET"), "Use");
+    put("m.PROC", 1);
+    EXPECT_NEAR(getd("m.RHLM"), 5000, 1e-6);
+    EXPECT_NEAR(getd("m.RLLM"), -2000, 1e-6);
+    EXPECT_EQ(put("m.RHLM", 1), PutStatus::ReadOnly);
+}
