@@ -19,7 +19,9 @@ const std::array kVariables = {
     BEAMCTL_AXVAR("enc.extactpos", enc.extactpos, true),
     BEAMCTL_AXVAR("enc.actvel", enc.actvel, false),
     BEAMCTL_AXVAR("enc.source", enc.source, true),
-    BEAMCTL_AXVAR("enc.homed", enc.homed, false),
+    // rw: a write marks the primary encoder referenced or not (ECMC setAxisHomed); the PLC
+    // runtime applies it after the scan (the axis publishes the encoder's state)
+    BEAMCTL_AXVAR("enc.homed", enc.homed, true),
     BEAMCTL_AXVAR("traj.setpos", traj.setpos, true),
     BEAMCTL_AXVAR("traj.targetdec", traj.targetdec, true),
     BEAMCTL_AXVAR("traj.setvel", traj.setvel, false),
@@ -27,6 +29,11 @@ const std::array kVariables = {
     BEAMCTL_AXVAR("traj.dir", traj.dir, false),
     BEAMCTL_AXVAR("drv.setvelraw", drv.setvelraw, false),
     BEAMCTL_AXVAR("cntrl.poserror", cntrl.poserror, false),
+    // ECMC's cntrlError, the error the controller works on: setpoint - actual taken across a
+    // modulo wrap (ecmcMotionUtils::getPosErrorModWithSign). beamctl keeps setpoint and actual
+    // unwrapped, so it is the same value as cntrl.poserror (ECMC's plain setpoint - actual).
+    // ECMC 11.0.8 defines the name but its PLC parser never matches it; the manual lists it.
+    BEAMCTL_AXVAR("cntrl.error", cntrl.poserror, false),
     BEAMCTL_AXVAR("cntrl.output", cntrl.output, false),
     BEAMCTL_AXVAR("seq.state", seq.state, false),
     BEAMCTL_AXVAR("traj.targetpos", traj.targetpos, true),

@@ -24,7 +24,7 @@ struct AxisVariables {
         double actpos = 0, extactpos = 0, actvel = 0;
         double rawpos = 0;  // r: raw counter of the primary encoder
         double source = 0;  // rw: 0 encoder, 1 PLC (extactpos)
-        double homed = 0;
+        double homed = 0;   // r, and w as ECMC: marks the primary encoder homed (PLC runtime)
         double homepos = 0; // rw: the homing position [EGU]
     } enc;
     struct {
@@ -42,7 +42,8 @@ struct AxisVariables {
         double setvelraw = 0;           // r: drive velocity setpoint [EGU/s]
     } drv;
     struct {
-        double poserror = 0, output = 0; // r: following error [EGU], controller output [EGU/s]
+        // r: following error [EGU] (also named cntrl.error), controller output [EGU/s]
+        double poserror = 0, output = 0;
     } cntrl;
     struct {
         double state = 0; // r: homing sequence state
@@ -70,10 +71,10 @@ std::span<const AxisVariableInfo> axis_variables();
 const AxisVariableInfo* find_axis_variable(std::string_view name);
 
 // A readback the axis publishes every cycle (enc.actpos, traj.setpos, ...): an input for records
-// and the registry, even where ECMC lets PLC code write it (enc.actpos, traj.setpos).
+// and the registry, even where ECMC lets PLC code write it (enc.actpos, traj.setpos, enc.homed).
 inline bool is_readback(const AxisVariableInfo& info) {
     std::string_view n = info.name;
-    return !info.writable || n == "enc.actpos" || n == "traj.setpos";
+    return !info.writable || n == "enc.actpos" || n == "traj.setpos" || n == "enc.homed";
 }
 
 inline double* axis_variable(AxisVariables& v, const AxisVariableInfo& info) {

@@ -81,6 +81,16 @@ struct PlcRuntime::Plc : Host {
     };
     std::deque<DsCell> ds;
     std::map<std::string, DsCell*> ds_names;
+    // ax<n>.<item> whose write is an action the axis does not take from its variables (ECMC's
+    // ecmcPLCDataIF::writeAxis): enc.homed marks the primary encoder homed or not. The value is
+    // noted before each scan and the action taken after it when the scan changed it (as a
+    // boolean, ECMC's isBool_), unless the axis refuses PLC commands (allowplccmd 0).
+    struct AxisWrite {
+        motion::Axis* axis = nullptr;
+        double* cell = nullptr;
+        double read = 0;
+    };
+    std::vector<AxisWrite> axis_writes;
     std::set<std::string> written; // ec entries the code assigns (bit suffix removed)
     void assigned(std::string_view name) override {
         if (name.rfind("ec", 0) != 0 || !ec_names.count(std::string(name))) return;
@@ -163,7 +173,13 @@ struct PlcRuntime::Plc : Host {
             const motion::AxisVariableInfo* info = motion::find_axis_variable(lower(rest));
             if (!info) return std::nullopt;
             for (motion::Axis* a : rt.opt_.axes)
-                if (a->params().id == id) return Binding{motion::axis_variable(a->variables(), *info), info->writable, 1};
+                if (a->params().id == id) {
+                    double* cell = motion::axis_variable(a->variables(), *info);
+                    if (std::string_view(info->name) == "enc.homed" &&
+                        std::none_of(axis_writes.begin(), axis_writes.end(), [&](const AxisWrite& w) { return w.cell == cell; }))
+                        axis_writes.push_back(AxisWrite{a, cell, 0});
+                    return Binding{cell, info->writable, 1};
+                }
             if (rt.opt_.check_only && (!rt.opt_.known_axis_ids || std::count(rt.opt_.known_axis_ids->begin(), rt.opt_.known_axis_ids->end(), id)))
                 return Binding{cell(stand_ins, n), info->writable, 1};
             return std::nullopt;
@@ -360,6 +376,17 @@ struct PlcRuntime::Plc : Host {
             case DsItem::Full:
             case DsItem::Error: break;
             }
+        }
+    }
+
+    // RT: the axis values whose writes are actions, as the scan starts; after it, the actions.
+    void axis_in() noexcept {
+        for (AxisWrite& w : axis_writes) w.read = *w.cell;
+    }
+    void axis_out() noexcept {
+        for (AxisWrite& w : axis_writes) {
+            if ((*w.cell != 0) == (w.read != 0) || w.axis->variables().allowplccmd == 0) continue;
+            (void)w.axis->set_encoder_homed(w.axis->params().primary_encoder, *w.cell != 0);
         }
     }
 
@@ -1316,9 +1343,11 @@ void PlcRuntime::scan(Plc& p, const rt::CycleInfo& c) noexcept {
     p.vars.firstscan = p.first_done ? 0 : 1;
     p.copy_in();
     p.ds_in();
+    p.axis_in();
     int r = p.program->run();
     p.copy_out();
     p.ds_out();
+    p.axis_out();
     p.first_done = true;
     p.st_firstscan.store(false, std::memory_order_relaxed);
     p.st_scans.fetch_add(1, std::memory_order_relaxed);
