@@ -54,9 +54,10 @@ bool is_identifier(std::string_view s) {
 struct PlcRuntime::Plc : Host {
     PlcRuntime& rt;
     PlcSource src;
-    struct Vars {
-        double enable = 0, error = 0, scantime = 0, firstscan = 1, dbg = 0;
-    } vars;
+    // plc<n>.* (ax<n>.plc.*): the runtime's block for this id, which code of any PLC added
+    // before may already have bound (ECMC: data items shared by name)
+    using Vars = PlcRuntime::PlcVars;
+    Vars& vars;
     std::deque<double> cells; // statics and check-mode stand-ins (stable addresses)
     std::map<std::string, double*> statics, stand_ins;
     struct EcCell {
@@ -111,7 +112,7 @@ struct PlcRuntime::Plc : Host {
     std::atomic<int> st_error{0}, st_fault_index{-1};
     std::atomic<std::uint64_t> st_scans{0}, st_faults{0};
 
-    Plc(PlcRuntime& r, PlcSource s) : rt(r), src(std::move(s)) {}
+    Plc(PlcRuntime& r, PlcSource s) : rt(r), src(std::move(s)), vars(r.plc_vars(src.id, src.axis_plc)) {}
 
     std::string prefix() const {
         return src.axis_plc ? std::string(SB() << "ax" << src.id << ".plc") : std::string(SB() << "plc" << src.id);
@@ -134,15 +135,18 @@ struct PlcRuntime::Plc : Host {
         return nullptr;
     }
 
-    // plc<n>.* or ax<n>.plc.* of this or another (already added) PLC.
+    // plc<n>.* or ax<n>.plc.* of this or another PLC, added before or after this one: ECMC makes
+    // them data items shared by name (ecmcPLCMain::parsePLC, addPLCDefaultVariable), so any PLC
+    // may name any plc<n>; ax<n>.plc.* needs axis n.
     std::optional<Binding> plc_variable(int id, bool axis_plc, std::string_view item) {
-        Plc* target = nullptr;
-        if (id == src.id && axis_plc == src.axis_plc) target = this;
-        for (auto& p : rt.plcs_)
-            if (p->src.id == id && p->src.axis_plc == axis_plc) target = p.get();
-        if (!target) return std::nullopt;
-        double* a = var(target->vars, item);
-        if (!a) return std::nullopt;
+        if (!var(vars, item)) return std::nullopt;
+        if (axis_plc && !(id == src.id && src.axis_plc)) {
+            bool axis = std::any_of(rt.opt_.axes.begin(), rt.opt_.axes.end(), [&](motion::Axis* a) { return a->params().id == id; });
+            const auto& known = rt.opt_.known_axis_ids;
+            if (rt.opt_.check_only) axis = axis || !known || std::count(known->begin(), known->end(), id);
+            if (!axis) return std::nullopt;
+        }
+        double* a = var(id == src.id && axis_plc == src.axis_plc ? vars : rt.plc_vars(id, axis_plc), item);
         // scantime and firstscan are the runtime's; enable, error and dbg may be written
         std::string i = lower(item);
         return Binding{a, i == "enable" || i == "error" || i == "dbg", 1};
@@ -159,17 +163,9 @@ struct PlcRuntime::Plc : Host {
         }
         int id = 0;
         std::string_view rest;
-        if (split_indexed(n, "plc", id, rest)) {
-            if (auto b = plc_variable(id, false, rest)) return b;
-            if (rt.opt_.check_only && var(vars, rest)) return Binding{cell(stand_ins, n), true, 1};
-            return std::nullopt;
-        }
+        if (split_indexed(n, "plc", id, rest)) return plc_variable(id, false, rest);
         if (split_indexed(n, "ax", id, rest)) {
-            if (lower(rest).rfind("plc.", 0) == 0) {
-                if (auto b = plc_variable(id, true, rest.substr(4))) return b;
-                if (rt.opt_.check_only && var(vars, rest.substr(4))) return Binding{cell(stand_ins, n), true, 1};
-                return std::nullopt;
-            }
+            if (lower(rest).rfind("plc.", 0) == 0) return plc_variable(id, true, rest.substr(4));
             const motion::AxisVariableInfo* info = motion::find_axis_variable(lower(rest));
             if (!info) return std::nullopt;
             for (motion::Axis* a : rt.opt_.axes)
@@ -271,9 +267,11 @@ struct PlcRuntime::Plc : Host {
         int id = 0;
         std::string_view rest;
         if (split_indexed(n, "ax", id, rest)) {
-            if (lower(rest).rfind("plc.", 0) == 0)
-                return SB() << "axis " << id << " has no PLC, or '" << rest.substr(4)
-                            << "' is not one of enable, error, scantime, firstscan, dbg";
+            if (lower(rest).rfind("plc.", 0) == 0) {
+                if (!var(vars, rest.substr(4)))
+                    return SB() << "'" << rest.substr(4) << "' is not one of enable, error, scantime, firstscan, dbg";
+                return SB() << "no axis " << id << " for its axis PLC";
+            }
             if (!motion::find_axis_variable(lower(rest))) return SB() << "'" << rest << "' is not an axis variable (specs: ax<n>.enc.actpos, ax<n>.traj.extsetpos, ...)";
             std::string ids;
             for (motion::Axis* a : rt.opt_.axes) ids += (ids.empty() ? "" : ", ") + std::to_string(a->params().id);
@@ -282,7 +280,7 @@ struct PlcRuntime::Plc : Host {
             return SB() << "no axis " << id << (ids.empty() ? std::string(" (the IOC has no axes)") : " (axes: " + ids + ")");
         }
         if (split_indexed(n, "plc", id, rest))
-            return SB() << "no PLC " << id << " before this one, or '" << rest << "' is not one of enable, error, scantime, firstscan, dbg";
+            return SB() << "'" << rest << "' is not one of enable, error, scantime, firstscan, dbg";
         if (split_indexed(n, "ec", id, rest)) {
             if (rest.find(".mm.") != std::string_view::npos) return "memory maps (mm) are not supported yet";
             if (!rt.opt_.ec) return "no such process-data entry (expected ec<m>.s<k>.<entry>[.<bit>] or ec<m>.masterstatus)";
@@ -1263,6 +1261,12 @@ PlcRuntime::PlcRuntime(Options options) : opt_(std::move(options)), output_(256)
 }
 
 PlcRuntime::~PlcRuntime() = default;
+
+PlcRuntime::PlcVars& PlcRuntime::plc_vars(int id, bool axis_plc) {
+    auto& v = plc_vars_[{id, axis_plc}];
+    if (!v) v = std::make_unique<PlcVars>();
+    return *v;
+}
 
 void PlcRuntime::add(const PlcSource& source) {
     for (auto& p : plcs_)

@@ -162,6 +162,13 @@ private:
     bool buses_ok() noexcept;
 
     Options opt_;
+    // plc<n>.* / ax<n>.plc.* by (id, axis PLC): made when first named (by the PLC itself or by
+    // another PLC's code, before or after it is added); stable addresses
+    struct PlcVars {
+        double enable = 0, error = 0, scantime = 0, firstscan = 1, dbg = 0;
+    };
+    std::map<std::pair<int, bool>, std::unique_ptr<PlcVars>> plc_vars_;
+    PlcVars& plc_vars(int id, bool axis_plc);
     std::vector<std::unique_ptr<Plc>> plcs_;
     std::vector<Plc*> axis_plcs_; // by AxisGroup index
     std::vector<int> axis_by_id_; // axis id (mc_* first argument) -> AxisGroup index, -1 none
