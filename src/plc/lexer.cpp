@@ -373,8 +373,13 @@ bool plain_identifier(const std::string& s) {
     return true;
 }
 
+// ECMC reads a VAR block line by line (ecmcPLCMain::parseVarBlock): an entry is `name : address;`
+// on one line, and a line without its ';' is skipped, so that name is no alias (the manual's own
+// example ends its block with such a line). The same here; a later use of a skipped name is an
+// error that says so.
 void apply_aliases(const Source& src, std::vector<Token>& toks, Diagnostics& diags) {
     std::map<std::string, Alias> aliases;
+    std::map<std::string, Token> skipped; // entries without ';' on their line
     std::vector<Token> rest;
     rest.reserve(toks.size());
     for (std::size_t i = 0; i < toks.size(); ++i) {
@@ -414,11 +419,12 @@ void apply_aliases(const Source& src, std::vector<Token>& toks, Diagnostics& dia
             std::size_t k = j + 2;
             Alias alias;
             alias.decl = name;
-            while (k < end && toks[k].type != Tok::semicolon) alias.value.push_back(toks[k++]);
-            if (k >= end) {
-                diags.add(src.diagnostic(name.line, name.offset,
-                                         SB() << "VAR entry '" << name.text
-                                              << "' is not terminated by ';'"));
+            while (k < end && toks[k].type != Tok::semicolon && toks[k].line == name.line)
+                alias.value.push_back(toks[k++]);
+            if (k >= end || toks[k].type != Tok::semicolon) { // no ';' on its line: ECMC skips it
+                if (!aliases.count(name.text)) skipped.insert_or_assign(name.text, name);
+                j = k; // the next line's entry
+                continue;
             } else if (alias.value.empty()) {
                 diags.add(src.diagnostic(toks[k].line, toks[k].offset,
                                          SB() << "VAR entry '" << name.text << "' has no address"));
@@ -428,6 +434,7 @@ void apply_aliases(const Source& src, std::vector<Token>& toks, Diagnostics& dia
                                          SB() << "'" << name.text << "' is declared twice in VAR "
                                               << "blocks (first at " << prev.str() << ")"));
             } else {
+                skipped.erase(name.text);
                 aliases.emplace(name.text, std::move(alias));
             }
             j = k + 1;
@@ -444,6 +451,15 @@ void apply_aliases(const Source& src, std::vector<Token>& toks, Diagnostics& dia
         const std::string head = t.text.substr(0, dot);
         const auto it = aliases.find(head);
         if (it == aliases.end()) {
+            const auto sk = skipped.find(head);
+            if (sk != skipped.end() && !toks.empty() && toks.back().type == Tok::symbol && lower(toks.back().text) == "var") {
+                skipped.erase(sk); // a local of that name from here on
+            } else if (sk != skipped.end()) {
+                const SourceLoc at = src.loc(sk->second.line, sk->second.offset);
+                diags.add(src.diagnostic(t.line, t.offset,
+                                         SB() << "'" << head << "' is no alias: its VAR entry (" << at.str()
+                                              << ") has no ';' on its line, and ECMC skips such a line"));
+            }
             toks.push_back(std::move(t));
             continue;
         }
