@@ -89,7 +89,8 @@ case "${1:-}" in
 deps) deps test ;;
 build) deps; build release ;;
 demo)
-    deps demo; build release
+    # Only the program the demo runs (no unit tests, benchmarks or plugins of the tests).
+    deps demo; build release beamctl
     export EPICS_CAS_SERVER_PORT=${EPICS_CAS_SERVER_PORT:-5064}
     echo "== demo beamline IOC: 25 simulated EtherCAT terminals, slit, sample stage, mirror, soft records,"
     echo "   and an RCP machine (beamctl rcp-sim examples/rcp/model.yaml) on the UDP bridge (Ctrl-C to stop)"
