@@ -10,7 +10,9 @@ load it:
 
 - PLC files: `beamctl plc check` with the PLC_MACROS and INC of each `loadPLCFile.cmd` call that
   names the file (each call one check; the file passes when all do), ecmccfg's reserved macros
-  (SELF, SELF_ID, M, M_ID) coming from beamctl itself. A file no script loads is checked with no
+  (SELF, SELF_ID, M, M_ID) coming from beamctl itself; a PLC that a `loadPLCLib.cmd` call gives
+  a function library (the call after its loadPLCFile.cmd) is checked with `beamctl check` of a
+  small IOC file whose `plcs:` entry names both. A file no script loads is checked with no
   macros. An include file (`.plc_inc`) passes when a file including it compiles; one that no
   file includes is checked on its own.
 - Axis files: `beamctl axis check` with the macros of each `loadYamlAxis.cmd` call (and the
@@ -32,13 +34,15 @@ summary; --details adds the first error of each failure.
 """
 import argparse
 import collections
+import json
 import os
 import re
 import subprocess
 import sys
+import tempfile
 
 ENV_REF = re.compile(r"\$[({]([A-Za-z0-9_]+)(?:=([^)}]*))?[)}]")
-CALL = re.compile(r"(loadPLCFile|loadYamlAxis|loadYamlEnc)\.cmd\s*,?\s*\(?\s*\"([^\"]*)\"")
+CALL = re.compile(r"(loadPLCFile|loadPLCLib|loadYamlAxis|loadYamlEnc)\.cmd\s*,?\s*\(?\s*\"([^\"]*)\"")
 
 
 def resolve_env(value, root, env=None, unknown="1"):
@@ -110,11 +114,12 @@ ENV_SET = re.compile(r"epicsEnvSet\s*\(?\s*\"?([A-Za-z0-9_]+)\"?\s*,?\s*\"([^\"]
 
 
 def collect_calls(root):
-    """{abs file: [(macros dict, include dirs, encoder files)]} from every startup script."""
+    """{abs file: [(macros, include dirs, libraries or encoder files)]} from every startup script
+    (a PLC's libraries: [(file, PLC_MACROS)] of the loadPLCLib.cmd calls after it)."""
     plc_calls, axis_calls = collections.defaultdict(list), collections.defaultdict(list)
     for script in scripts(root):
         d = os.path.dirname(script)
-        last_axis = None
+        last_axis = last_plc = None
         env = {}  # epicsEnvSet values so far: the axis file's ${NAME} sees them (iocsh expands it)
         try:
             lines = open(script, errors="replace").read().splitlines()
@@ -143,7 +148,11 @@ def collect_calls(root):
                 pm = resolve_env(pm, root, env, unknown="" if whole else "1")
                 inc = [os.path.normpath(os.path.join(d, p))
                        for p in resolve_env(args.get("INC", "."), root).split(":") if p]
-                plc_calls[path].append((pm, inc, []))
+                last_plc = (pm, inc, [])
+                plc_calls[path].append(last_plc)
+            elif m.group(1) == "loadPLCLib":
+                if last_plc is not None:
+                    last_plc[2].append((path, resolve_env(args.get("PLC_MACROS", ""), root, env)))
             elif m.group(1) == "loadYamlAxis":
                 last_axis = (macros, [d], [])  # [d]: the IOC's directory (ECMC's working directory)
                 axis_calls[path].append(last_axis)
@@ -219,14 +228,31 @@ def main():
     results = {}
     std_inc = [os.path.join(root, "plc_lib"), os.path.join(root, "plc_lib", "master_slave")]
 
+    def check_with_libraries(f, pm, inc, libs):
+        """`beamctl check` of an IOC file with one PLC: `f` with its libraries and macros."""
+        macros = dict(kv.split("=", 1) for kv in (pm + "," + ",".join(m for _, m in libs)).split(",") if "=" in kv)
+        with tempfile.TemporaryDirectory() as d:
+            yaml = os.path.join(d, "ioc.yaml")
+            with open(yaml, "w") as out:
+                out.write("ioc: {name: CORPUS}\nengine: {rate_hz: 1000}\nplcs:\n")
+                out.write(f"  - id: 0\n    file: {json.dumps(f)}\n    strict: {'true' if a.strict else 'false'}\n")
+                out.write(f"    libraries: {json.dumps([lib for lib, _ in libs])}\n")
+                out.write(f"    include: {json.dumps(inc + std_inc)}\n")
+                out.write(f"    macros: {json.dumps({k.strip(): v.strip() for k, v in macros.items()})}\n")
+            p = subprocess.run([a.beamctl, "check", yaml], capture_output=True, text=True)
+            return p.returncode == 0, (p.stderr or p.stdout).strip()
+
     def check_plc(f):
         calls = plc_calls.get(f) or [("", [os.path.dirname(f)], [])]
         errs = []
-        for pm, inc, _ in calls:
-            cmd = [a.beamctl, "plc", "check"] + (["--strict"] if a.strict else [])
-            for d in inc + std_inc:
-                cmd += ["-I", d]
-            ok, msg = run(cmd + [f], pm)
+        for pm, inc, libs in calls:
+            if libs:
+                ok, msg = check_with_libraries(f, pm, inc, libs)
+            else:
+                cmd = [a.beamctl, "plc", "check"] + (["--strict"] if a.strict else [])
+                for d in inc + std_inc:
+                    cmd += ["-I", d]
+                ok, msg = run(cmd + [f], pm)
             if not ok:
                 errs.append(msg)
         return not errs, errs[0] if errs else ""
