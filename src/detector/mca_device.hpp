@@ -32,6 +32,11 @@ public:
     };
     // false: the device refused (the record sets NACK).
     virtual bool setup(const Setup& s) = 0;
+    // Whether the device acquires in this MODE (a put of another MODE is refused).
+    virtual bool supports(McaMode m) const {
+        (void)m;
+        return true;
+    }
     virtual bool start() = 0;
     virtual bool stop() = 0;
     virtual bool erase() = 0;

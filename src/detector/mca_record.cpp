@@ -228,6 +228,8 @@ struct McaRecord : Record {
 
     PutStatus special(const FieldDesc& f) override {
         int i, k;
+        if (is(f, "MODE") && (mode >= kMenuMcaMode.choices.size() || (device && !device->supports(McaMode(mode)))))
+            return PutStatus::BadValue; // the device does not acquire so: refused, MODE stays
         if (is(f, "ERAS")) newv |= N_ERAS;
         else if (is(f, "ERST")) newv |= N_ERST;
         else if (is(f, "NUSE")) {

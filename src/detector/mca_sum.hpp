@@ -17,6 +17,11 @@ public:
     explicit McaSum(std::vector<McaDevice*> elements, std::string name = "sum");
 
     bool setup(const Setup& s) override;
+    bool supports(McaMode m) const override { // what every element acquires in
+        for (const McaDevice* e : elements_)
+            if (!e->supports(m)) return false;
+        return true;
+    }
     bool start() override;
     bool stop() override;
     bool erase() override;

@@ -76,6 +76,7 @@ public:
     SimMca(SimMcaConfig cfg, std::function<double()> clock, std::function<double()> intensity = {});
 
     bool setup(const Setup& s) override;
+    bool supports(McaMode m) const override { return m == McaMode::Pha; } // MCS and List are not simulated
     bool start() override;
     bool stop() override;
     bool erase() override;

@@ -602,6 +602,20 @@ std::size_t IocAreaDetector::busy_worker() const {
     return n;
 }
 
+// An output's value into its readback: text for CHAR waveforms and strings, else the number.
+void IocAreaDetector::copy_readback(pv::Record& out, pv::Record& rbv) {
+    std::string_view type = out.type().name();
+    if (type == "waveform") {
+        set_text(db_, rbv, get_text(out));
+    } else if (type == "stringout") {
+        char s[pv::kStringSize] = {};
+        db_.get(pv::Address{&out, out.type().find("VAL")}, pv::Prim::String, s, 1);
+        set_string(db_, rbv, s);
+    } else {
+        set_value(db_, rbv, get_value(out), false);
+    }
+}
+
 void IocAreaDetector::hook(Unit& u) {
     Unit* self = &u;
     // every output with a readback: the applied value into it (the camera's outputs clipped to the
@@ -645,6 +659,8 @@ void IocAreaDetector::hook(Unit& u) {
             }
             if (camera && !is_text) {
                 apply_camera(u2);
+            } else if (std::string_view(r->type().name()) == "stringout") { // NDArrayPort: a string, not a number
+                copy_readback(*r, *back);
             } else if (is_text) {
                 std::string t = get_text(*r);
                 if (name == u2.hdf + "FilePath") {
@@ -697,9 +713,10 @@ void IocAreaDetector::hook(Unit& u) {
         set_value(db_, self->r(self->hdf + "WriteFile_RBV"), 1, false);
         return pv::PutStatus::Ok;
     };
-    u.r(u.hdf + "ReadFile").put_hook = [](pv::Record& r, const pv::FieldDesc& fd) {
+    u.r(u.hdf + "ReadFile").put_hook = [this, self](pv::Record& r, const pv::FieldDesc& fd) {
         if (std::string_view(fd.name) != "VAL" || get_value(r) == 0) return pv::PutStatus::Ok;
         LOG_WARN(lg, r.name() << ": refused: the HDF5 plugin writes files, it does not read them back here");
+        set_text(db_, self->r(self->hdf + "WriteMessage"), "ReadFile: refused: this plugin writes files, it does not read them");
         return pv::PutStatus::Failed;
     };
     u.r(u.cam + "TriggerSoftware").put_hook = [self](pv::Record& r, const pv::FieldDesc& fd) {
@@ -773,8 +790,7 @@ void IocAreaDetector::start() {
             const std::string rbv = name + "_RBV";
             auto it = u.rec.find(rbv);
             if (it == u.rec.end() || !r->put_hook) continue;
-            if (std::string_view(r->type().name()) == "waveform") set_text(db_, *it->second, get_text(*r));
-            else set_value(db_, *it->second, get_value(*r), false);
+            copy_readback(*r, *it->second);
         }
         apply_camera(u);
         std::string fp = get_text(u.r(u.hdf + "FilePath"));

@@ -54,6 +54,7 @@ private:
     struct Worker;
 
     void make_records(const config::AreaDetectorEntry& e, const std::string& prefix, pv::DbFile& f);
+    void copy_readback(pv::Record& out, pv::Record& rbv);
     void hook(Unit& u);
     void apply_camera(Unit& u);
     void start(Unit& u, double now_s);

@@ -72,6 +72,7 @@ class IocDetectors::McaRef : public detector::McaDevice {
 public:
     McaRef(detector::McaDevice& d, std::string name) : d_(d), name_(std::move(name)) {}
     bool setup(const Setup& s) override { return d_.setup(s); }
+    bool supports(detector::McaMode m) const override { return d_.supports(m); }
     bool start() override { return d_.start(); }
     bool stop() override { return d_.stop(); }
     bool erase() override { return d_.erase(); }

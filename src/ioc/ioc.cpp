@@ -1076,6 +1076,15 @@ int Ioc::run() {
     loop.run();
     if (autosave_) autosave_->flush(); // a clean stop saves what changed since the last save
     shutdown(&signals);
+    // The stopped state reaches the clients before the server closes: a few more rounds of the
+    // loop publish the last snapshot, the motor records' polls (0.1 s) end their moves (DMOV 1,
+    // the stopped RBV) and the CA server sends it; then the log has the final positions.
+    loop.call_after(0.35, [&loop] { loop.stop(); });
+    loop.run();
+    for (std::size_t i = 0; i < axes_->size(); ++i) {
+        const motion::AxisStatus& st = axes_->status(i);
+        LOG_INFO(lg, "stopped: axis " << axes_->name(i) << " at " << st.act_pos << (st.enabled ? " (enabled)" : " (disabled)"));
+    }
     if (plans_) plans_->set_scheduler({}); // the loop goes now
     return 0;
 }

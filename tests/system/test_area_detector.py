@@ -99,6 +99,15 @@ def test_binning_and_region_and_refusals(tmp_path, prefix):
         assert text(prefix + "HDF1:FileTemplate_RBV") == "%s%s_%3.3d.h5"
         assert text(prefix + "HDF1:FileWriteMode") == "Single"  # Capture is refused
         assert put_status(prefix + "HDF1:Capture", 1) == ECA_PUTFAIL
+        # the plugins' NDArrayPort readbacks are the port's name, not a number
+        assert text(prefix + "HDF1:NDArrayPort_RBV") == text(prefix + "HDF1:NDArrayPort") == "cam1"
+        assert text(prefix + "image1:NDArrayPort_RBV") == "cam1"
+        assert put_status(prefix + "HDF1:NDArrayPort", "cam1") == 1
+        assert text(prefix + "HDF1:NDArrayPort_RBV") == "cam1"
+        # ReadFile is refused and WriteMessage says why
+        assert put_status(prefix + "HDF1:ReadFile", 1) == ECA_PUTFAIL
+        msg = bytes(get(prefix + "HDF1:WriteMessage")).split(b"\0")[0].decode()
+        assert "ReadFile" in msg and "refused" in msg, msg
 
 
 def test_multiple_images_streamed_into_an_hdf5_file(tmp_path, prefix):

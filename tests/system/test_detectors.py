@@ -55,6 +55,9 @@ def test_an_acquisition_with_a_real_time_preset(tmp_path, prefix):
         assert abs(get(p + "mca1.R0N") - 8000 * eltm) < 5 * (8000 * eltm) ** 0.5 + 10
         assert abs(get(p + "mca1.R1N") - 5000 * eltm) < 5 * (5000 * eltm) ** 0.5 + 10
         assert epics.caget(p + "mca1.R0NM") == "Fe Ka"
+        # MODE MCS: the simulated detector counts PHA only, so the put is refused and MODE stays
+        assert put_status(p + "mca1.MODE", 1) != 1
+        assert epics.caget(p + "mca1.MODE", as_string=True) == "PHA"
         assert max(range(2048), key=lambda i: spectrum[i]) in range(635, 646)
 
 

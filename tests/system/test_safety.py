@@ -194,6 +194,53 @@ def test_sigterm_stops_a_running_move_disables_the_drives_and_exits_0(tmp_path):
         release_port(port)
 
 
+class Last:
+    """Every value a PV's monitor delivers, in order."""
+
+    def __init__(self, name):
+        self.values = []
+        self.pv = epics.PV(P + name, callback=self._cb, auto_monitor=True)
+        assert self.pv.wait_for_connection(5)
+
+    def _cb(self, value=None, **kw):
+        if value is not None:
+            self.values.append(value)
+
+
+def test_sigterm_during_a_move_posts_the_stopped_state_before_the_server_closes(tmp_path):
+    """Clients see the move end (DMOV 1, MOVN 0, the stopped readback) before the disconnect, and
+    the log names each axis's final position."""
+    port = acquire_port()
+    srv = RunServer(tmp_path, REPO_ROOT / "examples" / "demo" / "ioc.yaml", port).start()
+    try:
+        assert wait_for(lambda: ca.get(connect(P + "m0-Stat-OK")) == 1, timeout=10)
+        enabled("SlitTop")
+        dmov, movn, rbv = Last("SlitTop.DMOV"), Last("SlitTop.MOVN"), Last("SlitTop.RBV")
+        top = epics.Motor(P + "SlitTop", timeout=5)
+        start = top.get("RBV")
+        top.move(start + 8 if start < 5 else start - 8, wait=False)
+        assert wait_for(lambda: dmov.values and dmov.values[-1] == 0, timeout=5)
+        assert wait_for(lambda: abs(get("SlitTop-VelAct")) > 1.0, timeout=5)
+        srv.proc.send_signal(signal.SIGTERM)
+        assert srv.proc.wait(20) == 0
+        time.sleep(0.5)  # the last monitor updates were sent before the close; let libca deliver them
+        assert dmov.values[-1] == 1, dmov.values
+        assert movn.values[-1] == 0, movn.values
+        final = rbv.values[-1]
+        err = srv.stderr()
+        assert "stopped: axis" in err, err
+        line = [x for x in err.splitlines() if "stopped: axis" in x and "SlitTop" in x]
+        assert line, err
+        logged = float(line[0].split(" at ")[1].split()[0])
+        assert abs(logged - final) < 0.01, (logged, final)  # the last RBV a client saw is where it stopped
+        assert abs(final - start) > 0.01  # it had moved: the stop is mid-move, not a stale value
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(P)
+        release_port(port)
+
+
 def test_outputs_an_axis_drives_are_read_only_and_show_what_is_sent(demo):
     enabled("SlitTop")
     vel = epics.PV(P + "m0s011-velocitySetpoint01")
