@@ -104,6 +104,15 @@ template <typename Self> struct AaBase : ArrayBase<Self> {
     using ArrayBase<Self>::ArrayBase;
     uint16_t mpst = 0, apst = 0;
     uint32_t hash = 0;
+    Simulation sim;
+    const FieldDesc* simm_fd = this->type().find("SIMM");
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
+    }
+    PutStatus special(const FieldDesc& f) override {
+        sim_special(*this, sim, f, simm_fd);
+        return PutStatus::Ok;
+    }
     static std::vector<FieldDesc> aa_fields(std::vector<FieldDesc> v) {
         using R = Self;
         auto add = {
@@ -140,16 +149,21 @@ struct AaiRecord : AaBase<AaiRecord> {
         using R = AaiRecord;
         auto v = aa_fields(array_fields(common_fields(), kVal));
         v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        add_simulation_fields<R>(v, false, false);
         return v;
     }
     void init() override {
         allocate("NELM", nelm);
         nord = nelm == 1;
+        sim_init(*this, sim, *simm_fd);
         if (load_constant(inp, *val_fd)) udf = 0; // devAaiSoft: a constant array at init
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        if (linked(inp)) read_link(inp, *val_fd); // NORD = elements read (set_count)
+        Link& from = step == SimStep::Now ? sim.siol : inp; // simulated: SIOL instead of INP
+        if (linked(from)) read_link(from, *val_fd); // NORD = elements read (set_count)
         udf = 0;
         stamp_time();
         aa_monitor();
@@ -171,23 +185,27 @@ struct AaoRecord : AaBase<AaoRecord> {
             BEAMCTL_FIELD(R, OUT, out, OutLink, 0),
         };
         v.insert(v.end(), add.begin(), add.end());
+        add_simulation_fields<R>(v, false, true);
         return v;
     }
     void init() override {
         allocate("NELM", nelm);
         nord = nelm == 1;
+        sim_init(*this, sim, *simm_fd);
         if (omsl == 1 && load_constant(dol, *val_fd)) udf = 0; // fetchValue(init): constant DOL
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
         udf = 0;
         // fetchValue: closed_loop reads DOL; a failed read ends processing (no write, no monitor).
-        if (omsl == 1 && linked(dol) && !read_link(dol, *val_fd)) {
+        if (!sim.resuming && omsl == 1 && linked(dol) && !read_link(dol, *val_fd)) {
             pact = 0;
             return ProcessResult::Done;
         }
         stamp_time();
-        write_link(out, *val_fd); // devAaoSoft: NORD elements
+        write_link(step == SimStep::Now ? sim.siol : out, *val_fd); // devAaoSoft: NORD elements (simulated: SIOL)
         aa_monitor();
         pact = 0;
         return ProcessResult::Done;

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <string_view>
 #include <utility>
@@ -303,6 +304,11 @@ template <typename Self> struct LongStringBase : Record {
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* oval_fd = type().find("OVAL");
     const FieldDesc* len_fd = type().find("LEN");
+    Simulation sim;
+    const FieldDesc* simm_fd = type().find("SIMM");
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
+    }
     inline static const FieldDesc kScratch{"", Dbf::String, 0, kStringSize, nullptr,
                                            [](Record& r) -> void* { return static_cast<Self&>(r).scratch; }};
 
@@ -339,6 +345,7 @@ template <typename Self> struct LongStringBase : Record {
     }
     PutStatus special(const FieldDesc& f) override {
         if (&f == val_fd) post(len_fd, kDbeValue | kDbeLog);
+        sim_special(*this, sim, f, simm_fd);
         return PutStatus::Ok;
     }
     void set_value(std::string_view s) {
@@ -393,15 +400,33 @@ struct LsiRecord : LongStringBase<LsiRecord> {
         using R = LsiRecord;
         auto v = long_string_fields(common_fields());
         v.push_back(BEAMCTL_FIELD(R, INP, inp, InLink, 0));
+        add_simulation_fields<R>(v, false, false);
         return v;
     }
     void init() override {
         allocate();
+        sim_init(*this, sim, *simm_fd);
         if (load_string_constant(inp)) udf = 0;
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        if (linked(inp) && read_string(inp)) udf = 0; // devLsiSoft (lsi raises no UDF alarm)
+        if (step == SimStep::Now) { // simulated: SIOL instead of INP
+            if (linked(sim.siol) && read_string(sim.siol)) udf = 0;
+        } else if (dtyp == kDtypGetenv) { // devLsiEnviron: the variable INP names
+            std::string name(inp.kind == Link::Kind::Hw ? inp.s().address : std::string());
+            if (const char* v = std::getenv(name.c_str())) {
+                set_value(v);
+                udf = 0;
+            } else {
+                set_value("");
+                udf = 1;
+                set_sevr(kStatUdf, udfs, "No such ENV");
+            }
+        } else if (linked(inp) && read_string(inp)) {
+            udf = 0; // devLsiSoft (lsi raises no UDF alarm)
+        }
         stamp_time();
         long_string_monitor();
         pact = 0;
@@ -415,25 +440,42 @@ struct LsoRecord : LongStringBase<LsoRecord> {
         using R = LsoRecord;
         auto v = long_string_fields(common_fields());
         add_output_fields<R>(v, Dbf::String);
+        add_simulation_fields<R>(v, false, true);
         return v;
     }
     void init() override {
         allocate();
+        sim_init(*this, sim, *simm_fd);
         if (load_string_constant(dol)) {
             std::memcpy(oval_buf.data(), val_buf.data(), len);
             olen = len;
             udf = 0;
         }
     }
+    // The device (OUT; "stdio": @stdout/@stderr) or, simulated, SIOL.
+    void write_value(SimStep step) {
+        if (step == SimStep::Now) {
+            write_string(sim.siol);
+        } else if (dtyp == kDtypStdio) {
+            std::string_view where = out.kind == Link::Kind::Hw ? std::string_view(out.s().address) : "stdout";
+            std::FILE* f = where == "stderr" || where == "errlog" ? stderr : stdout;
+            std::fprintf(f, "%.*s\n", int(strnlen(val_buf.data(), sizv)), val_buf.data());
+            std::fflush(f);
+        } else {
+            write_string(out);
+        }
+    }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        if (omsl == 1 && linked(dol) && read_string(dol)) udf = 0;
+        if (!sim.resuming && omsl == 1 && linked(dol) && read_string(dol)) udf = 0;
         if (udf) set_sevr(kStatUdf, kInvalid);
         if (nsev < kInvalid || ivoa == 0) {
-            write_string(out);
+            write_value(step);
         } else if (ivoa == 2) {
-            set_value(std::string_view(ivov, strnlen(ivov, sizeof ivov)));
-            write_string(out);
+            if (!sim.resuming) set_value(std::string_view(ivov, strnlen(ivov, sizeof ivov)));
+            write_value(step);
         }
         stamp_time();
         long_string_monitor();

@@ -454,3 +454,34 @@ record(nosuchtype, "c") {})");
     EXPECT_NE(err.find("bad.db:2:"), std::string::npos) << err;
     EXPECT_NE(err.find("nosuchtype"), std::string::npos) << err;
 }
+
+TEST_F(Conformance, LongStringsAndArraysSimulateThroughSiol) {
+    ::setenv("BEAMCTL_TEST_LSI", "a long string from the environment", 1);
+    load(R"(
+record(stringout, "src") { field(VAL, "simulated") }
+record(lsi, "l") { field(INP, "src") field(SIOL, "src") field(SIMM, "YES") field(SIMS, "MINOR") }
+record(lsi, "env") { field(DTYP, "getenv") field(INP, "@BEAMCTL_TEST_LSI") field(SIZV, "64") }
+record(waveform, "wf") { field(NELM, "3") field(FTVL, "DOUBLE") }
+record(aai, "a") { field(NELM, "3") field(FTVL, "DOUBLE") field(SIOL, "wf") field(SIMM, "YES") }
+record(aao, "o") { field(NELM, "3") field(FTVL, "DOUBLE") field(SIOL, "wf PP") field(SIMM, "YES") }
+)");
+    process("l");
+    EXPECT_EQ(gets("l.SEVR"), "MINOR");
+    EXPECT_EQ(gets("l.STAT"), "SIMM");
+    char buf[64] = {};
+    db.get(addr("l"), Prim::Char, buf, 40);
+    EXPECT_STREQ(buf, "simulated");
+    process("env");
+    char env[64] = {};
+    db.get(addr("env"), Prim::Char, env, 64);
+    EXPECT_STREQ(env, "a long string from the environment");
+    double v[3] = {1, 2, 3};
+    db.put(addr("o"), Prim::Double, v, 3);
+    double w[3] = {};
+    db.get(addr("wf"), Prim::Double, w, 3);
+    EXPECT_DOUBLE_EQ(w[2], 3); // aao simulated: SIOL got the array
+    process("a");
+    double got[3] = {};
+    db.get(addr("a"), Prim::Double, got, 3);
+    EXPECT_DOUBLE_EQ(got[1], 2); // aai simulated: read from SIOL
+}
