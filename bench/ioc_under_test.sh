@@ -9,5 +9,5 @@ start_ioc() {
     ioc=$!
     for _ in $(seq 50); do grep -q '^ready' "$2" && break; sleep 0.2; done
     grep -q '^ready' "$2" || { echo "the IOC did not start:"; cat "$2"; exit 1; }
-    export EPICS_CA_ADDR_LIST=localhost:$port EPICS_CA_AUTO_ADDR_LIST=NO
+    export EPICS_CA_ADDR_LIST=127.0.0.1:$port EPICS_CA_AUTO_ADDR_LIST=NO
 }

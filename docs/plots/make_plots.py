@@ -41,7 +41,7 @@ def free_port():
 
 
 PORT = free_port()
-os.environ.update(EPICS_CA_ADDR_LIST=f"localhost:{PORT}", EPICS_CA_AUTO_ADDR_LIST="NO", EPICS_CA_MAX_ARRAY_BYTES="20000000")
+os.environ.update(EPICS_CA_ADDR_LIST=f"127.0.0.1:{PORT}", EPICS_CA_AUTO_ADDR_LIST="NO", EPICS_CA_MAX_ARRAY_BYTES="20000000")
 import epics  # noqa: E402  (after the environment: libca reads it once)
 
 

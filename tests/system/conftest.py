@@ -29,6 +29,12 @@ BEAMCTL = Path(os.environ.get("BEAMCTL_BIN", str(REPO_ROOT / "build" / "release"
 PYTHON = "/usr/bin/python3"
 READY_TIMEOUT = 10.0  # [s]
 POOL_SIZE = 8
+# Prefixed to the argv of every server IocServer starts (and of other processes a test stops with
+# SIGINT, beamctl's Ctrl-C): SIGINT at its default disposition, as from a terminal. A shell that runs
+# pytest as a background job (`nohup bash build.sh test &`) sets SIGINT to ignored, and exec passes
+# that on to every child. (beamctl blocks SIGINT and reads it from a signalfd, which gets it either
+# way; this keeps the tests of it independent of how pytest was started.)
+DEFAULT_SIGINT = ["env", "--default-signal=INT"]
 
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
@@ -209,7 +215,7 @@ class IocServer:
         self.stderr_path = self.workdir / f"{self.name}.{self._runs}.stderr"
         errf = open(self.stderr_path, "wb")
         self.proc = subprocess.Popen(
-            self.argv(), stdout=subprocess.PIPE, stderr=errf, stdin=subprocess.DEVNULL,
+            DEFAULT_SIGINT + self.argv(), stdout=subprocess.PIPE, stderr=errf, stdin=subprocess.DEVNULL,
             env=self.env(), cwd=str(self.workdir))
         errf.close()
         threading.Thread(target=self._reader, args=(self.proc,), daemon=True).start()
@@ -439,6 +445,21 @@ def client_env(port):
     return env
 
 
+def end_process(proc, timeout=10.0):
+    """Ends a helper process whatever signal dispositions it inherited: SIGTERM, SIGKILL if it is
+    still there after `timeout`, and reaped either way. Returns its exit code."""
+    if proc is None:
+        return None
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout)
+    return proc.returncode
+
+
 def run_client(code, port, timeout=60, args=()):
     """Run python code in a separate /usr/bin/python3 (own CA context); returns CompletedProcess."""
     return subprocess.run([PYTHON, "-c", code, *args], env=client_env(port), capture_output=True,
@@ -521,8 +542,9 @@ def running_ioc(workdir, prefix, ioc_text, files=None, config_name="ioc.yaml"):
     cfg = workdir / config_name
     cfg.write_text(ioc_text.format(name=prefix.rstrip(":"), prefix=prefix))
     port = acquire_port()
-    srv = RunServer(workdir, cfg, port).start()
+    srv = RunServer(workdir, cfg, port)
     try:
+        srv.start()  # inside: a server that does not start still gives its port back
         assert wait_for(lambda: epics.ca.get(connect(prefix + "m0-Stat-OK")) == 1)
         yield srv
     finally:
@@ -536,8 +558,9 @@ def running_ioc(workdir, prefix, ioc_text, files=None, config_name="ioc.yaml"):
 def demo(tmp_path):
     """The demo beamline (examples/demo/ioc.yaml) on a pool port, once its bus is OK."""
     port = acquire_port()
-    srv = RunServer(tmp_path, REPO_ROOT / "examples" / "demo" / "ioc.yaml", port).start()
+    srv = RunServer(tmp_path, REPO_ROOT / "examples" / "demo" / "ioc.yaml", port)
     try:
+        srv.start()
         assert wait_for(lambda: epics.ca.get(connect("DEMO:m0-Stat-OK")) == 1, timeout=10)
         yield srv
     finally:
@@ -615,8 +638,9 @@ def running_config(tmp_path, prefix, text, ready, timeout=10.0):
     cfg = tmp_path / "ioc.yaml"
     cfg.write_text(text)
     port = acquire_port()
-    srv = RunServer(tmp_path, cfg, port).start()
+    srv = RunServer(tmp_path, cfg, port)
     try:
+        srv.start()
         assert wait_for(ready, timeout)
         yield srv
         assert srv.alive()

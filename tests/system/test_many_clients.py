@@ -99,3 +99,4 @@ def test_libca_clients_in_separate_processes(ioc):
         for p in procs:
             if p.poll() is None:
                 p.kill()
+            p.wait(10)

@@ -15,7 +15,7 @@ import numpy as np
 
 import epics
 
-from conftest import _put_done, BEAMCTL, ECA_NORMAL, ECA_PUTFAIL, connect, put_status, running_config, wait_for
+from conftest import _put_done, BEAMCTL, DEFAULT_SIGINT, ECA_NORMAL, ECA_PUTFAIL, connect, put_status, running_config, wait_for
 from test_automation import MailAndHooks, get, get_str, snd_config
 
 CRYSTALS = ("T1:TH1", "T1:TH2", "T4:TH2", "T4:TH1", "T2:TH", "T3:TH")
@@ -138,9 +138,10 @@ def test_beamctl_plan_run_starts_follows_and_reports_and_ctrl_c_aborts(tmp_path,
         r = subprocess.run([str(BEAMCTL), "plan", "list", str(cfg)], capture_output=True, text=True, timeout=30)
         assert r.returncode == 0 and "th1_scan (scan): T1 crystal 1 around where it is" in r.stdout
         # Ctrl-C aborts the run: the motor stops, the plan says Aborted, the exit code says so
+        # (SIGINT at its default disposition, as at a terminal, however pytest was started)
         start = get(prefix + "T1:TH1.RBV")
-        proc = subprocess.Popen([str(BEAMCTL), "plan", "run", str(cfg), "th1_scan", "n=101"], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(DEFAULT_SIGINT + [str(BEAMCTL), "plan", "run", str(cfg), "th1_scan", "n=101"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             assert wait_for(lambda: get(prefix + "th1_scan:Point") >= 3, 30)
             proc.send_signal(signal.SIGINT)
@@ -148,6 +149,7 @@ def test_beamctl_plan_run_starts_follows_and_reports_and_ctrl_c_aborts(tmp_path,
         finally:
             if proc.poll() is None:
                 proc.kill()
+                proc.wait(10)
         assert proc.returncode == 1, (out, err)
         assert "aborting" in err and "th1_scan: Aborted" in out
         assert get_str(prefix + "th1_scan:Status") == "Aborted"

@@ -5,7 +5,12 @@ and counts, values stream, writes reach the machine with the spec's byte layout,
 add and retire PVs, silence raises INVALID/COMM and data clears it, malformed packets change no
 PV, and the MOTOR object is a motor record that pyepics moves, stops and keeps in its limits.
 With rcp-sim stopped (offline) puts fail and change nothing, motor moves end in alarm and are
-never replayed, and when it runs again the setpoints show the machine's values."""
+never replayed, and when it runs again the setpoints show the machine's values.
+
+Nothing here is asserted against the wall clock: the tests wait for what they check (with
+deadlines that only end a hung test), rates are measured on the IOC's own timestamps, and "nothing
+happens for a while" is measured in the machine's own steps (its Counter), so a loaded machine
+makes them slower, not red."""
 
 import contextlib
 import ctypes
@@ -18,6 +23,7 @@ import epics
 import pytest
 from epics import ca
 
+import ca_raw as raw
 from conftest import BEAMCTL, REPO_ROOT, RunServer, acquire_port, connect, forget_pvs, release_port, wait_for
 
 LOCAL = 0x7F000001  # 127.0.0.1 as the spec's u32
@@ -101,6 +107,31 @@ def exists(name, timeout=0.5):
     return ca.connect_channel(chid, timeout=timeout)
 
 
+DEADLINE = 30  # [s] only ends a hung test: every wait below returns as soon as its condition holds
+
+
+def served(srv, name):
+    """The server's own answer to CREATE_CHAN on a fresh circuit: True (the channel), False
+    (CREATE_CH_FAIL). Definite either way, unlike a libca search that did not connect in time."""
+    with raw.Circuit("127.0.0.1", srv.port, timeout=DEADLINE) as c:
+        return c.create(name, timeout=DEADLINE) is not None
+
+
+def value_and_time(name):
+    """(value, IOC timestamp [s]) of one fresh read."""
+    chid = connect(name)
+    md = ca.get_with_metadata(chid, ftype=ca.promote_type(chid, use_time=True), timeout=DEADLINE)
+    return md["value"], md["timestamp"]
+
+
+def machine_steps(p, n):
+    """Waits until the machine (rcp-sim, prefix p) has run n more model steps, as its Counter
+    (one a step) shows: "for a while" in the machine's time, not in this client's."""
+    c0 = ca.get(connect(p + "Counter"))
+    assert wait_for(lambda: ca.get(connect(p + "Counter")) >= c0 + n, timeout=60), \
+        f"{p}Counter stays below {c0 + n}: the machine does not run"
+
+
 OBJECTS = [
     (1, AI, FLOAT64, 0, 0, "Temp"),
     (2, AO, FLOAT64, 0, 0, "Set"),
@@ -114,39 +145,46 @@ OBJECTS = [
 
 
 def test_packets_from_an_independent_writer(tmp_path, prefix):
-    with bridge_ioc(tmp_path, prefix) as (srv, rcp_port):
+    # timeout_s 3 (the default): the application stays online between this test's packets even
+    # when a loaded machine runs the test slowly (the silence below is waited for, however long)
+    with bridge_ioc(tmp_path, prefix, timeout_s=3.0) as (srv, rcp_port):
         rcp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         rcp.bind(("127.0.0.1", 0))
-        rcp.settimeout(2)
+        rcp.settimeout(DEADLINE)
         my_port = rcp.getsockname()[1]
         objs = [(i, t, d, my_port, rcp_port, n) for i, t, d, _, _, n in OBJECTS]
         bridge = ("127.0.0.1", rcp_port)
         p = f"{prefix}RCP:pyRcp:"
-        t0 = time.monotonic()
+        assert not served(srv, p + "Axis")  # nothing before the beacon
         rcp.sendto(beacon("pyRcp", objs), bridge)
-        # PVs within 2 s of the first beacon, with the types of the spec's table
-        assert wait_for(lambda: exists(p + "Axis"), timeout=2)
-        assert time.monotonic() - t0 < 2
+        # the first beacon makes the PVs, with the types of the spec's table
+        assert wait_for(lambda: served(srv, p + "Axis"), timeout=DEADLINE)
+        assert wait_for(lambda: exists(p + "Axis"), timeout=DEADLINE)
         want = {"Temp": "ai", "Set": "ao", "Set_RBV": "ai", "Ready": "bi", "Go": "bo", "Go_RBV": "bi",
                 "Count": "longin", "Mode": "longout", "Mode_RBV": "longin", "Wave": "ai", "Axis": "motor"}
         for n, rtype in want.items():
             assert ca.get(connect(p + n + ".RTYP")) == rtype, n
 
         # data: values (and a count of 8 turns Wave into a waveform)
-        rcp.sendto(data([(1, AI, FLOAT64, "Temp", [21.5]), (3, BI, BOOL, "Ready", [1]),
-                         (5, LI, INT32, "Count", [-7]), (7, AI, FLOAT64, "Wave", [float(i) for i in range(8)]),
-                         (8, MOTOR, FLOAT64, "Axis", [1.25, 0, 1 | 16 | 64, 0, 0])]), bridge)
-        assert wait_for(lambda: ca.get(connect(p + "Temp")) == 21.5, timeout=2)
+        first_data = data([(1, AI, FLOAT64, "Temp", [21.5]), (3, BI, BOOL, "Ready", [1]),
+                           (5, LI, INT32, "Count", [-7]), (7, AI, FLOAT64, "Wave", [float(i) for i in range(8)]),
+                           (8, MOTOR, FLOAT64, "Axis", [1.25, 0, 1 | 16 | 64, 0, 0])])
+        rcp.sendto(first_data, bridge)
+        assert wait_for(lambda: ca.get(connect(p + "Temp")) == 21.5, timeout=DEADLINE)
         assert ca.get(connect(p + "Ready")) == 1
         assert ca.get(connect(p + "Count")) == -7
         forget_pvs(p + "Wave")
-        assert wait_for(lambda: exists(p + "Wave") and ca.get(connect(p + "Wave.RTYP")) == "waveform", timeout=3)
+        assert wait_for(lambda: exists(p + "Wave") and ca.get(connect(p + "Wave.RTYP")) == "waveform",
+                        timeout=DEADLINE)
         wave = epics.PV(p + "Wave")
-        assert wait_for(lambda: wave.get() is not None and len(wave.get()) == 8, timeout=3)
+        assert wait_for(lambda: wave.get() is not None and len(wave.get()) == 8, timeout=DEADLINE)
         assert list(wave.get()) == [float(i) for i in range(8)]
-        assert wait_for(lambda: abs(ca.get(connect(p + "Axis.RBV")) - 1.25) < 1e-9, timeout=3)
+        assert wait_for(lambda: abs(ca.get(connect(p + "Axis.RBV")) - 1.25) < 1e-9, timeout=DEADLINE)
 
-        # writes: one packet to ip_rcp:port_rcp per put, in the spec's layout
+        # writes: one packet to ip_rcp:port_rcp per put, in the spec's layout. The same data once
+        # more first (nothing changes): the application is online however long the above took.
+        rcp.sendto(first_data, bridge)
+        assert wait_for(lambda: alarm(p + "Temp")[0] == 0, timeout=DEADLINE)
         ca.put(connect(p + "Set"), 3.25, wait=True)
         pkt, _ = rcp.recvfrom(2000)
         ts, entries = parse_data(pkt)
@@ -178,24 +216,28 @@ def test_packets_from_an_independent_writer(tmp_path, prefix):
             assert len(pkt) == (100 if reason == "Short" else 1000), reason
             rcp.sendto(pkt, bridge)
         for reason in bad:
-            assert wait_for(lambda: (ca.get(connect(f"{prefix}RCP:Malformed-{reason}")) or 0) >= 1, timeout=3), reason
+            assert wait_for(lambda: (ca.get(connect(f"{prefix}RCP:Malformed-{reason}")) or 0) >= 1,
+                            timeout=DEADLINE), reason
         assert ca.get(connect(p + "Temp")) == 21.5
         assert ca.get(connect(p + "Count")) == -7
 
         # a changed beacon: Go is retired, New appears, the .db is rewritten
         objs2 = [o for o in objs if o[5] != "Go"] + [(9, AI, FLOAT64, my_port, rcp_port, "New")]
         rcp.sendto(beacon("pyRcp", objs2), bridge)
-        assert wait_for(lambda: exists(p + "New"), timeout=2)
+        assert wait_for(lambda: served(srv, p + "New"), timeout=DEADLINE)
+        assert wait_for(lambda: exists(p + "New"), timeout=DEADLINE)
+        # retired: the server answers CREATE_CHAN for Go with CREATE_CH_FAIL (not merely slowly)
+        assert wait_for(lambda: not served(srv, p + "Go"), timeout=DEADLINE)
+        assert served(srv, p + "Go_RBV") is False and served(srv, p + "Temp")
         forget_pvs(p + "Go")
-        assert wait_for(lambda: not exists(p + "Go", timeout=0.3), timeout=3)
         db = (tmp_path / "rcp.db").read_text()
         assert f'"{p}New"' in db and f'"{p}Go"' not in db
 
-        # silence (timeout 1 s): INVALID/COMM; the next packet clears it
+        # silence (timeout_s): INVALID/COMM; the next packet clears it
         temp = epics.PV(p + "Temp", form="ctrl")
-        assert wait_for(lambda: temp.get_ctrlvars() and temp.severity == 3 and temp.status == 9, timeout=4)
+        assert wait_for(lambda: temp.get_ctrlvars() and temp.severity == 3 and temp.status == 9, timeout=DEADLINE)
         rcp.sendto(data([(1, AI, FLOAT64, "Temp", [22.0])]), bridge)
-        assert wait_for(lambda: temp.get(use_monitor=False) == 22.0 and temp.severity == 0, timeout=3)
+        assert wait_for(lambda: temp.get(use_monitor=False) == 22.0 and temp.severity == 0, timeout=DEADLINE)
         rcp.close()
 
 
@@ -224,36 +266,45 @@ def rcp_sim(rcp_port, extra=(), sim_port=None, model=MODEL):
 def test_rcp_sim_values_writes_and_motor(tmp_path, prefix):
     with bridge_ioc(tmp_path, prefix, timeout_s=3) as (srv, rcp_port), rcp_sim(rcp_port):
         p = f"{prefix}RCP:sgDemo:"
-        assert wait_for(lambda: exists(p + "Stage"), timeout=3)
-        # values stream at the model's rate (100 Hz): the int32 counter advances with it
-        c0 = ca.get(connect(p + "Counter"))
-        time.sleep(1.0)
-        c1 = ca.get(connect(p + "Counter"))
-        assert 50 <= c1 - c0 <= 150, (c0, c1)
+        assert wait_for(lambda: exists(p + "Stage"), timeout=DEADLINE)
+        # values stream at the model's rate (100 Hz): the int32 counter advances by one a step, and
+        # every Sine value comes as a monitor update. Both rates are measured on the IOC's clock
+        # (the timestamps of the values it received), over at least 2 s of it.
         updates = []
-        sine = epics.PV(p + "Sine", callback=lambda value=None, **kw: updates.append(value))
-        time.sleep(1.0)
-        assert len(updates) >= 50, len(updates)
+        sine = epics.PV(p + "Sine", callback=lambda value=None, timestamp=None, **kw: updates.append((value, timestamp)))
+        c0, t0 = value_and_time(p + "Counter")
+        assert wait_for(lambda: value_and_time(p + "Counter")[1] - t0 >= 2.0, timeout=DEADLINE), \
+            f"{p}Counter is not updated: {value_and_time(p + 'Counter')} after {(c0, t0)}"
+        c1, t1 = value_and_time(p + "Counter")
+        rate = (c1 - c0) / (t1 - t0)
+        assert 50 <= rate <= 150, f"Counter {c0} -> {c1} in {t1 - t0:.3f} s of IOC time: {rate:.1f} Hz"
+        assert wait_for(lambda: len(updates) >= 2 and updates[-1][1] - updates[0][1] >= 2.0, timeout=DEADLINE)
         sine.clear_callbacks()
+        got = list(updates)
+        stamps = [t for _, t in got]
+        assert stamps == sorted(stamps), "monitor updates in the order the IOC stamped them"
+        sine_rate = (len(got) - 1) / (stamps[-1] - stamps[0])
+        assert sine_rate >= 50, f"{len(got)} Sine updates in {stamps[-1] - stamps[0]:.3f} s of IOC time"
+        assert all(abs(v) <= 1.0 for v, _ in got) and len({v for v, _ in got}) > len(got) // 2, got[:20]
         assert ca.get(connect(p + "Spectrum.NELM")) == 16
         # a write reaches the model: its readback comes back in the model's data
         ca.put(connect(p + "Setpoint"), 2.0, wait=True)
-        assert wait_for(lambda: ca.get(connect(p + "Setpoint_RBV")) == 2.0, timeout=2)
-        assert wait_for(lambda: abs(ca.get(connect(p + "PlantOut")) - 2.0) < 0.05, timeout=5)
-        assert wait_for(lambda: ca.get(connect(p + "InTolerance")) == 1, timeout=5)
+        assert wait_for(lambda: ca.get(connect(p + "Setpoint_RBV")) == 2.0, timeout=DEADLINE)
+        assert wait_for(lambda: abs(ca.get(connect(p + "PlantOut")) - 2.0) < 0.05, timeout=DEADLINE)
+        assert wait_for(lambda: ca.get(connect(p + "InTolerance")) == 1, timeout=DEADLINE)
         # the motor record on the MOTOR object
-        m = epics.Motor(p + "Stage", timeout=5)
-        assert m.move(5.0, wait=True, timeout=20) == 0
+        m = epics.Motor(p + "Stage", timeout=DEADLINE)
+        assert m.move(5.0, wait=True, timeout=60) == 0
         assert abs(m.get("RBV") - 5.0) < 0.01
         assert m.get("DMOV") == 1
         m.move(40.0)
-        assert wait_for(lambda: m.get("MOVN") == 1, timeout=3)
+        assert wait_for(lambda: m.get("MOVN") == 1, timeout=DEADLINE)
         m.stop()
-        assert wait_for(lambda: m.get("DMOV") == 1, timeout=5)
-        stopped = m.get("RBV")
+        assert wait_for(lambda: ca.get(connect(p + "Stage.DMOV")) == 1, timeout=DEADLINE)
+        stopped = ca.get(connect(p + "Stage.RBV"))
         assert 5.0 < stopped < 40.0
-        time.sleep(0.3)
-        assert m.get("RBV") == stopped
+        machine_steps(p, 30)  # the machine runs on: the stage stays where it stopped
+        assert ca.get(connect(p + "Stage.RBV")) == stopped
         assert m.move(100.0, wait=True) == -12  # beyond the record's high limit (45)
         assert ca.get(connect(p + "Stage.HLM")) == 45
         # diagnostics
@@ -296,27 +347,30 @@ def test_rcp_sim_offline_refuses_writes_and_setpoints_follow_it_back(tmp_path, p
         p = f"{prefix}RCP:sgDemo:"
         sim_port = free_udp_port()  # the restarted machine listens where it did
         with rcp_sim(rcp_port, sim_port=sim_port):
-            assert wait_for(lambda: exists(p + "Stage"), timeout=3)
+            assert wait_for(lambda: exists(p + "Stage"), timeout=DEADLINE)
             assert epics.caput(p + "Setpoint", 2.0, wait=True) == 1
-            assert wait_for(lambda: ca.get(connect(p + "Setpoint_RBV")) == 2.0, timeout=2)
-            m = epics.Motor(p + "Stage", timeout=5)
+            assert wait_for(lambda: ca.get(connect(p + "Setpoint_RBV")) == 2.0, timeout=DEADLINE)
+            m = epics.Motor(p + "Stage", timeout=DEADLINE)
             m.put("VELO", 10.0, wait=True)
-            assert m.move(5.0, wait=True, timeout=20) == 0
+            assert m.move(5.0, wait=True, timeout=60) == 0
             assert abs(m.get("RBV") - 5.0) < 0.01
-            # a long move (VELO 1: 35 s) in progress when the machine stops
+            # a long move (VELO 1: 35 s) in progress when the machine stops: the machine has
+            # reported the stage moving on from 5
             m.put("VELO", 1.0, wait=True)
             m.move(40.0)
-            assert wait_for(lambda: m.get("MOVN") == 1, timeout=3)
-            time.sleep(0.5)
-        # rcp-sim stopped: within timeout_s every PV is INVALID/COMM; the move in progress ended
-        # (DMOV 1) in alarm, its target dropped (VAL = RBV), the MSTA problem bit set
-        assert wait_for(lambda: alarm(p + "Setpoint") == (INVALID, COMM), timeout=4)
-        assert wait_for(lambda: m.get("DMOV") == 1, timeout=2)
+            assert wait_for(lambda: m.get("MOVN") == 1 and ca.get(connect(p + "Stage.RBV")) > 5.05, timeout=DEADLINE)
+        # rcp-sim stopped: after timeout_s of silence every PV is INVALID/COMM; the move in
+        # progress ended (DMOV 1) in alarm, its target dropped (VAL = RBV), the MSTA problem bit set
+        assert wait_for(lambda: alarm(p + "Setpoint") == (INVALID, COMM), timeout=DEADLINE)
+        def field(name):  # a fresh read, not pyepics' latest monitor update
+            return ca.get(connect(p + "Stage." + name))
+
+        assert wait_for(lambda: field("DMOV") == 1, timeout=DEADLINE)
         assert alarm(p + "Stage") == (INVALID, COMM)
-        stopped = m.get("RBV")
+        stopped = field("RBV")
         assert 5.0 < stopped < 40.0
-        assert abs(m.get("VAL") - stopped) < 1e-3
-        assert int(m.get("MSTA")) & (1 << 9), "MSTA problem: the move failed"
+        assert abs(field("VAL") - stopped) < 1e-3
+        assert int(field("MSTA")) & (1 << 9), "MSTA problem: the move failed"
 
         # puts fail: the put-callback reports an error, the value does not change
         assert put_callback_status(p + "Setpoint", 7.0) != ECA_NORMAL
@@ -329,30 +383,36 @@ def test_rcp_sim_offline_refuses_writes_and_setpoints_follow_it_back(tmp_path, p
         assert ca.get(connect(p + "Mode")) == 0
 
         # a motor move while offline fails: it ends at once in alarm and keeps no target
-        m.move(-20.0, wait=True, timeout=5)
-        assert m.get("DMOV") == 1
-        assert abs(m.get("VAL") - stopped) < 1e-3
+        m.move(-20.0, wait=True, timeout=DEADLINE)
+        assert field("DMOV") == 1
+        assert abs(field("VAL") - stopped) < 1e-3
         assert alarm(p + "Stage") == (INVALID, COMM)
 
         # the machine restarts (its initial values: Setpoint 0, Stage at 0)
         with rcp_sim(rcp_port, sim_port=sim_port):
-            assert wait_for(lambda: alarm(p + "Setpoint") == (0, 0), timeout=4)
-            assert wait_for(lambda: alarm(p + "Stage")[0] == 0, timeout=2)
+            assert wait_for(lambda: alarm(p + "Setpoint") == (0, 0), timeout=DEADLINE)
+            assert wait_for(lambda: alarm(p + "Stage")[0] == 0, timeout=DEADLINE)
+            # the alarms clear with the machine's beacon, the values come with its data: wait for
+            # the values (readbacks at the restarted machine's 0, and the setpoint and the motor's
+            # target taking them), not for the alarms alone, which can precede them
             sp, rbv = connect(p + "Setpoint"), connect(p + "Setpoint_RBV")
-            assert wait_for(lambda: ca.get(sp) == ca.get(rbv),
-                            timeout=2)
+            assert wait_for(lambda: ca.get(rbv) == 0.0 and ca.get(sp) == ca.get(rbv), timeout=DEADLINE), \
+                (ca.get(sp), ca.get(rbv))
             assert ca.get(sp) == 0.0
-            assert abs(m.get("VAL") - m.get("RBV")) < 1e-3
-            # nothing refused or interrupted is sent now: the machine stays where it started
-            time.sleep(1.5)
+            stage_val, stage_rbv = connect(p + "Stage.VAL"), connect(p + "Stage.RBV")
+            assert wait_for(lambda: abs(ca.get(stage_rbv)) < 1e-3 and abs(ca.get(stage_val) - ca.get(stage_rbv)) < 1e-3,
+                            timeout=DEADLINE), (ca.get(stage_val), ca.get(stage_rbv))
+            # nothing refused or interrupted is sent now: the machine stays where it started for
+            # 150 of its steps (1.5 s of its time), by when a replayed write would show
+            machine_steps(p, 150)
             assert ca.get(rbv) == 0.0
-            assert abs(m.get("RBV")) < 1e-3
-            assert m.get("DMOV") == 1
+            assert abs(ca.get(stage_rbv)) < 1e-3 and abs(ca.get(stage_val)) < 1e-3
+            assert ca.get(connect(p + "Stage.DMOV")) == 1
             assert ca.get(connect(p + "Mode_RBV")) == 0
             # and writes work again
             assert put_callback_status(p + "Setpoint", 1.5) == ECA_NORMAL
-            assert wait_for(lambda: ca.get(rbv) == 1.5, timeout=2)
-            assert m.move(1.0, wait=True, timeout=20) == 0
+            assert wait_for(lambda: ca.get(rbv) == 1.5, timeout=DEADLINE)
+            assert m.move(1.0, wait=True, timeout=60) == 0
             assert abs(m.get("RBV") - 1.0) < 0.01
 
 
@@ -362,22 +422,45 @@ def test_rcp_sim_data_before_its_beacon_is_not_malformed(tmp_path, prefix):
     model = tmp_path / "model.yaml"
     text = MODEL.read_text()
     assert "beacon_period_s: 1\n" in text
-    model.write_text(text.replace("beacon_period_s: 1\n", "beacon_period_s: 3\n"))
+    # 5 s between beacons, so the IOC (however slowly it starts) is up before the second one,
+    # and a bridge timeout_s of 10: a few seconds of data before a beacon is the usual start, not
+    # a misconfiguration worth a warning
+    model.write_text(text.replace("beacon_period_s: 1\n", "beacon_period_s: 5\n"))
     port = acquire_port()
     rcp_port = free_udp_port()
-    with rcp_sim(rcp_port, model=model):  # its first beacon goes unheard; the next is 3 s later
+    with rcp_sim(rcp_port, model=model):  # its first beacon goes unheard; the next is 5 s later
         cfg = tmp_path / "ioc.yaml"
         cfg.write_text(f'ioc: {{name: {prefix.rstrip(":")}, prefix: "{prefix}"}}\n'
-                       f'bridges:\n  rcp: {{listen: 127.0.0.1, port: {rcp_port}, prefix: "{prefix}RCP:"}}\n')
+                       f'bridges:\n  rcp: {{listen: 127.0.0.1, port: {rcp_port}, prefix: "{prefix}RCP:", '
+                       f'timeout_s: 10}}\n')
         srv = RunServer(tmp_path, cfg, port).start()
         try:
             p = f"{prefix}RCP:"
             assert ca.get(connect(p + "Applications")) == 0
-            # the next beacon comes within 3 s; libca's searches for a name not found yet back off,
-            # so allow it time to see the new PV (a bound on waiting, not a deadline asserted)
-            assert wait_for(lambda: exists(p + "sgDemo:Stage"), timeout=20)
-            time.sleep(1.1)  # the counters are published once a second
-            assert ca.get(connect(p + "DataBeforeBeacon")) >= 50  # 100 Hz for about 2 s
+            # the next beacon makes the application's PVs
+            assert wait_for(lambda: served(srv, p + "sgDemo:Stage"), timeout=60)
+            assert wait_for(lambda: exists(p + "sgDemo:Stage"), timeout=DEADLINE)
+
+            # every packet the IOC received is counted once: the data before the beacon in
+            # DataBeforeBeacon, the rest (beacon and data) as the application's. The counters are
+            # published together once a second; a snapshot is one publication if the global
+            # RxCount read before and after it is the same (data keeps coming at 100 Hz).
+            def get(n):
+                return ca.get(connect(p + n))
+
+            def snapshot():
+                rx0, early, app_rx, rx1 = get("RxCount"), get("DataBeforeBeacon"), get("sgDemo:RxCount"), get("RxCount")
+                return (rx0, early, app_rx) if rx0 == rx1 and app_rx > 0 else None
+
+            snap = wait_for(snapshot, timeout=DEADLINE)
+            assert snap, "no consistent publication of the counters"
+            rx, early, app_rx = snap
+            assert early >= 1, "the data before the beacon was counted in DataBeforeBeacon"
+            assert rx == early + app_rx, f"RxCount {rx} = DataBeforeBeacon {early} + sgDemo:RxCount {app_rx}"
+            # once the beacon came, data is the application's: DataBeforeBeacon stays
+            machine_steps(p + "sgDemo:", 150)
+            assert get("DataBeforeBeacon") == early
+            assert get("sgDemo:RxCount") > app_rx
             for reason in ("UnknownApplication", "UnknownObject", "TypeMismatch"):
                 assert ca.get(connect(p + "Malformed-" + reason)) == 0, reason
             assert ca.get(connect(p + "sgDemo:Online")) == 1
@@ -395,7 +478,7 @@ def test_rcp_objects_are_in_the_running_iocs_signal_registry(tmp_path, prefix):
     from test_shell import shell, socket_of
     with bridge_ioc(tmp_path, prefix, timeout_s=3) as (srv, rcp_port), rcp_sim(rcp_port):
         p = f"{prefix}RCP:sgDemo:"
-        assert wait_for(lambda: exists(p + "Stage"), timeout=3)
+        assert wait_for(lambda: exists(p + "Stage"), timeout=DEADLINE)
         rc, out, err = shell(socket_of(srv), "signals rcp.*")
         assert rc == 0, out + err
         stage = [l for l in out.splitlines() if l.startswith("rcp.sgDemo.Stage ")]

@@ -110,18 +110,21 @@ def test_beacons(ioc):
     sink.bind(("127.0.0.1", 0))
     sink.settimeout(0.2)
     bport = sink.getsockname()[1]
-    t0 = time.monotonic()
     srv = ioc.start(DB, extra_env={"EPICS_CAS_BEACON_ADDR_LIST": f"127.0.0.1:{bport}",
                                    "EPICS_CAS_BEACON_PERIOD": "1.0"})
+    # beacons until the steady period shows (the last more than 5 s after the first), however
+    # long a loaded machine takes to get there; the deadline only ends a server that stays silent
     beacons = []
-    while time.monotonic() - t0 < 5.0:
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (len(beacons) >= 8 and beacons[-1][0] - beacons[0][0] > 5.0):
         try:
             pkt, _ = sink.recvfrom(1024)
         except socket.timeout:
             continue
         beacons.append((time.monotonic(), pkt))
     sink.close()
-    assert len(beacons) >= 5, f"too few beacons in 5 s: {len(beacons)}"
+    assert len(beacons) >= 8 and beacons[-1][0] - beacons[0][0] > 5.0, \
+        f"beacons stopped: {len(beacons)} in 60 s"
     ids = []
     for _, pkt in beacons:
         assert len(pkt) == 16, "a beacon is one bare header"
@@ -134,10 +137,12 @@ def test_beacons(ioc):
     assert ids[-1] >= 3
     times = [t for t, _ in beacons]
     gaps = [b - a for a, b in zip(times, times[1:])]
-    # fast start (0.02 s doubling) then the configured period of 1 s
-    assert sum(1 for t in times if t - times[0] < 1.0) >= 4, f"no fast start: gaps {gaps}"
-    late = [g for t, g in zip(times[1:], gaps) if t - times[0] > 2.0]
-    assert late and all(0.6 < g < 1.6 for g in late), f"steady period should be 1 s: {gaps}"
+    # fast start (0.02 s doubling) then the configured period of 1 s. The arrival times are this
+    # client's: a late read stretches one gap (and shortens the next), so the fast start is most
+    # of the first gaps being short, and the period the median of the gaps after 2 s
+    assert sum(1 for g in gaps[:5] if g < 0.5) >= 3, f"no fast start: gaps {gaps}"
+    late = sorted(g for t, g in zip(times[1:], gaps) if t - times[0] > 2.0)
+    assert len(late) >= 3 and 0.6 < late[len(late) // 2] < 1.6, f"steady period should be 1 s: {gaps}"
 
 
 def test_restart_changes_nothing_for_other_servers(ioc):

@@ -13,7 +13,8 @@ from pathlib import Path
 import epics
 from epics import ca
 
-from conftest import BEAMCTL, RunServer, acquire_port, connect, forget_pvs, release_port, require_binary, wait_for
+from conftest import (BEAMCTL, RunServer, acquire_port, connect, end_process, forget_pvs, release_port,
+                      require_binary, wait_for)
 
 DATA = Path(__file__).parent / "data" / "axes"
 
@@ -270,8 +271,7 @@ buses:
             forget_pvs(prefix)
             release_port(port)
     finally:
-        sim.terminate()
-        sim.wait(timeout=10)
+        end_process(sim)
     assert not os.path.exists(sock)
     gone = subprocess.run([str(BEAMCTL), "sim", "fault", sock, "repair"], capture_output=True, text=True, timeout=30)
     assert gone.returncode != 0 and "no simulator control socket there" in gone.stderr, gone
