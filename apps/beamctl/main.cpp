@@ -575,7 +575,11 @@ int main(int argc, char** argv) {
     bool dbd = false;
     dbcmd->add_flag("--dbd", dbd,
                     "Print the record types beamctl serves as a .dbd (every field, its type, menu, access and initial value)");
-    dbcmd->add_option("files", dbo.files, "Database files (.db), or one ioc.yaml");
+    // FILES are required, unless --dbd asks for the record types alone
+    bool dbd_asked = false;
+    for (int i = 1; i < argc; ++i)
+        if (std::string_view(argv[i]) == "--dbd") dbd_asked = true;
+    dbcmd->add_option("files", dbo.files, "Database files (.db), or one ioc.yaml")->required(!dbd_asked);
 
     IocOptions runo, checko;
     auto* runcmd = app.add_subcommand("run", "Run an IOC: buses, RT engine, PVs and CA server (ioc.yaml)");
@@ -779,10 +783,6 @@ int main(int argc, char** argv) {
             return 0;
         }
         if (*dbcmd) {
-            if (dbo.files.empty()) {
-                std::fprintf(stderr, "beamctl db: give database files (or an ioc.yaml), or --dbd\n");
-                return 2;
-            }
             if (dbo.files.size() == 1 && dbo.files[0].size() > 5 &&
                 (dbo.files[0].ends_with(".yaml") || dbo.files[0].ends_with(".yml"))) {
                 rt::MonotonicClock clock;
