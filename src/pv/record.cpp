@@ -87,7 +87,7 @@ const Menu kMenuOif{"aoOIF", {"Full", "Incremental"}};
 
 void copy_string(char* dst, std::size_t size, std::string_view src) {
     std::size_t n = std::min(src.size(), size - 1);
-    std::memcpy(dst, src.data(), n);
+    if (n) std::memcpy(dst, src.data(), n); // an empty view may have no data pointer
     std::memset(dst + n, 0, size - n);
 }
 
@@ -231,7 +231,8 @@ bool Record::set_sevr(uint16_t new_stat, uint16_t new_sevr, std::string_view msg
     if (nsev < new_sevr) {
         nsta = new_stat;
         nsev = new_sevr;
-        copy_string(namsg, sizeof namsg, msg);
+        if (msg.empty()) namsg[0] = 0;
+        else copy_string(namsg, sizeof namsg, msg);
         return true;
     }
     return false;
