@@ -24,6 +24,7 @@
 #include "pv/autosave.hpp"
 #include "pv/database.hpp"
 #include "pv/dbd_file.hpp"
+#include "pv/ioc_stats.hpp"
 #include "core/error_list.hpp"
 #include "pv/db_shell.hpp"
 #include "pv/shell_server.hpp"
@@ -152,12 +153,12 @@ int run_plc_check(const PlcCheckOptions& o) {
 // `beamctl softioc`: softIoc's command line. Steps in command-line order (-m, -d, -x, -a and
 // positional files); -m applies to the -d / -a after it, each -m replacing the one before.
 struct SoftIocStep {
-    enum Kind { Macros, Db, Exit, Acf, File } kind;
+    enum Kind { Macros, Db, Exit, Stats, Acf, File } kind;
     std::string value;
 };
 
 struct SoftIocOptions {
-    std::vector<std::string> macros, dbs, exits, acfs, files, include_path;
+    std::vector<std::string> macros, dbs, exits, stats, acfs, files, include_path;
     std::vector<std::string> routine_libs; // -P: libraries of sub/aSub routines (as dlload)
     std::string dbd;                                           // -D: accepted, not needed
     bool no_shell = false, old_shell = false, verbose = false; // -S, -s, -v
@@ -203,6 +204,9 @@ int run_softioc(const SoftIocOptions& o) {
         server = std::make_unique<ca::Server>(loop, db, ca::ServerConfig::from_env());
         server->set_access_security(acf);
         server->start();
+        db.ioc_stats().set_ca_counts([&server] { // --ioc-stats: $(IOC):CA_CLNT_CNT, CA_CONN_CNT
+            return pv::IocStats::CaCounts{unsigned(server->client_count()), unsigned(server->channel_count())};
+        });
     };
     hooks.exit = [&](int status) { // a put to PREFIX:exit (-x): answer it, then stop
         exit_status = status;
@@ -242,6 +246,12 @@ int run_softioc(const SoftIocOptions& o) {
         case SoftIocStep::Exit:
             verbose(SB() << "dbLoadRecords(\"softIocExit.db\", \"IOC=" << step.value << "\")");
             shell.load_exit_records(step.value, "beamctl " BEAMCTL_VERSION);
+            loaded = true;
+            break;
+        case SoftIocStep::Stats:
+            verbose(SB() << "dbLoadRecords(\"iocAdminSoft.db\", \"IOC=" << step.value << "\")");
+            db.load(pv::parse_db(pv::IocStats::database_text(), "iocAdminSoft.db (beamctl's devIocStats records)",
+                                 {{"IOC", step.value}}));
             loaded = true;
             break;
         case SoftIocStep::Acf:
@@ -514,6 +524,7 @@ int main(int argc, char** argv) {
         return ca::ca_repeater_main(argc, argv);
     // Record types beyond pv's own (synApps' epid and mca): every command that loads a .db sees them.
     feedback::register_feedback_records(pv::RecordTypes::global());
+    pv::IocStats::set_release("beamctl " BEAMCTL_VERSION ", EPICS 7.0.8 records"); // $(IOC):EPICS_VERS
     detector::register_detector_records(pv::RecordTypes::global());
     CLI::App app{"beamctl: beamline control engine (EPICS Channel Access server, PV database)"};
     app.set_version_flag("--version", std::string("beamctl ") + BEAMCTL_VERSION);
@@ -539,6 +550,9 @@ int main(int argc, char** argv) {
         "-d,--db", soft.dbs, "Load a database file (dbLoadRecords) with the -m macros before it"));
     auto* soft_x = take_each(softioc->add_option(
         "-x", soft.exits, "Load PREFIX:exit (a put stops the IOC) and PREFIX:BaseVersion"));
+    auto* soft_s = take_each(softioc->add_option(
+        "--ioc-stats", soft.stats,
+        "Load the IOC health records of devIocStats (iocAdminSoft.db) as IOC:HEARTBEAT, IOC:UPTIME, IOC:IOC_CPU_LOAD, ..."));
     auto* soft_a = take_each(softioc->add_option(
         "-a,--acf", soft.acfs,
         "EPICS access-security file, with the -m macros before it (reloaded on SIGHUP)"));
@@ -732,6 +746,7 @@ int main(int argc, char** argv) {
             Source sources[] = {{soft_m, SoftIocStep::Macros, soft.macros},
                                 {soft_d, SoftIocStep::Db, soft.dbs},
                                 {soft_x, SoftIocStep::Exit, soft.exits},
+                                {soft_s, SoftIocStep::Stats, soft.stats},
                                 {soft_a, SoftIocStep::Acf, soft.acfs},
                                 {soft_files, SoftIocStep::File, soft.files}};
             for (const CLI::Option* opt : softioc->parse_order())

@@ -137,6 +137,12 @@ struct Server::Conn {
     bool reading = true;
 };
 
+std::size_t Server::channel_count() const {
+    std::size_t n = 0;
+    for (const auto& [fd, c] : conns_) n += c->circuit->channel_count();
+    return n;
+}
+
 Server::Server(EventLoop& loop, pv::Database& db, ServerConfig cfg)
     : loop_(loop), ctx_{db, AccessSecurity(), 0, cfg.max_array_bytes, 4096, 16u << 20, {}},
       cfg_(std::move(cfg)), rxbuf_(256 * 1024) {}

@@ -75,6 +75,7 @@ public:
     bool reload_access_security(const std::string& path);
     const ServerStats& stats() const { return ctx_.stats; }
     std::size_t client_count() const { return conns_.size(); }
+    std::size_t channel_count() const; // over every circuit
     // casr: the connected circuits as EPICS casr prints them (peer, user, protocol version,
     // channels), with subscriptions and channel names (level 1) and the server's sockets and
     // counters (level 2). Loop thread.

@@ -281,7 +281,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
         rd.take_errors(errors);
         return cfg;
     }
-    if (YamlNode n = root.required("ioc", " ({name: ..., prefix: ...})"); n.keys({"name", "prefix"}) && n) {
+    if (YamlNode n = root.required("ioc", " ({name: ..., prefix: ...})"); n.keys({"name", "prefix", "stats"}) && n) {
         if (auto name = n.required("name").string()) {
             if (name->empty() || name->find_first_of(" .$\"'") != std::string::npos)
                 n["name"].error(SB() << "'" << *name << "' should be a plain PV name part");
@@ -289,8 +289,19 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
                 cfg.name = *name;
         }
         cfg.prefix = n["prefix"].string().value_or(cfg.name + ":");
+        cfg.stats = cfg.name;
+        // devIocStats's records as $(IOC):HEARTBEAT ...: `stats: NAME` names $(IOC), `false` leaves them out
+        if (YamlNode st = n["stats"]; st) {
+            std::string raw = st.raw();
+            if (raw == "false" || raw == "no" || raw == "off") cfg.stats.clear();
+            else if (raw == "true" || raw == "yes" || raw == "on") cfg.stats = cfg.name;
+            else if (raw.empty() || raw.find_first_of(" .$\"'") != std::string::npos)
+                st.error("should be false, true or the $(IOC) name of the IOC health PVs (devIocStats's, e.g. IOC:BL1)");
+            else cfg.stats = raw;
+        }
     } else {
         cfg.prefix = cfg.name + ":";
+        cfg.stats = cfg.name;
     }
     if (YamlNode n = root["engine"]; n.keys({"rate_hz", "cpu", "priority"})) {
         cfg.rate_hz = n["rate_hz"].number(between(1, 20000)).value_or(cfg.rate_hz);

@@ -522,6 +522,7 @@ struct IocConfig {
     std::string path; // the file itself
     std::string name = "IOC";
     std::string prefix; // "NAME:" unless given
+    std::string stats;  // $(IOC) of the IOC health PVs (devIocStats's $(IOC):HEARTBEAT, ...); "" none
     double rate_hz = 1000;
     int cpu = -1;
     int priority = 80;

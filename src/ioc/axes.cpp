@@ -69,6 +69,7 @@ public:
         c.on = on;
         axes_.send(i_, c);
     }
+    void set_soft_limits(double dial_low, double dial_high) override { axes_.set_record_limits(i_, dial_low, dial_high); }
     // ECMC's motor driver: PCOF/ICOF/DCOF in 0..0.99 are the controller's Kp/Ki/Kd / 100.
     bool set_gain(int which, double value) override {
         if (!(value >= 0 && value <= 0.99)) return false;
@@ -178,6 +179,18 @@ const PvTable& axis_table() {
         {"-MtnCmd", "longout", "command", {{"DESC", "1 VEL 2 REL 3 ABS 10 HOME"}, {"VAL", "3"}}},
         {"-MtnCmdData", "longout", "cmddata", {{"DESC", "Homing sequence; 14 = configured"}, {"VAL", "14"}}},
         {"-MsgTxt", "stringin", "", {{"DESC", "Error message"}}}, // text: set by the axes on an error
+        // the soft limits as ecmccfg's ecmcMotorRecord.template and ecmcAxis.db name them: one value
+        // with the motor record's DHLM/DLLM (a put to either moves both)
+        {"-CfgDHLM", "ao", "softlimfwd", {{"DESC", "EC High Soft Limit"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}, true},
+        {"-CfgDLLM", "ao", "softlimbwd", {{"DESC", "EC Low Soft Limit"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}, true},
+        {"-CfgDHLM-En", "longout", "softlimfwden", {{"DESC", "EC High Soft Limit enable"}}, true},
+        {"-CfgDLLM-En", "longout", "softlimbwden", {{"DESC", "EC Low Soft Limit enable"}}, true},
+        {"-CfgDHLM-RB", "ai", "softlimfwd", {{"DESC", "EC High Soft Limit RB"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
+        {"-CfgDLLM-RB", "ai", "softlimbwd", {{"DESC", "EC Low Soft Limit RB"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
+        {"-CfgDHLM-En-RB", "longin", "softlimfwden", {{"DESC", "EC High Soft Limit enable RB"}}},
+        {"-CfgDLLM-En-RB", "longin", "softlimbwden", {{"DESC", "EC Low Soft Limit enable RB"}}},
+        {"-SftLimFwdEna-RB", "bi", "status.14", {{"DESC", "Softlim Fwd Enabled"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}}},
+        {"-SftLimBwdEna-RB", "bi", "status.15", {{"DESC", "Softlim Bwd Enabled"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}}},
     }};
     return t;
 }
@@ -200,7 +213,7 @@ std::string encoder_key(std::size_t k) { // "enc01"
 // the PLC variable of the same value: what records read and write through device support.
 // Readbacks come from the axis group's latest snapshot; the command items are the IOC's own
 // (ExeCmd runs `command` with targpos, targvelo and cmddata, as ECMC's control word does).
-enum class Write : uint8_t { None, TargPos, TargVelo, Command, CmdData, Control };
+enum class Write : uint8_t { None, TargPos, TargVelo, Command, CmdData, Control, SoftFwd, SoftBwd, SoftFwdOn, SoftBwdOn };
 struct AxisItem {
     const char* name; // after "ax<n>."
     const char* plc;  // the PLC variable with this value ("" none); a record may use either name
@@ -222,6 +235,11 @@ constexpr AxisItem kAxisItems[] = {
     {"targvelo", "traj.targetvel", Write::TargVelo, -1, [](const motion::AxisStatus&, const AxisCommandState& c) { return c.targvelo; }},
     {"command", "traj.command", Write::Command, -1, [](const motion::AxisStatus&, const AxisCommandState& c) { return double(c.command); }},
     {"cmddata", "traj.cmddata", Write::CmdData, -1, [](const motion::AxisStatus&, const AxisCommandState& c) { return double(c.cmddata); }},
+    // the soft limits and their enables (ECMC's motor driver parameters CfgDHLM, CfgDLLM, CfgDHLM-En, CfgDLLM-En)
+    {"softlimfwd", "", Write::SoftFwd, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return s.soft_fwd; }},
+    {"softlimbwd", "", Write::SoftBwd, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return s.soft_bwd; }},
+    {"softlimfwden", "", Write::SoftFwdOn, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.soft_fwd_enabled); }},
+    {"softlimbwden", "", Write::SoftBwdOn, -1, [](const motion::AxisStatus& s, const AxisCommandState&) { return double(s.soft_bwd_enabled); }},
     // bit 0 enable (the axis's enable command), 1 execute, 2 stop, 3 reset
     {"control", "", Write::Control, -1, [](const motion::AxisStatus& s, const AxisCommandState& c) {
          return double((c.control & ~1u) | (s.enable_cmd ? 1u : 0u)); }},
@@ -512,6 +530,18 @@ bool IocAxes::write_item(std::size_t i, int w, int bit, double v) {
     case Write::TargVelo: c.targvelo = v; return true;
     case Write::Command: c.command = int(v); return true;
     case Write::CmdData: c.cmddata = int(v); return true;
+    case Write::SoftFwd:
+    case Write::SoftBwd:
+    case Write::SoftFwdOn:
+    case Write::SoftBwdOn: { // the motor record's DHLM/DLLM follow (publish), as ECMC's
+        if (!std::isfinite(v)) return false;
+        motion::AxisCommand l{motion::CommandType::SetSoftLimits};
+        if (Write(w) == Write::SoftFwd) l.soft_fwd = v;
+        if (Write(w) == Write::SoftBwd) l.soft_bwd = v;
+        if (Write(w) == Write::SoftFwdOn) l.soft_fwd_on = v != 0 ? 1 : 0;
+        if (Write(w) == Write::SoftBwdOn) l.soft_bwd_on = v != 0 ? 1 : 0;
+        return send(i, l) != 0;
+    }
     case Write::Control: break;
     }
     // the control word (ECMC): bit 0 enable, 1 execute (1 runs `command`, 0 halts), 2 stop, 3 reset
@@ -593,6 +623,33 @@ void IocAxes::put_dial_limits(std::size_t i, double lo, double hi) {
     }
 }
 
+void IocAxes::set_record_limits(std::size_t i, double lo, double hi) {
+    Axis& a = axes_.at(i);
+    if (a.derived || !group_) return;
+    const motion::AxisStatus& s = status(i);
+    bool on = !(lo == 0 && hi == 0);
+    bool same = on ? s.soft_fwd_enabled && s.soft_bwd_enabled && s.soft_fwd == hi && s.soft_bwd == lo
+                   : !s.soft_fwd_enabled && !s.soft_bwd_enabled;
+    if (same) return; // the axis's own change coming back through the record
+    motion::AxisCommand c{motion::CommandType::SetSoftLimits};
+    if (on) {
+        c.soft_fwd = hi;
+        c.soft_bwd = lo;
+    }
+    c.soft_fwd_on = c.soft_bwd_on = on ? 1 : 0;
+    uint64_t tag = send(i, c);
+    if (!tag) {
+        LOG_ERR(lg, owner(i) << ": the soft limits " << lo << " .. " << hi << " of its motor record did not reach the axis (command queue full)");
+        return;
+    }
+    a.limits_pending = true;
+    a.limits_tag = tag;
+    if (on) {
+        a.soft_fwd = hi;
+        a.soft_bwd = lo;
+    }
+}
+
 void IocAxes::publish() {
     if (!group_) return;
     const auto& st = group_->snapshot();
@@ -604,6 +661,10 @@ void IocAxes::publish() {
         if (std::isnan(a.soft_fwd)) { // what the record was configured with
             a.soft_fwd = a.params.soft_fwd;
             a.soft_bwd = a.params.soft_bwd;
+        }
+        if (a.limits_pending) { // the record's own put: wait until the axis has taken it
+            if (s.done_tag < a.limits_tag) continue;
+            a.limits_pending = false;
         }
         if (!a.derived && s.soft_fwd_enabled && s.soft_bwd_enabled && (s.soft_fwd != a.soft_fwd || s.soft_bwd != a.soft_bwd)) {
             a.soft_fwd = s.soft_fwd;

@@ -79,6 +79,11 @@ public:
     // IOC loop: the soft limits of axis i's motor record (DLLM/DHLM, dial) become [lo, hi]: a
     // virtual axis's range as its kinematics group derives it. No-op without a motor record.
     void set_derived_limits(std::size_t i, double lo, double hi);
+    // IOC loop: axis i's motor record's dial soft limits changed (a put to DHLM, DLLM, HLM, LLM):
+    // the axis takes them, enabled, or disabled for DLLM = DHLM = 0 (the record's "no limits"), as
+    // ECMC's driver with CfgSyncSftLim. One value both ways: PLC code moving the axis's limits
+    // moves the record's (publish). Not for a derived (kinematics) axis.
+    void set_record_limits(std::size_t i, double lo, double hi);
     // Motor records of the IOC's .db files with DTYP "asynMotor" and OUT "@asyn(PORT,ADDR)" (the
     // stock synApps asyn_motor.db, ECMC's port MC_CPU1): driven by axis ADDR (its id), as ECMC's
     // motor driver. Throws Error naming the record when there is no such axis.
@@ -96,6 +101,10 @@ private:
         // as ecmccfg's slit include does); a kinematics group's derived limits take over
         double soft_fwd = NAN, soft_bwd = NAN;
         bool derived = false;
+        // limits the record sent that the axis's status does not show yet: publish() leaves the
+        // record alone until it does (or the command's tag is done)
+        bool limits_pending = false;
+        uint64_t limits_tag = 0;
     };
     void make_pvs(Axis& a, registry::Registry& signals);
     void make_motor_record(Axis& a, pv::DbFile& f);

@@ -1,6 +1,7 @@
 #include "ioc/ioc.hpp"
 
 #include "pv/db_shell.hpp"
+#include "pv/ioc_stats.hpp"
 #include "pv/shell_server.hpp"
 
 #include "automation/line_server.hpp"
@@ -348,6 +349,9 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     registry_.freeze(); // every name the cycle will know is declared
     kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
     pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
+    if (!cfg_.stats.empty()) // devIocStats's record set: $(IOC):HEARTBEAT, UPTIME, IOC_CPU_LOAD, ...
+        db_.load(pv::parse_db(pv::IocStats::database_text(), cfg_.path + ": ioc.stats (devIocStats's records)",
+                              {{"IOC", cfg_.stats}}));
     for (const auto& d : cfg_.db) {
         db_.load(pv::load_db_file(d.file, d.macros));
         try {
@@ -981,6 +985,9 @@ int Ioc::run() {
     ca::Server server(loop, db_, sc);
     if (!cfg_.acf.empty()) server.set_access_security(ca::AccessSecurity::load_file(cfg_.acf));
     server.start();
+    db_.ioc_stats().set_ca_counts([&server] { // $(IOC):CA_CLNT_CNT, CA_CONN_CNT
+        return pv::IocStats::CaCounts{unsigned(server.client_count()), unsigned(server.channel_count())};
+    });
     std::unique_ptr<bridge::rcp::RcpBridge> rcp;
     if (cfg_.rcp) {
         bridge::rcp::BridgeConfig bc;
@@ -1086,6 +1093,7 @@ int Ioc::run() {
         LOG_INFO(lg, "stopped: axis " << axes_->name(i) << " at " << st.act_pos << (st.enabled ? " (enabled)" : " (disabled)"));
     }
     if (plans_) plans_->set_scheduler({}); // the loop goes now
+    db_.ioc_stats().set_ca_counts({});    // and the server
     return 0;
 }
 

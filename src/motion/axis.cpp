@@ -291,6 +291,12 @@ uint32_t Axis::command(const AxisCommand& c) noexcept {
     case CommandType::Stop:
         start_stop(emergency_decel());
         return refuse(0);
+    case CommandType::SetSoftLimits: // the PLC variables are what the monitor takes every cycle
+        if (std::isfinite(c.soft_fwd)) vars_.mon.highsoftlim = c.soft_fwd;
+        if (std::isfinite(c.soft_bwd)) vars_.mon.lowsoftlim = c.soft_bwd;
+        if (c.soft_fwd_on >= 0) vars_.mon.highsoftlimenable = c.soft_fwd_on;
+        if (c.soft_bwd_on >= 0) vars_.mon.lowsoftlimenable = c.soft_bwd_on;
+        return refuse(0);
     case CommandType::SetGain: // the PLC variables are what the controller takes every cycle
         if (!std::isfinite(c.position)) return refuse(0);
         (c.gain == 0 ? vars_.ctrl.kp : c.gain == 1 ? vars_.ctrl.ki : vars_.ctrl.kd) = c.position;

@@ -177,6 +177,7 @@ enum class CommandType : uint8_t {
     Reset = 23,      // clear errors whose cause is gone; reset the drive
     SetPosition = 24, // the actual position reads `position` (no motion)
     SetGain = 25,     // controller gain `gain` (0 Kp, 1 Ki, 2 Kd) := `position` (motor record PCOF..)
+    SetSoftLimits = 26, // the soft limits and their enables (motor record DHLM/DLLM, ecmccfg CfgDHLM...)
 };
 
 struct AxisCommand {
@@ -188,6 +189,9 @@ struct AxisCommand {
     bool on = false;         // Power
     bool set_home_position = false; // Home: `position` is the new homing position (mc_home_pos)
     int gain = 0;            // SetGain: 0 Kp, 1 Ki, 2 Kd
+    // SetSoftLimits: each that is not NaN (a limit [units]) or -1 (an enable) replaces the axis's
+    double soft_fwd = std::nan(""), soft_bwd = std::nan("");
+    int8_t soft_fwd_on = -1, soft_bwd_on = -1;
     uint64_t tag = 0;        // echoed as AxisStatus::done_tag when this command has finished
 };
 

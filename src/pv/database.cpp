@@ -4,6 +4,7 @@
 #include "core/error_list.hpp"
 #include "core/log.hpp"
 #include "pv/convert.hpp"
+#include "pv/ioc_stats.hpp"
 
 #include <algorithm>
 #include <malloc.h>
@@ -61,6 +62,11 @@ Database::~Database() {
     for (auto* r : order_) delete r;
 }
 
+IocStats& Database::ioc_stats() {
+    if (!ioc_stats_) ioc_stats_ = std::make_unique<IocStats>();
+    return *ioc_stats_;
+}
+
 namespace {
 log::Logger lg("pv.db");
 bool is_val(const FieldDesc& f) { return f.name[0] == 'V' && f.name[1] == 'A' && f.name[2] == 'L' && !f.name[3]; }
@@ -79,6 +85,7 @@ Prim transfer_prim(Dbf to, Dbf from) {
 // The type a link's value comes in: its target field's, a CA link's remote native type.
 Dbf source_dbf(const Link& l) {
     if (l.target_field()) return l.target_field()->dbf;
+    if (l.kind == Link::Kind::Hw && l.device() && l.device()->is_text()) return Dbf::String;
     if (RemoteLink* rl = l.remote()) {
         switch (rl->type()) {
         case Prim::String: return Dbf::String;
@@ -410,6 +417,7 @@ void Database::init_records() {
     std::unordered_map<const Record*, RecordLoc>().swap(record_locs_);
     std::vector<std::string>().swap(record_loc_files_);
     init_errors.throw_if_any();
+    if (ioc_stats_) ioc_stats_->set_record_count(records_.size());
     if (restore_hook_ && !batch.empty()) restore_hook_(); // autosave: after init, before PINI
     // PINI: YES, then RUN and RUNNING (this IOC runs as soon as it is initialised), each in PHAS
     // order (stable: load order within a phase), as iocInit's piniProcess.
@@ -482,6 +490,12 @@ bool Database::resolve_link(Record& r, const FieldDesc& f, Link& l, std::string*
         bool soft_menu = dtyp_fd && dtyp_fd->menu == &kMenuSoftDtyp;
         if (soft_menu && (r.dtyp == kDtypTimestamp || r.dtyp == kDtypGetenv || r.dtyp == kDtypStdio))
             return true; // INST_IO soft device support: the record reads the text itself
+        if (soft_menu && ioc_stats_dtyp(r.dtyp)) { // devIocStats: this database's own devices
+            LinkDevice* d = ioc_stats().bind(r, l, r.dtyp, why);
+            if (!d) return false;
+            l.set_device(d);
+            return true;
+        }
         if (soft_menu && soft_dtyp(r.dtyp))
             return fail(SB() << "the hardware address '@" << l.s().address << "' needs DTYP \"beamctl\" (DTYP \""
                              << kMenuSoftDtyp.choices[r.dtyp] << "\" has no hardware)");
@@ -1024,6 +1038,29 @@ bool Database::link_get(Record& r, Link& l, Prim t, void* dest, uint32_t n, uint
     case Link::Kind::Hw: {
         double v = 0;
         if (!l.device()) break;
+        if (l.device()->is_text()) { // a string, a CHAR array (NUL included), or its number
+            std::string text;
+            bool ok = l.device()->read_text(text);
+            if (!ok) {
+                stats_.link_errors++;
+                r.set_sevr(l.device()->read_alarm(), kInvalid);
+            }
+            if (t == Prim::String) {
+                copy_string(static_cast<char*>(dest), kStringSize, text);
+                *got = 1;
+            } else if (t == Prim::Char && n > 1) {
+                uint32_t len = std::min<uint32_t>(uint32_t(text.size()), n - 1);
+                std::memcpy(dest, text.data(), len);
+                static_cast<char*>(dest)[len] = 0;
+                *got = len + 1;
+            } else {
+                if (!parse_double(text.c_str(), v)) return false;
+                Elements e{Dbf::Double, &v, 1, 1, 8};
+                get_element(r, kScratchDouble, e, 0, t, dest);
+                *got = 1;
+            }
+            return true;
+        }
         if (!l.device()->read(v)) {
             stats_.link_errors++;
             r.set_sevr(l.device()->read_alarm(), kInvalid);
@@ -1230,6 +1267,7 @@ void Database::rescan(Record& r) {
 void Database::scan_periodic(double now_s) {
     Depth d(*this);
     now_s_ = now_s;
+    if (ioc_stats_) ioc_stats_->tick(*this, now_s);
     for (std::size_t i = 0; i < delays_.size();) { // in order of request; a callback may add more
         if (delays_[i].next_s > now_s) {
             ++i;

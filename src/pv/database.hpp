@@ -84,6 +84,8 @@ using LinkBinder = std::function<LinkDevice*(Record&, const FieldDesc&, Link&, s
 // owner, told release() when the database lets it go); returns nullptr with *why when it cannot.
 using RemoteBinder = std::function<RemoteLink*(Record&, const FieldDesc&, Link&, std::string* why)>;
 
+class IocStats;
+
 class Database {
 public:
     Database();
@@ -158,6 +160,9 @@ public:
     // loaded is kept as written (softIoc would make it a CA link), instead of an error; nothing is
     // served from such a database.
     void set_offline_devices(bool on) { offline_devices_ = on; }
+    // devIocStats's device supports of this database ("IOC stats", "IOC env var", "IOC epics
+    // var"): its records' devices, sampled by scan_periodic (created when first asked for).
+    IocStats& ioc_stats();
     // Puts r on the scan list its SCAN field now names (a record changed its own SCAN).
     void rescan(Record& r);
     // Errors of records that loaded but cannot work (Record::init_error: an SNAM no library
@@ -256,6 +261,7 @@ private:
     std::unordered_map<const Record*, RecordLoc> record_locs_;
     std::vector<std::string> record_loc_files_;
     bool offline_devices_ = false;
+    std::unique_ptr<IocStats> ioc_stats_;
     struct IoIntr {
         Record* rec;
         std::vector<LinkDevice*> devices; // of its links, found when io_intr_stale_ is set

@@ -39,6 +39,10 @@ public:
     // does not answer (an EtherCAT slave missing or lost).
     virtual uint16_t read_alarm() const { return kStatLink; }
     virtual bool write(double v) = 0;        // false: refused (the record raises LINK/INVALID)
+    // A device whose value is text (devIocStats's stringin and waveform parameters): records read
+    // it with read_text (a string, or a CHAR array); false raises read_alarm() with `out` as value.
+    virtual bool is_text() const { return false; }
+    virtual bool read_text(std::string& out) { (void)out; return false; }
     virtual std::string describe() const = 0; // for dbpr/introspection
     // SCAN "I/O Intr": true when the value differs from the one the record last read.
     virtual bool changed() { return false; }

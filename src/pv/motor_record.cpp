@@ -1480,6 +1480,7 @@ PutStatus MotorRecordImpl::special(const FieldDesc& f) {
     } else if (n == "S" || n == "SBAS" || n == "SMAX" || n == "SBAK") {
         clamp_speeds();
     }
+    if (n == "HLM" || n == "LLM" || n == "DHLM" || n == "DLLM") driver_->set_soft_limits(dllm, dhlm); // one value both ways
     derived_speeds();
     if (&f != type().find("VAL")) sync(f); // the database posts the written field itself
     if (!(f.flags & kProcess)) {           // no processing follows: post what changed now

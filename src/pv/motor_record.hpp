@@ -31,6 +31,12 @@ public:
     virtual void stop(double acceleration) = 0;
     virtual void set_position(double dial_position) = 0; // SET/calibration: no motion
     virtual void set_closed_loop(bool on) = 0;           // CNEN
+    // DLLM/DHLM (dial) were written: a controller with soft limits of its own takes them (both 0:
+    // the record has no limits). Not called at init.
+    virtual void set_soft_limits(double dial_low, double dial_high) {
+        (void)dial_low;
+        (void)dial_high;
+    }
     // PCOF (0), ICOF (1), DCOF (2): the controller's gains; false refuses the value.
     virtual bool set_gain(int which, double value) {
         (void)which;

@@ -44,7 +44,8 @@ const Menu kMenuSoftDtyp{"DTYP",
                           "asynFloat64ArrayIn", "asynFloat64ArrayOut", "asynOctetRead", "asynOctetWrite",
                           "asynOctetWriteRead", "asynOctetCmdResponse", "asynOctetWriteBinary",
                           "asynInt32Average", "asynFloat64Average", "asynInt32TimeSeries",
-                          "asynFloat64TimeSeries", "General Time", "Db State"}};
+                          "asynFloat64TimeSeries", "General Time", "Db State", "IOC stats", "IOC stats clusts",
+                          "IOC env var", "IOC epics var"}};
 
 bool soft_dtyp(uint16_t dtyp) {
     return dtyp == kDtypSoft || dtyp == kDtypRawSoft || dtyp == kDtypAsyncSoft;
@@ -76,6 +77,15 @@ const char* dtyp_refusal(std::string_view type, uint16_t dtyp) {
     case kDtypStdio:
         if (in({"stringout", "lso", "printf"})) return nullptr;
         return "has no \"stdio\" device support (base has it for stringout, lso and printf)";
+    case kDtypIocStats: // devIocStats (pv/ioc_stats.hpp)
+        if (in({"ai", "ao", "stringin", "waveform"})) return nullptr;
+        return "has no \"IOC stats\" device support (devIocStats has it for ai ao stringin waveform)";
+    case kDtypIocStatsClusts:
+        return "device support \"IOC stats clusts\" (RTEMS/vxWorks network buffer pools) has no source on Linux";
+    case kDtypIocEnvVar:
+    case kDtypIocEpicsVar:
+        if (type == "stringin") return nullptr;
+        return "has no \"IOC env var\" / \"IOC epics var\" device support (devIocStats has them for stringin)";
     case kDtypGeneralTime:
     case kDtypDbState:
         return "device support \"General Time\" / \"Db State\" is not provided by beamctl";

@@ -30,7 +30,10 @@ struct Menu {
 enum SoftDtyp : uint16_t {
     kDtypSoft = 0, kDtypBeamctl = 1, kDtypRawSoft = 5, kDtypAsyncSoft = 6, kDtypTimestamp = 7,
     kDtypGetenv = 8, kDtypStdio = 9, kDtypGeneralTime = 32, kDtypDbState = 33,
+    kDtypIocStats = 34, kDtypIocStatsClusts = 35, kDtypIocEnvVar = 36, kDtypIocEpicsVar = 37,
 };
+// A devIocStats device support (IocStats binds its "@parameter" addresses).
+inline bool ioc_stats_dtyp(uint16_t dtyp) { return dtyp >= kDtypIocStats && dtyp <= kDtypIocEpicsVar; }
 // A soft device support (no "@" address: Soft Channel, Raw Soft Channel, Async Soft Channel).
 bool soft_dtyp(uint16_t dtyp);
 // Why record type `type` cannot have DTYP choice `dtyp` of kMenuSoftDtyp (as base's devSoft.dbd

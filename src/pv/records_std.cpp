@@ -142,6 +142,7 @@ struct AiRecord : AnalogBase<AiRecord> {
             if (soft_read(*this, inp, *val_fd)) { // devAiSoft: the value, smoothed by SMOO
                 if (smoo != 0 && smoothed && std::isfinite(before)) val = val * (1 - smoo) + before * smoo;
                 smoothed = true;
+                if (inp.kind == Link::Kind::Hw) udf = std::isnan(val); // a device's read defines VAL
             }
         }
         if (convert_raw) {
