@@ -2,7 +2,7 @@
 // ECMC's driver with CfgSyncSftLim): a put to DHLM/DLLM/HLM/LLM moves the axis's soft limits
 // (DLLM = DHLM = 0 turns them off), and a write of ecmccfg's $(P)$(M)-CfgDHLM / -CfgDLLM /
 // -CfgDHLM-En moves the axis's and, through it, the record's. Demo IOC in virtual time.
-#include "ioc/virtual_ioc.hpp"
+#include "virtual_ioc.hpp"
 
 #include "pv/database.hpp"
 
