@@ -25,6 +25,7 @@
 #include "pv/database.hpp"
 #include "pv/dbd_file.hpp"
 #include "pv/ioc_stats.hpp"
+#include "pv/substitutions.hpp"
 #include "core/error_list.hpp"
 #include "pv/db_shell.hpp"
 #include "pv/shell_server.hpp"
@@ -85,7 +86,10 @@ MacroMap macro_options(const std::vector<std::string>& defs) {
 void load_databases(pv::Database& db, const DbOptions& o) {
     MacroMap macros = macro_options(o.macros);
     ErrorList errs;
-    for (auto& f : o.files) errs.capture([&] { db.load(pv::load_db_file(f, macros, o.include_path)); });
+    for (auto& f : o.files) // .db / .template files, and substitution files (dbLoadTemplate)
+        errs.capture([&] {
+            for (const pv::DbFile& d : pv::load_records_file(f, macros, o.include_path)) db.load(d);
+        });
     errs.capture([&] { db.init_records(); });
     errs.throw_if_any();
 }
@@ -782,9 +786,19 @@ int main(int argc, char** argv) {
         }
         if (*runcmd) {
             rt::MonotonicClock clock;
-            ioc::Ioc ioc(runo.load(), clock);
-            ioc.set_shell_socket(run_shell_socket);
-            return ioc.run();
+            std::unique_ptr<ioc::Ioc> ioc;
+            try {
+                ioc = std::make_unique<ioc::Ioc>(runo.load(), clock);
+            } catch (const Error&) {
+                // every error of every file, the set `beamctl check` reports, not only the build's
+                ioc::CheckReport r = ioc::check_ioc(runo.file, macro_options(runo.macros));
+                if (r.ok()) throw;
+                for (const auto& m : r.errors) std::fprintf(stderr, "%s\n", m.c_str());
+                std::fprintf(stderr, "%s: %zu error%s\n", runo.file.c_str(), r.errors.size(), r.errors.size() == 1 ? "" : "s");
+                return 1;
+            }
+            ioc->set_shell_socket(run_shell_socket);
+            return ioc->run();
         }
         if (*checkcmd) return ioc::run_check(checko.file, macro_options(checko.macros)); // every error
         if (*sigcmd) { // configured, not brought up: nothing touches a bus

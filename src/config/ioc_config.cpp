@@ -234,6 +234,13 @@ std::string expand_ioc_macros(const std::string& text, const MacroMap& macros, c
     return out;
 }
 
+std::string axis_entry_context(const AxisEntry& e, std::size_t index) {
+    std::string m;
+    for (const auto& [k, v] : e.macros) m += (m.empty() ? " with " : ", ") + k + "=" + v;
+    std::string file = e.file.substr(e.file.find_last_of('/') + 1);
+    return SB() << (e.where.empty() ? std::string() : e.where + ": ") << "axes[" << index << "] (" << file << m << ")";
+}
+
 IocConfig IocConfig::load(const std::string& path, const MacroMap& macros) {
     ErrorList errors;
     IocConfig cfg = load(path, errors, macros);

@@ -95,6 +95,10 @@ struct AxisEntry {
     std::string file_where; // file:line:col of the file name in the IOC file
 };
 
+// "ioc.yaml:12:5: axes[1] (jack.yaml with AX_ID=2, AX_NAME=J2, DRV_SLAVE=5)": what an error in an
+// axis's files is prefixed with, so that it names the entry and the macros that led to it.
+std::string axis_entry_context(const AxisEntry& e, std::size_t index);
+
 // A PLC file (ecmccfg loadPLCFile.cmd): `plcs: [{id, file, rate_ms, enable, macros, include,
 // libraries, strict}]`.
 struct PlcEntry {

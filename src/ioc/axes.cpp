@@ -305,33 +305,64 @@ private:
 } // namespace
 
 IocAxes::IocAxes(const std::vector<config::AxisEntry>& entries, const std::string& prefix,
-                 registry::Registry& signals, pv::Database& db)
+                 registry::Registry& signals, pv::Database& db, ErrorList& errors)
     : db_(db), prefix_(prefix) {
     std::set<int> ids;
     std::set<std::string> names;
-    for (const auto& e : entries) {
+    for (std::size_t n = 0; n < entries.size(); ++n) {
+        const config::AxisEntry& e = entries[n];
+        // every error of the entry, each with the chain that led to it (ioc.yaml's entry, its macros)
+        const std::string chain = config::axis_entry_context(e, n);
+        auto fail = [&](const std::string& m) { errors.add(chain + ": " + m); };
         Axis a;
-        a.cfg = motion::load_axis_config(e.file, e.macros);
-        for (const auto& enc : e.encoders) motion::add_encoder(a.cfg, motion::load_encoder_config(enc.file, enc.macros));
+        std::vector<Error> file_errors;
+        a.cfg = motion::load_axis_config(e.file, e.macros, file_errors);
+        for (const auto& enc : e.encoders) {
+            motion::EncoderConfig ec = motion::load_encoder_config(enc.file, enc.macros, file_errors);
+            if (file_errors.empty()) {
+                try {
+                    motion::add_encoder(a.cfg, std::move(ec));
+                } catch (const Error& x) {
+                    file_errors.push_back(x);
+                }
+            }
+        }
+        for (const auto& x : file_errors) fail(x.what());
+        if (!file_errors.empty()) continue; // nothing more of this axis can be known
         for (const auto& w : a.cfg.warnings) LOG_WARN(lg, w);
         // ECMC numbering: an axis without an id is the previous one + 1
         int id = a.cfg.axis.id.value_or(axes_.empty() ? 1 : axes_.back().params.id + 1);
         a.cfg.axis.id = id;
-        if (!ids.insert(id).second) throw Error(SB() << e.where << ": axis id " << id << " is used twice (" << e.file << ")");
-        if (!names.insert(a.cfg.epics.name).second)
-            throw Error(SB() << e.where << ": axis name '" << a.cfg.epics.name << "' is used twice (" << e.file << ")");
-        a.params = motion::make_axis_params(a.cfg);
+        if (!ids.insert(id).second) {
+            errors.add(SB() << e.where << ": axis id " << id << " is used twice (" << e.file << ")");
+            continue;
+        }
+        if (!names.insert(a.cfg.epics.name).second) {
+            errors.add(SB() << e.where << ": axis name '" << a.cfg.epics.name << "' is used twice (" << e.file << ")");
+            continue;
+        }
+        try {
+            a.params = motion::make_axis_params(a.cfg);
+        } catch (const Error& x) {
+            fail(x.what());
+            continue;
+        }
         a.params.id = id;
         a.pv = prefix + a.cfg.epics.name;
         std::string owner = SB() << "axis " << id << " (" << a.cfg.epics.name << ")";
-        for (const auto& r : motion::axis_signal_refs(a.cfg)) {
-            if (r.slave < 0) throw Error(SB() << at(r.where) << ": '" << r.text << "': the simulation slave (s-1) is not supported");
+        for (const auto& r : motion::axis_signal_refs(a.cfg)) { // every bad reference, not the first
+            if (r.slave < 0) {
+                fail(SB() << at(r.where) << ": '" << r.text << "': the simulation slave (s-1) is not supported");
+                continue;
+            }
             const registry::Signal* sig = signals.find(signal_name(r));
-            if (!sig || sig->loop_only)
-                throw Error(SB() << at(r.where) << ": no signal '" << signal_name(r) << "' on the configured buses (from '" << r.text << "')");
+            if (!sig || sig->loop_only) {
+                fail(SB() << at(r.where) << ": no signal '" << signal_name(r) << "' on the configured buses (from '" << r.text << "')");
+                continue;
+            }
             std::string why;
             if (sig->direction == registry::Direction::Output && !signals.claim(sig->name, owner, why))
-                throw Error(SB() << at(r.where) << ": " << owner << " cannot drive it: " << why);
+                fail(SB() << at(r.where) << ": " << owner << " cannot drive it: " << why);
         }
         // The axis as PLC code and records see it: ax<n>.enc.actpos, ax<n>.traj.extsetpos, ...
         for (const motion::AxisVariableInfo& v : motion::axis_variables()) {

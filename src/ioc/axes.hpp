@@ -14,6 +14,8 @@
 // Threading: everything here runs on the IOC loop thread except the AxisGroup's RT stage.
 #pragma once
 
+#include "core/error_list.hpp"
+
 #include "config/ioc_config.hpp"
 #include "motion/axis_config.hpp"
 #include "motion/axis_group.hpp"
@@ -42,9 +44,11 @@ class IocAxes {
 public:
     // Loads the axis files and creates their PVs. Every bus signal an axis names must be in
     // `signals` (declared by the buses); each axis declares its ax<n>.* variables there and
-    // becomes the one writer of the outputs it drives every cycle. Throws Error (file:line:col).
+    // becomes the one writer of the outputs it drives every cycle. Every error of every axis goes
+    // to `errors` (file:line:col, after the IOC file's entry and its macros); an axis whose file
+    // cannot be read is left out, one with a bad signal kept (the IOC is not run with errors).
     IocAxes(const std::vector<config::AxisEntry>& entries, const std::string& prefix,
-            registry::Registry& signals, pv::Database& db);
+            registry::Registry& signals, pv::Database& db, ErrorList& errors);
 
     // Bring-up: binds every axis to the process images and adds the axis stage to the engine.
     using Resolver = std::function<registry::BoundSignal(const motion::SignalRef&)>;

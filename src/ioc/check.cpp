@@ -18,6 +18,7 @@
 #include "plc/runtime.hpp"
 #include "pv/database.hpp"
 #include "pv/db_file.hpp"
+#include "pv/substitutions.hpp"
 #include "rt/engine.hpp"
 
 #include <algorithm>
@@ -112,10 +113,11 @@ public:
     void axes(const config::IocConfig& cfg) {
         for (std::size_t i = 0; i < cfg.axes.size(); ++i) {
             const config::AxisEntry& a = cfg.axes[i];
+            const std::string chain = config::axis_entry_context(a, i); // as the IOC build names them
             if (readable(a.file_where, SB() << "axes[" << i << "].file", a.file)) {
                 std::vector<Error> errors;
                 motion::AxisConfig c = motion::load_axis_config(a.file, a.macros, errors);
-                for (const auto& e : errors) errors_.add(e);
+                for (const auto& e : errors) errors_.add(chain + ": " + e.what());
                 warnings_.insert(warnings_.end(), c.warnings.begin(), c.warnings.end());
             }
             for (std::size_t k = 0; k < a.encoders.size(); ++k) {
@@ -125,7 +127,7 @@ public:
                     continue;
                 std::vector<Error> errors;
                 motion::EncoderConfig c = motion::load_encoder_config(enc.file, enc.macros, errors);
-                for (const auto& e : errors) errors_.add(e);
+                for (const auto& e : errors) errors_.add(chain + ": " + e.what());
                 warnings_.insert(warnings_.end(), c.warnings.begin(), c.warnings.end());
             }
         }
@@ -162,7 +164,9 @@ public:
         for (std::size_t i = 0; i < cfg.db.size(); ++i) {
             const config::DbConfig& d = cfg.db[i];
             if (!readable(d.file_where, SB() << "db[" << i << "].file", d.file)) continue;
-            collect([&] { db.load(pv::load_db_file(d.file, d.macros)); });
+            collect([&] {
+                for (const pv::DbFile& f : pv::load_records_file(d.file, d.macros)) db.load(f);
+            });
         }
         if (!cfg.acf.empty() && readable(cfg.acf_where, "ca.acf", cfg.acf))
             collect([&] { ca::AccessSecurity::load_file(cfg.acf); });
@@ -186,17 +190,20 @@ CheckReport check_ioc(const std::string& path, const MacroMap& macros) {
     ErrorList errors;
     config::IocConfig cfg = config::IocConfig::load(path, errors, macros);
     std::ifstream probe(path);
+    bool bus_errors = false; // the IOC cannot be built without its buses: the second pass waits
     if (probe) { // the files it names, each with all its errors
         Checker c(errors);
         const ethercat::Catalog* catalog = nullptr;
         errors.capture([&] { catalog = &ethercat::Catalog::builtin(); });
+        std::size_t before = errors.size();
         if (catalog) c.buses(cfg, *catalog);
+        bus_errors = errors.size() > before;
         c.axes(cfg);
         c.plcs(cfg);
         c.databases(cfg);
         report.warnings = std::move(c.warnings_);
     }
-    if (errors.empty()) { // the errors between the files: the IOC as `run` builds it
+    if (probe && !bus_errors) { // the errors between the files: the IOC as `run` builds it (repeats dropped)
         for (auto& bc : cfg.buses) bc.link.resolve_timeout_s = 1; // a check does not wait for a scanner
         rt::MonotonicClock clock;
         Checker(errors).collect([&] {

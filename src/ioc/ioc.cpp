@@ -1,8 +1,10 @@
 #include "ioc/ioc.hpp"
 
 #include "pv/db_shell.hpp"
+#include "plc/program.hpp"
 #include "pv/ioc_stats.hpp"
 #include "pv/shell_server.hpp"
+#include "pv/substitutions.hpp"
 
 #include "automation/line_server.hpp"
 
@@ -322,44 +324,66 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     declare_bus_signals();
     declare_engine_items(registry_);
     for (std::size_t i = 0; i < buses_.size(); ++i) make_bus_pvs(buses_[i], cfg_.buses[i]);
-    axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, registry_, db_);
+    // Every error of every subsystem, in one run (`check` and `run` report the same set): each
+    // step keeps its errors and the build goes on; what depends on a failed step is not built.
+    ErrorList errors;
+    auto step = [&errors](auto&& f) {
+        try {
+            f();
+            return true;
+        } catch (const plc::CompileError& e) {
+            for (const auto& m : e.errors()) errors.add(m);
+        } catch (const MultiError& e) {
+            for (const auto& m : e.errors()) errors.add(m);
+        } catch (const Error& e) {
+            errors.add(e);
+        }
+        return false;
+    };
+    axes_ = std::make_unique<IocAxes>(cfg_.axes, cfg_.prefix, registry_, db_, errors);
     std::vector<motion::AxisConfig> axis_configs;
     for (std::size_t i = 0; i < axes_->size(); ++i) axis_configs.push_back(axes_->config(i));
-    storages_ = std::make_unique<IocStorages>(cfg_, db_);
-    memmaps_ = std::make_unique<IocMemMaps>(cfg_, catalog_, db_);
-    plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_);
-    flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get());
-    quadem_ = std::make_unique<IocQuadEm>(cfg_, registry_, db_); // before feedback: its values are loop inputs
-    feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_);
-    detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s);
-    area_ = std::make_unique<IocAreaDetector>(cfg_, db_, EventLoop::now_s);
+    step([&] { storages_ = std::make_unique<IocStorages>(cfg_, db_); });
+    step([&] { memmaps_ = std::make_unique<IocMemMaps>(cfg_, catalog_, db_); });
+    step([&] { plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_); });
+    step([&] { flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get()); });
+    step([&] { quadem_ = std::make_unique<IocQuadEm>(cfg_, registry_, db_); }); // before feedback: its values are loop inputs
+    step([&] { feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_); });
+    step([&] { detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s); });
+    step([&] { area_ = std::make_unique<IocAreaDetector>(cfg_, db_, EventLoop::now_s); });
     auto engine_clock = [this] { return double(clock_.now_ns()) * 1e-9; }; // automation's clock: virtual in tests
-    if (cfg_.smart_control) smart_ = std::make_unique<automation::SmartControl>(*cfg_.smart_control, cfg_.prefix, db_, engine_clock);
-    if (!cfg_.compound_motors.empty()) compound_ = std::make_unique<automation::CompoundMotors>(cfg_.compound_motors, cfg_.prefix, db_);
-    if (!cfg_.state_machines.empty()) fsms_ = std::make_unique<automation::StateMachines>(cfg_.state_machines, cfg_.prefix, db_, engine_clock);
-    if (!cfg_.collision_zones.empty()) zones_ = std::make_unique<automation::CollisionZones>(cfg_.collision_zones, cfg_.prefix, db_, engine_clock);
-    if (cfg_.notify) {
-        notifier_ = std::make_unique<automation::Notifier>(*cfg_.notify, cfg_.prefix, db_, engine_clock);
+    if (cfg_.smart_control)
+        step([&] { smart_ = std::make_unique<automation::SmartControl>(*cfg_.smart_control, cfg_.prefix, db_, engine_clock); });
+    if (!cfg_.compound_motors.empty())
+        step([&] { compound_ = std::make_unique<automation::CompoundMotors>(cfg_.compound_motors, cfg_.prefix, db_); });
+    if (!cfg_.state_machines.empty())
+        step([&] { fsms_ = std::make_unique<automation::StateMachines>(cfg_.state_machines, cfg_.prefix, db_, engine_clock); });
+    if (!cfg_.collision_zones.empty())
+        step([&] { zones_ = std::make_unique<automation::CollisionZones>(cfg_.collision_zones, cfg_.prefix, db_, engine_clock); });
+    if (cfg_.notify && step([&] { notifier_ = std::make_unique<automation::Notifier>(*cfg_.notify, cfg_.prefix, db_, engine_clock); }))
         if (fsms_) fsms_->on_latch([this](const std::string& m, const std::string& why) { notifier_->latched(m, why); });
-    }
-    if (!cfg_.plans.empty()) {
-        plans_ = std::make_unique<automation::Plans>(cfg_.plans, cfg_.prefix, cfg_.name, db_, engine_clock);
+    if (!cfg_.plans.empty() && step([&] { plans_ = std::make_unique<automation::Plans>(cfg_.plans, cfg_.prefix, cfg_.name, db_, engine_clock); }))
         plans_->set_state_machines(fsms_.get());
-    }
     registry_.freeze(); // every name the cycle will know is declared
-    kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_);
-    pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_);
+    step([&] { kinematics_ = std::make_unique<IocKinematics>(cfg_, *axes_, db_); });
+    step([&] { pvt_ = std::make_unique<IocPvt>(cfg_, *axes_, db_); });
     if (!cfg_.stats.empty()) // devIocStats's record set: $(IOC):HEARTBEAT, UPTIME, IOC_CPU_LOAD, ...
-        db_.load(pv::parse_db(pv::IocStats::database_text(), cfg_.path + ": ioc.stats (devIocStats's records)",
-                              {{"IOC", cfg_.stats}}));
-    for (const auto& d : cfg_.db) {
-        db_.load(pv::load_db_file(d.file, d.macros));
-        try {
-            axes_->attach_asyn_motors(); // synApps asyn_motor.db: DTYP asynMotor, @asyn(PORT,ADDR)
-        } catch (const Error& e) {
-            throw Error(SB() << d.file_where << ": " << d.file << ": " << e.what());
-        }
-    }
+        step([&] {
+            db_.load(pv::parse_db(pv::IocStats::database_text(), cfg_.path + ": ioc.stats (devIocStats's records)",
+                                  {{"IOC", cfg_.stats}}));
+        });
+    for (const auto& d : cfg_.db) // a .db / .template file, or a substitution file's templates
+        if (step([&] {
+                for (const pv::DbFile& f : pv::load_records_file(d.file, d.macros)) db_.load(f);
+            }))
+            step([&] {
+                try {
+                    axes_->attach_asyn_motors(); // synApps asyn_motor.db: DTYP asynMotor, @asyn(PORT,ADDR)
+                } catch (const Error& e) {
+                    throw Error(SB() << d.file_where << ": " << d.file << ": " << e.what());
+                }
+            });
+    errors.throw_if_any();
 }
 
 bool Ioc::ethercat_report(const std::vector<std::string>& argv, std::ostream& os) {

@@ -32,7 +32,7 @@ public:
         o.macros = e.macros;
         o.include_path = e.include;
         o.max_loop_iterations = 100000; // a transform is straight-line code; a runaway loop faults
-        std::string name = e.file.empty() ? std::string(SB() << ioc_file << ": kinematics '" << e.name << "' inverse") : e.file;
+        std::string name = e.file.empty() ? std::string(SB() << (e.where.empty() ? ioc_file : e.where) << ": kinematics '" << e.name << "' inverse") : e.file;
         program_ = std::make_unique<plc::Program>(e.file.empty() ? plc::Program::compile(e.code, name, *this, o)
                                                                  : plc::Program::compile_file(e.file, *this, o));
         // Every real axis must be assigned (at the all-zero pose, at least).

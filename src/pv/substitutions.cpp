@@ -1,5 +1,7 @@
 #include "pv/substitutions.hpp"
 
+#include "core/error_list.hpp"
+
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -387,6 +389,40 @@ std::vector<TemplateInstance> load_substitutions_file(const std::string& path,
     ss << in.rdbuf();
     if (in.bad()) throw Error(SB() << path << ": read error: " << std::strerror(errno));
     return parse_substitutions(ss.str(), path, macros);
+}
+
+bool is_substitutions_file(std::string_view path) {
+    for (std::string_view ext : {".substitutions", ".substitution", ".subs", ".substs"})
+        if (path.size() > ext.size() && path.ends_with(ext)) return true;
+    return false;
+}
+
+std::vector<DbFile> load_records_file(const std::string& path, const MacroMap& macros,
+                                      const std::vector<std::string>& include_path) {
+    if (!is_substitutions_file(path)) return {load_db_file(path, macros, include_path)};
+    namespace fs = std::filesystem;
+    std::vector<DbFile> files;
+    ErrorList errors;
+    const fs::path dir = fs::path(path).parent_path();
+    for (const TemplateInstance& inst : load_substitutions_file(path, macros)) {
+        std::error_code ec;
+        std::string found = inst.file;
+        if (!fs::path(inst.file).is_absolute()) {
+            std::vector<fs::path> where{dir / inst.file};
+            for (const auto& d : include_path) where.push_back(fs::path(d) / inst.file);
+            for (const auto& w : where)
+                if (fs::exists(w, ec)) {
+                    found = w.string();
+                    break;
+                }
+        }
+        std::vector<std::string> inc{dir.string()};
+        inc.insert(inc.end(), include_path.begin(), include_path.end());
+        errors.capture([&] { files.push_back(load_db_file(found, inst.macros, inc)); },
+                       std::string(SB() << inst.loc.str() << ": instance of " << inst.file));
+    }
+    errors.throw_if_any();
+    return files;
 }
 
 } // namespace beamctl::pv

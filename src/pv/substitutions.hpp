@@ -28,6 +28,7 @@
 
 #include "core/error.hpp"
 #include "core/macros.hpp"
+#include "pv/db_file.hpp"
 
 #include <string>
 #include <string_view>
@@ -52,5 +53,16 @@ std::vector<TemplateInstance> parse_substitutions(std::string_view text,
 // Reads and parses the substitution file at `path`.
 std::vector<TemplateInstance> load_substitutions_file(const std::string& path,
                                                       const MacroMap& macros = {});
+
+// True for a substitution file's name (.substitutions, .substitution, .subs, .substs).
+bool is_substitutions_file(std::string_view path);
+
+// The records of `path` as dbLoadRecords or dbLoadTemplate reads them, by its extension: a .db /
+// .template file parsed with `macros`, or each template of a substitution file with its
+// instance's macros (a relative template name is found beside the substitution file, then in
+// `include_path`, then from the working directory). Every error of every instance is thrown
+// (MultiError), each with the instance it came from.
+std::vector<DbFile> load_records_file(const std::string& path, const MacroMap& macros,
+                                      const std::vector<std::string>& include_path = {});
 
 } // namespace beamctl::pv

@@ -7,7 +7,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from conftest import BEAMCTL, require_binary
+from conftest import BEAMCTL, acquire_port, release_port, require_binary
 
 DATA = Path(__file__).parent / "data" / "axes"
 
@@ -122,3 +122,67 @@ def test_an_ioc_file_that_cannot_be_read(tmp_path):
     r = check(tmp_path / "none.yaml")
     assert r.returncode == 1
     assert f"{tmp_path}/none.yaml: cannot open: No such file or directory" in r.stderr, r.stderr
+
+
+JACK = Path(__file__).parents[2] / "examples" / "demo" / "axes" / "jack.yaml"
+
+PHASES = """ioc: {name: PH}
+engine: {rate_hz: 1000, priorty: 50}
+buses:
+  - id: 0
+    link: {type: sim}
+    slaves:
+      - {position: 0, type: EK1100}
+      - {position: 1, type: EL7041}
+      - {position: 2, type: EL7041}
+axes:
+  - {file: jack.yaml, macros: {AX_ID: 1, AX_NAME: J1, DRV_SLAVE: 1}}
+  - {file: jack.yaml, macros: {AX_ID: 2, AX_NAME: J2, DRV_SLAVE: 5}}
+  - {file: jack.yaml, macros: {AX_ID: 3, AX_NAME: J3, DRV_SLAVE: 2}}
+kinematics:
+  - name: pair
+    virtual: [3]
+    real: [1, 2]
+    inverse: |
+      ax1 := ax3 +;
+db:
+  - {file: extra.db}
+"""
+
+
+def test_mistakes_of_several_files_come_in_one_run_with_their_chain_and_run_reports_the_same(tmp_path):
+    """The four kinds of mistake of issue 41 in one file set: a key typo, a bad signal in a shared
+    axis file (named with the ioc.yaml entry and the macros that passed it), a kinematics error
+    and two .db errors: `check` reports them all in one run, `run` the same set."""
+    shutil.copy(JACK, tmp_path / "jack.yaml")
+    ioc = tmp_path / "ioc.yaml"
+    ioc.write_text(PHASES)
+    (tmp_path / "extra.db").write_text(DB)
+    r = check(ioc)
+    assert r.returncode == 1, r.stdout + r.stderr
+    errors = [line for line in r.stderr.splitlines() if re.match(r"^/\S+:\d+:\d+: ", line)]
+    text = "\n".join(errors)
+    assert f"{where(ioc, 'priorty')}: unknown key 'priorty' in engine (did you mean 'priority'?)" in text, text
+    # J2's bus signals (setpoint, control, status, position, ...), each after the entry that passed
+    # DRV_SLAVE=5, none of J1's or J3's
+    chain = f"{where(ioc, '{file: jack.yaml, macros: {AX_ID: 2')}: axes[1] (jack.yaml with AX_ID=2, AX_NAME=J2, DRV_SLAVE=5): "
+    bad = [e for e in errors if "no signal 'ec0.s5." in e]
+    assert len(bad) >= 4 and any("positionActual01" in e for e in bad), text
+    assert all(e.startswith(chain + f"{tmp_path}/jack.yaml:") for e in bad), text
+    assert not any("ec0.s1." in e or "ec0.s2." in e for e in errors), text
+    assert f"{where(ioc, 'name: pair')}: kinematics 'pair' inverse:1:13: expected a value, found ';'" in text, text
+    db = tmp_path / "extra.db"
+    assert f"{where(db, '1)')}: expected ',' after field name 'VAL', found '1'" in text, text
+    assert f"{where(db, '@')}: invalid '@'" in text, text
+    assert r.stderr.rstrip().endswith(f"{ioc}: {len(errors)} errors"), r.stderr
+    # `run` refuses to start with the same set
+    port = acquire_port()
+    try:
+        run = subprocess.run([str(BEAMCTL), "run", "--ca-port", str(port), "--shell-socket", "none", str(ioc)],
+                             capture_output=True, text=True, timeout=60)
+    finally:
+        release_port(port)
+    assert run.returncode == 1, run.stdout + run.stderr
+    run_errors = [line for line in run.stderr.splitlines() if re.match(r"^/\S+:\d+:\d+: ", line)]
+    assert run_errors == errors, "\n".join(run_errors) + "\n---\n" + text
+    assert "ready:" not in run.stdout

@@ -558,7 +558,7 @@ TEST(IocPlc, CompileErrorsNameWhatAndWhere) {
         rt::VirtualClock clock;
         ioc::Ioc ioc(config::IocConfig::load(d.write("ioc.yaml", ioc_yaml("axes:\n" + virtual_axis(1), "plcs:\n  - {id: 0, file: main.plc}\n"))), clock);
         FAIL() << "compiled";
-    } catch (const plc::CompileError& e) {
+    } catch (const MultiError& e) { // every error of every file of the IOC
         std::string all;
         for (const auto& s : e.errors()) all += s + "\n";
         EXPECT_NE(all.find("main.plc:1:1: 'ax1.enc.actvel' is read-only"), std::string::npos) << all;
