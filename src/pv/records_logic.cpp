@@ -654,30 +654,55 @@ struct SelRecord : AnalogBase<SelRecord> {
 };
 
 // ---------------------------------------------------------------- event
+// eventRecord: VAL names the event its processing posts; INP reads VAL, or in simulation mode
+// (SIMM YES, SIML) SIOL reads SVAL and VAL takes it, after SDLY when SDLY >= 0 (base 7's).
 struct EventRecord : Record {
     using Record::Record;
-    char val[40] = {};
+    char val[40] = {}, sval[40] = {};
     Link inp;
+    Simulation sim;
     const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* sval_fd = type().find("SVAL");
+    const FieldDesc* simm_fd = type().find("SIMM");
     static std::vector<FieldDesc> fields() {
         using R = EventRecord;
         auto v = common_fields();
-        auto add = {BEAMCTL_FIELD(R, VAL, val, String, kVal), BEAMCTL_FIELD(R, INP, inp, InLink, 0)};
+        auto add = {BEAMCTL_FIELD(R, VAL, val, String, kVal), BEAMCTL_FIELD(R, INP, inp, InLink, 0),
+                    BEAMCTL_FIELD(R, SVAL, sval, String, 0)};
         v.insert(v.end(), add.begin(), add.end());
+        add_simulation_fields<R>(v, false, false);
         return v;
     }
     void init() override {
+        sim_init(*this, sim, *simm_fd);
+        load_constant(sim.siol, *sval_fd);
         if (load_constant(inp, *val_fd)) udf = 0;
     }
+    PutStatus special(const FieldDesc& f) override {
+        sim_special(*this, sim, f, simm_fd);
+        return PutStatus::Ok;
+    }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
-        if (soft_read(*this, inp, *val_fd)) udf = 0;
+        if (step == SimStep::Now) {
+            if (read_link(sim.siol, *sval_fd) || sim.siol.kind != Link::Kind::Db) {
+                std::memcpy(val, sval, sizeof val);
+                udf = 0;
+            }
+        } else if (soft_read(*this, inp, *val_fd)) {
+            udf = 0;
+        }
         if (val[0] && database()) database()->post_event(std::string_view(val, strnlen(val, sizeof val)));
         stamp_time();
         unsigned m = reset_alarms();
         post(val_fd, kDbeValue | kDbeLog | m);
         pact = 0;
         return ProcessResult::Done;
+    }
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) sim_resume(*this, sim);
     }
 };
 

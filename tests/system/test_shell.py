@@ -248,7 +248,11 @@ def test_beamctl_run_shell_and_autosave(tmp_path, prefix):
     assert not os.path.exists(sock)
 
     with running_ioc(tmp_path, prefix, RUN_IOC, files={"extra.db": EXTRA_DB}) as srv:
-        assert "restored 2 value(s)" in srv.stderr(), srv.stderr()
+        # gain.VAL and .DESC, and the devIocStats records' own tags: $(IOC):ACCESS (settings) and
+        # START_CNT (positions, pass 0), which counts this second start
+        assert "restored 3 value(s)" in srv.stderr() and "info_settings.sav" in srv.stderr(), srv.stderr()
+        assert "restored 1 value(s)" in srv.stderr() and "info_positions.sav" in srv.stderr(), srv.stderr()
+        assert epics.caget(prefix + "START_CNT", timeout=10) == 2
         assert epics.caget(prefix + "gain", timeout=10) == 3.5
         assert epics.caget(prefix + "gain.DESC", timeout=5) == "saved"
         assert epics.caget(prefix + "copy", timeout=5) == 3.5  # PINI after the restore

@@ -485,3 +485,24 @@ record(aao, "o") { field(NELM, "3") field(FTVL, "DOUBLE") field(SIOL, "wf PP") f
     db.get(addr("a"), Prim::Double, got, 3);
     EXPECT_DOUBLE_EQ(got[1], 2); // aai simulated: read from SIOL
 }
+
+TEST_F(Conformance, EventInSimulationPostsTheEventSiolReads) {
+    load(R"(
+record(stringout, "name") { field(VAL, "sim_evt") }
+record(stringout, "rname") { field(VAL, "real_evt") }
+record(event, "ev") { field(INP, "rname") field(SIOL, "name") field(SIMS, "MINOR") }
+record(calc, "real") { field(SCAN, "Event") field(EVNT, "real_evt") field(CALC, "VAL+1") }
+record(calc, "simulated") { field(SCAN, "Event") field(EVNT, "sim_evt") field(CALC, "VAL+1") }
+)");
+    process("ev");
+    EXPECT_EQ(gets("ev"), "real_evt");
+    EXPECT_DOUBLE_EQ(getd("real"), 1);
+    put("ev.SIMM", 1);
+    process("ev");
+    EXPECT_EQ(gets("ev"), "sim_evt"); // SVAL through SIOL
+    EXPECT_EQ(gets("ev.SVAL"), "sim_evt");
+    EXPECT_EQ(gets("ev.STAT"), "SIMM");
+    EXPECT_EQ(gets("ev.SEVR"), "MINOR");
+    EXPECT_DOUBLE_EQ(getd("simulated"), 1);
+    EXPECT_DOUBLE_EQ(getd("real"), 1);
+}
