@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """Conformance of `beamctl softioc` against EPICS softIoc, seen from a Channel Access client.
 
-Both servers load the same databases (bench/db/conformance.db, conformance_arrays.db), one after the other, each on its own
+Both servers load the same databases (bench/db/conformance.db, conformance_arrays.db,
+conformance_issue41.db), one after the other, each on its own
 free port; a separate client process (pyepics on its own libca) applies the same sequence of puts
 and records what it sees: value, alarm status/severity and the DBR_CTRL metadata (units,
 precision, display/alarm/control limits, enum strings), the record's STAT/SEVR/UDF fields, and the
@@ -19,6 +20,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 DB = os.path.join(HERE, "db", "conformance.db")
 DB_ARRAYS = os.path.join(HERE, "db", "conformance_arrays.db")
+DB_41 = os.path.join(HERE, "db", "conformance_issue41.db")
 
 PVS = """cf:in cf:c1 cf:c2 cf:c3 cf:co cf:coout cf:co2 cf:co2out cf:co3 cf:co3cnt cf:seq cf:seq1
 cf:seq2 cf:seq3 cf:cp cf:cp2 cf:src cf:ms cf:nms cf:mss cf:msout cf:ao_init cf:ai_init cf:li_init
@@ -251,6 +253,53 @@ def client(out_path):
     for f_ in ("cf:perm.OVAL", "cf:perm.OFLG", "cf:state.OVAL", "cf:pf.LEN"):
         field("27 permissive, state, printf", f_)
 
+    # ---- issue 41 (bench/db/conformance_issue41.db): conversion, OROC, simulation mode, HIGH,
+    # OOPT, NLST, values out of range of the DBR type asked for
+    conv = ["cf:ai_slope", "cf:ai_linear", "cf:ao_slope", "cf:ao_raw"]
+    snap("28 issue41 init", conv + ["cf:ai_sim", "cf:ai_siml", "cf:bo_sim", "cf:bo_high", "cf:sel"])
+    put("cf:ai_slope.PROC", 1)
+    put("cf:ai_linear.PROC", 1)
+    snap("29 put PROC of the Raw Soft Channel ai's", ["cf:ai_slope", "cf:ai_linear"])
+    for f_ in ("cf:ai_slope.RVAL", "cf:ai_linear.RVAL", "cf:ai_linear.ESLO", "cf:ai_linear.EOFF"):
+        field("29 put PROC of the Raw Soft Channel ai's", f_)
+    put("cf:ao_slope", 10.0)
+    snap("30 put cf:ao_slope=10", ["cf:ao_slope", "cf:ao_raw"])
+    for f_ in ("cf:ao_slope.RVAL", "cf:ao_slope.OVAL", "cf:ao_slope.ORAW"):
+        field("30 put cf:ao_slope=10", f_)
+    put("cf:ao_oroc", 5.0)
+    field("31 put cf:ao_oroc=5 (OROC 1)", "cf:ao_oroc.OVAL")
+    field("31 put cf:ao_oroc=5 (OROC 1)", "cf:ao_orocout")
+    put("cf:ao_oroc.PROC", 1)
+    field("32 then PROC", "cf:ao_oroc.OVAL")
+    field("32 then PROC", "cf:ao_orocout")
+    put("cf:ai_sim.SIMM", 1)
+    put("cf:ai_sim.PROC", 1)
+    snap("33 cf:ai_sim SIMM=1, PROC", ["cf:ai_sim"])
+    put("cf:simmode", 1)
+    put("cf:ai_siml.PROC", 1)
+    snap("34 cf:simmode=1, cf:ai_siml PROC", ["cf:ai_siml"])
+    field("34 cf:simmode=1, cf:ai_siml PROC", "cf:ai_siml.SIMM")
+    put("cf:simmode", 0)
+    put("cf:ai_siml.PROC", 1)
+    snap("35 cf:simmode=0, cf:ai_siml PROC", ["cf:ai_siml"])
+    put("cf:bo_sim", 1)
+    snap("36 put cf:bo_sim=1 (SIMM YES)", ["cf:bo_sim", "cf:bo_real", "cf:bo_simout"])
+    put("cf:bo_high", 1)  # the put's 0.6 s settle outlasts HIGH 0.2 s
+    snap("37 put cf:bo_high=1, 0.6 s later", ["cf:bo_high"])
+    for v in (5, 5, 6):
+        put("cf:lo_oopt", v)
+    snap("38 put cf:lo_oopt=5,5,6 (OOPT On Change)", ["cf:lo_oopt", "cf:lo_cnt"])
+    put("cf:selidx", 1)
+    put("cf:sel.PROC", 1)
+    snap("39 cf:selidx=1, cf:sel PROC", ["cf:sel"])
+    field("39 cf:selidx=1, cf:sel PROC", "cf:sel.LNVL")
+    for name in ("cf:lo_neg", "cf:ai_big"):
+        numeric_gets("40 out of range", name)
+        c = chan(name)
+        for tname, ft in (("CTRL_CHAR", dbr.CTRL_CHAR), ("CTRL_SHORT", dbr.CTRL_SHORT), ("CTRL_ENUM", dbr.CTRL_ENUM)):
+            for k, v in md(c, ft).items():
+                obs[f"40 out of range|{name}|{tname}.{k}"] = v
+
     with open(out_path, "w") as f:
         json.dump(obs, f, indent=0)
 
@@ -320,12 +369,12 @@ def main():
     a = ap.parse_args()
     if a.client:
         return client(a.client)
-    bc = observe("beamctl", [a.beamctl, "softioc", "-S", "-d", DB, "-d", DB_ARRAYS])
+    bc = observe("beamctl", [a.beamctl, "softioc", "-S", "-d", DB, "-d", DB_ARRAYS, "-d", DB_41])
     if not a.softioc:
         for k, v in bc.items():
             print(k, "=", fmt(v))
         return
-    si = observe("softIoc", [a.softioc, "-S", "-d", DB, "-d", DB_ARRAYS])
+    si = observe("softIoc", [a.softioc, "-S", "-d", DB, "-d", DB_ARRAYS, "-d", DB_41])
     if a.json:
         with open(a.json, "w") as f:
             json.dump({"beamctl": bc, "softIoc": si}, f, indent=0)

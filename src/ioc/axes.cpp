@@ -631,6 +631,13 @@ void IocAxes::set_derived_limits(std::size_t i, double lo, double hi) {
 void IocAxes::put_dial_limits(std::size_t i, double lo, double hi) {
     pv::Record* m = db_.find(axes_.at(i).pv);
     if (!pv::MotorRecord::from(m)) return;
+    // the record follows the axis: its puts (DLLM, then DHLM) must not go back to the axis, where
+    // the half-done pair would narrow the limits for a cycle
+    axes_.at(i).following_axis = true;
+    struct Done {
+        Axis& a;
+        ~Done() { a.following_axis = false; }
+    } done{axes_.at(i)};
     auto put = [&](const char* field, double v) {
         pv::Address a;
         a.rec = m;
@@ -656,7 +663,7 @@ void IocAxes::put_dial_limits(std::size_t i, double lo, double hi) {
 
 void IocAxes::set_record_limits(std::size_t i, double lo, double hi) {
     Axis& a = axes_.at(i);
-    if (a.derived || !group_) return;
+    if (a.derived || a.following_axis || !group_) return;
     const motion::AxisStatus& s = status(i);
     bool on = !(lo == 0 && hi == 0);
     bool same = on ? s.soft_fwd_enabled && s.soft_bwd_enabled && s.soft_fwd == hi && s.soft_bwd == lo

@@ -109,6 +109,7 @@ private:
         // record alone until it does (or the command's tag is done)
         bool limits_pending = false;
         uint64_t limits_tag = 0;
+        bool following_axis = false; // put_dial_limits is writing the record's limits
     };
     void make_pvs(Axis& a, registry::Registry& signals);
     void make_motor_record(Axis& a, pv::DbFile& f);

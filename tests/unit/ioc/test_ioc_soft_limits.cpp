@@ -95,3 +95,16 @@ TEST_F(SoftLimits, EcmccfgLimitPvsMoveTheAxisAndTheRecord) {
     EXPECT_DOUBLE_EQ(get("DEMO:SampleX-SftLimFwdEna-RB"), 0);
     EXPECT_TRUE(st().soft_bwd_enabled);
 }
+
+TEST_F(SoftLimits, PlcCodeMovingTheAxisLimitsMovesTheRecordsAndNothingComesBack) {
+    motion::Axis& ax = v.axis("SampleX");
+    ax.variables().mon.highsoftlim = 22; // as ecmccfg's slit include moves a blade's limits
+    ax.variables().mon.lowsoftlim = -21;
+    v.run(20);
+    EXPECT_DOUBLE_EQ(get("DEMO:SampleX.DHLM"), 22);
+    EXPECT_DOUBLE_EQ(get("DEMO:SampleX.DLLM"), -21);
+    v.run(20);
+    EXPECT_DOUBLE_EQ(st().soft_fwd, 22); // the record's follow-up puts did not send the pair back
+    EXPECT_DOUBLE_EQ(st().soft_bwd, -21);
+    EXPECT_EQ(v.axis("SampleX").variables().mon.highsoftlim, 22);
+}
