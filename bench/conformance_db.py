@@ -292,7 +292,7 @@ def client(out_path):
     put("cf:selidx", 1)
     put("cf:sel.PROC", 1)
     snap("39 cf:selidx=1, cf:sel PROC", ["cf:sel"])
-    field("39 cf:selidx=1, cf:sel PROC", "cf:sel.LNVL")
+    field("39 cf:selidx=1, cf:sel PROC", "cf:sel.NLST")
     for name in ("cf:lo_neg", "cf:ai_big"):
         numeric_gets("40 out of range", name)
         c = chan(name)

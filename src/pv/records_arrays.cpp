@@ -409,38 +409,32 @@ struct CompressRecord : Record {
         }
         nuse = std::min(nuse + count, nsam);
     }
-    // compress_array: N to 1 over an array; returns 1 when nothing was written.
+    // compress_array: an array input compressed N to 1 as base 7.0.8 does it: fewer than N
+    // elements (after the out-of-limit ones at its start) write nothing unless PBUF; otherwise the
+    // whole array becomes one sample (base sets n to the element count); returns 1 when nothing
+    // was written.
     int compress_array(double* src, int32_t count) {
         if (ilil < ihil)
             while (count > 0 && (*src < ilil || *src > ihil)) --count, ++src;
         if (n == 0) n = 1;
-        int32_t per = int32_t(n);
-        int32_t left = int32_t(std::min<int64_t>(count, int64_t(nsam) * per));
-        int written = 0;
-        while (left > 0) {
-            if (left < per && pbuf != 1) break;
-            per = std::min(per, left);
-            double value = *src;
-            switch (alg) {
-            case kLow: value = *std::min_element(src, src + per); break;
-            case kHigh: value = *std::max_element(src, src + per); break;
-            case kNAverage: {
-                double s = 0;
-                for (int32_t j = 0; j < per; ++j) s += src[j];
-                value = s / per;
-                break;
-            }
-            case kMedian:
-                std::sort(src, src + per);
-                value = src[per / 2];
-                break;
-            }
-            src += per;
-            left -= per;
-            put_values(&value, 1);
-            ++written;
+        if ((count < int64_t(n) && pbuf != 1) || count <= 0) return 1;
+        double value = *src;
+        switch (alg) {
+        case kLow: value = *std::min_element(src, src + count); break;
+        case kHigh: value = *std::max_element(src, src + count); break;
+        case kNAverage: {
+            double s = 0;
+            for (int32_t j = 0; j < count; ++j) s += src[j];
+            value = s / count;
+            break;
         }
-        return written == 0;
+        case kMedian:
+            std::sort(src, src + count);
+            value = src[count / 2];
+            break;
+        }
+        put_values(&value, 1);
+        return 0;
     }
     // array_average: element-wise mean of N arrays.
     int array_average(const double* src, uint32_t count) {

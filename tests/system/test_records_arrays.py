@@ -183,8 +183,9 @@ record(aao, "$(P)A:out") { field(NELM, "3") field(OUT, "$(P)B:wf CA") }
     assert caput(p + "B:wf", [1, 5, 2, 7, 3, 4]) == 1
     assert wait_for(lambda: caget(p + "A:in.NORD") == 6, timeout=30)
     assert as_list(caget(p + "A:in", count=6)) == [1, 5, 2, 7, 3, 4]
-    assert wait_for(lambda: caget(p + "A:max.NUSE") == 2, timeout=30)
-    assert as_list(caget(p + "A:max", count=2)) == [5, 7]
+    # base 7.0.8: an array of at least N elements is compressed whole into one sample
+    assert wait_for(lambda: caget(p + "A:max.NUSE") == 1, timeout=30)
+    assert as_list(caget(p + "A:max", count=1)) == [7]
     assert caput(p + "A:out", [9, 8, 7]) == 1  # written over CA to B
     assert wait_for(lambda: caget(p + "B:wf.NORD") == 3, timeout=30)
     assert as_list(caget(p + "B:wf", count=3)) == [9, 8, 7]
