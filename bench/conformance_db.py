@@ -2,14 +2,17 @@
 """Conformance of `beamctl softioc` against EPICS softIoc, seen from a Channel Access client.
 
 Both servers load the same databases (bench/db/conformance.db, conformance_arrays.db,
-conformance_issue41.db), one after the other, each on its own
+conformance_issue41.db, conformance_monitors.db, and one record of every type of softIoc.dbd
+with its defaults and one for puts), one after the other, each on its own
 free port; a separate client process (pyepics on its own libca) applies the same sequence of puts
 and records what it sees: value, alarm status/severity and the DBR_CTRL metadata (units,
 precision, display/alarm/control limits, enum strings), the record's STAT/SEVR/UDF fields, and the
-completion status of numeric gets of string records. The two observation sets are then compared
-item by item.
+completion status of numeric gets of string records; the events of DBE_VALUE/LOG/ALARM
+subscriptions (MDEL, ADEL, HYST), IVOA, SDLY; every field of every record type as DBR_STRING with
+its native type and count, and the completion status of a put to every settable field. The two
+observation sets are then compared item by item.
 
-  /usr/bin/python3 bench/conformance_db.py [--softioc PATH] [--beamctl PATH] [--md OUT.md]
+  /usr/bin/python3 bench/conformance_db.py [--softioc PATH] [--beamctl PATH] [--md OUT.md] [--dbd PATH]
 
 Without --softioc (or $SOFTIOC) only beamctl is observed and the observations are printed. Nothing
 here is needed by the build or the tests.
@@ -21,6 +24,36 @@ ROOT = os.path.dirname(HERE)
 DB = os.path.join(HERE, "db", "conformance.db")
 DB_ARRAYS = os.path.join(HERE, "db", "conformance_arrays.db")
 DB_41 = os.path.join(HERE, "db", "conformance_issue41.db")
+DB_MON = os.path.join(HERE, "db", "conformance_monitors.db")
+
+
+def dbd_sweep(dbd_path):
+    """[(record type, [(field, DBF type, settable)])] from an expanded .dbd (softIoc.dbd):
+    every field of every record type; settable = neither DBF_NOACCESS nor SPC_NOMOD."""
+    import re
+    out, cur, fld = [], None, None
+    for line in open(dbd_path):
+        m = re.match(r'\s*recordtype\((\w+)\)', line)
+        if m:
+            cur = (m.group(1), [])
+            out.append(cur)
+            continue
+        m = re.match(r'\s*field\((\w+),\s*(DBF_\w+)\)', line)
+        if m and cur:
+            fld = [m.group(1), m.group(2), m.group(2) != "DBF_NOACCESS"]
+            cur[1].append(fld)
+            continue
+        if fld and "special(SPC_NOMOD)" in line:
+            fld[2] = False
+    return out
+
+
+def sweep_db(sweep, path):
+    """One record of each type with its defaults (cf:t:TYPE) and one for the puts (cf:p:TYPE)."""
+    with open(path, "w") as f:
+        for rtype, _ in sweep:
+            for p in ("t", "p"):
+                f.write(f'record({rtype}, "cf:{p}:{rtype}") {{}}\n')
 
 PVS = """cf:in cf:c1 cf:c2 cf:c3 cf:co cf:coout cf:co2 cf:co2out cf:co3 cf:co3cnt cf:seq cf:seq1
 cf:seq2 cf:seq3 cf:cp cf:cp2 cf:src cf:ms cf:nms cf:mss cf:msout cf:ao_init cf:ai_init cf:li_init
@@ -300,6 +333,116 @@ def client(out_path):
             for k, v in md(c, ft).items():
                 obs[f"40 out of range|{name}|{tname}.{k}"] = v
 
+    # ---- monitors: what a client subscribed with DBE_VALUE, DBE_LOG or DBE_ALARM receives
+    # (MDEL/ADEL deadbands, HYST, alarm transitions), counted per subscription
+    events = {}
+
+    def subscribe(name, mask):
+        c = chan(name)
+        key = (name, mask)
+        events[key] = []
+
+        def cb(pvname=None, value=None, **kw):
+            events[key].append(norm(value))
+        h = ca.create_subscription(c, use_time=False, mask=mask, callback=cb)
+        return h
+
+    masks = {"DBE_VALUE": dbr.DBE_VALUE, "DBE_LOG": dbr.DBE_LOG, "DBE_ALARM": dbr.DBE_ALARM}
+    mon_pvs = ["cf:mon_ai", "cf:mon_calc", "cf:mon_li", "cf:mon_hyst"]
+    subs = [subscribe(n, m) for n in mon_pvs for m in masks.values()]
+    ca.poll(0.5)
+    time.sleep(0.5)
+    for v in (0.5, 1.5, 1.8, 2.2, 4.0, 3.6, 9.0, 7.5, 4.8, 0.0):
+        put("cf:mon_src", v)
+    for n in mon_pvs:
+        for mn, m in masks.items():
+            obs[f"41 monitors|{n}|{mn} events (values)"] = events[(n, m)]
+    snap("41 monitors", mon_pvs)
+    for s_ in subs:
+        ca.clear_subscription(s_[2])
+
+    # ---- IVOA: an output whose alarm is INVALID (Continue normally / Don't drive / Set to IVOV)
+    put("cf:ivoa_src", 12.0)
+    snap("42 IVOA, input INVALID", ["cf:ivoa_cont", "cf:ivoa_hold", "cf:ivoa_set", "cf:ivoa_out1",
+                                    "cf:ivoa_out2", "cf:ivoa_out3"])
+    put("cf:ivoa_src", 3.0)
+    snap("43 IVOA, input valid again", ["cf:ivoa_cont", "cf:ivoa_hold", "cf:ivoa_set", "cf:ivoa_out1",
+                                        "cf:ivoa_out2", "cf:ivoa_out3"])
+
+    # ---- SDLY: the simulated read ends after the delay (0.3 s); the put-callback waits for it
+    put("cf:ai_sdly.PROC", 1, wait=False)
+    field("44 cf:ai_sdly PROC, at once", "cf:ai_sdly.PACT")
+    time.sleep(0.6)
+    ca.poll(0.1)
+    snap("45 cf:ai_sdly, 0.9 s later", ["cf:ai_sdly"])
+
+    # ---- every field of every record type (the field list of softIoc.dbd): defaults as
+    # DBR_STRING with the native type and count, then a put of one value per settable field
+    sweep = json.loads(os.environ.get("CF_SWEEP", "null") or "null")
+    if sweep:
+        put_cb_type = ctypes.CFUNCTYPE(None, Args)
+        done = {}
+
+        def on_put(a):
+            done["r"] = a.status
+        pcb = put_cb_type(on_put)
+        put_cb = libca["ca_array_put_callback"]
+        put_cb.argtypes = [ctypes.c_long, ctypes.c_ulong, ctypes.c_void_p, ctypes.c_void_p,
+                           put_cb_type, ctypes.c_void_p]
+
+        def raw_put_string(name, text):
+            c = chan(name)
+            if c is None:
+                return "NOT CONNECTED"
+            buf = ctypes.create_string_buffer(text.encode(), 40)
+            done.clear()
+            st = put_cb(dbr.STRING, 1, c.value if hasattr(c, "value") else c, buf, pcb, None)
+            if st != 1:
+                return f"request {ca_message(st).decode()}"
+            libca.ca_flush_io()
+            t0 = time.time()
+            while "r" not in done and time.time() - t0 < 3:
+                ca.poll(0.01)
+            return ca_message(done["r"]).decode() if "r" in done else "no callback"
+
+        names = []
+        for rtype, fields in sweep:
+            for fname, dbf, settable in fields:
+                names += [f"cf:t:{rtype}.{fname}", f"cf:p:{rtype}.{fname}"]
+        for n in names:  # create all channels first: one search round for all
+            if n not in chids:
+                chids[n] = ca.create_channel(n, connect=False, auto_cb=False)
+        t0 = time.time()  # a NOACCESS field never connects: wait for the rest, not for each
+        while time.time() - t0 < 8 and not all(ca.isConnected(chids[n]) for n in names):
+            ca.poll(0.2)
+        for n in names:
+            if not ca.isConnected(chids[n]):
+                chids[n] = None
+        for rtype, fields in sweep:
+            for fname, dbf, settable in fields:
+                n = f"cf:t:{rtype}.{fname}"
+                c = chids[n]
+                key = f"46 defaults|cf:t:{rtype}|{fname}"
+                if c is None:
+                    obs[key] = "NOT CONNECTED"
+                    continue
+                obs[key + " type/count"] = f"{dbr.Name(ca.field_type(c)) if hasattr(dbr, 'Name') else ca.field_type(c)}/{ca.element_count(c)}"
+                v = ca.get(c, ftype=dbr.STRING, timeout=3.0)
+                obs[key] = norm(v)
+        values = {"DBF_STRING": "ab", "DBF_MENU": "1", "DBF_ENUM": "1", "DBF_INLINK": "2",
+                  "DBF_OUTLINK": "2", "DBF_FWDLINK": "", "DBF_FLOAT": "2.5", "DBF_DOUBLE": "2.5"}
+        for rtype, fields in sweep:
+            for fname, dbf, settable in fields:
+                if not settable or fname in ("PROC", "DTYP", "SCAN", "PHAS", "EVNT", "PRIO", "TPRO"):
+                    continue
+                n = f"cf:p:{rtype}.{fname}"
+                key = f"47 put|cf:p:{rtype}|{fname}"
+                text = values.get(dbf, "3")
+                obs[key + f" put {text!r}"] = raw_put_string(n, text)
+                c = chids[n]
+                if c is not None:
+                    obs[key + " then"] = norm(ca.get(c, ftype=dbr.STRING, timeout=3.0))
+
     with open(out_path, "w") as f:
         json.dump(obs, f, indent=0)
 
@@ -365,16 +508,25 @@ def main():
     ap.add_argument("--beamctl", default=os.path.join(ROOT, "build/release/beamctl"))
     ap.add_argument("--softioc", default=os.environ.get("SOFTIOC"))
     ap.add_argument("--md", help="write the comparison as a markdown table")
+    ap.add_argument("--dbd", help="expanded .dbd with the record types to sweep (default: softIoc's)")
     ap.add_argument("--json", help="write both observation sets")
     a = ap.parse_args()
     if a.client:
         return client(a.client)
-    bc = observe("beamctl", [a.beamctl, "softioc", "-S", "-d", DB, "-d", DB_ARRAYS, "-d", DB_41])
+    dbs = ["-d", DB, "-d", DB_ARRAYS, "-d", DB_41, "-d", DB_MON]
+    dbd = a.dbd or (a.softioc and os.path.join(os.path.dirname(a.softioc), "..", "..", "dbd", "softIoc.dbd"))
+    if dbd and os.path.exists(dbd):  # every field of every record type: base's own list
+        sweep = dbd_sweep(dbd)
+        path = tempfile.NamedTemporaryFile(suffix="-sweep.db", delete=False).name
+        sweep_db(sweep, path)
+        dbs += ["-d", path]
+        os.environ["CF_SWEEP"] = json.dumps(sweep)
+    bc = observe("beamctl", [a.beamctl, "softioc", "-S"] + dbs)
     if not a.softioc:
         for k, v in bc.items():
             print(k, "=", fmt(v))
         return
-    si = observe("softIoc", [a.softioc, "-S", "-d", DB, "-d", DB_ARRAYS, "-d", DB_41])
+    si = observe("softIoc", [a.softioc, "-S"] + dbs)
     if a.json:
         with open(a.json, "w") as f:
             json.dump({"beamctl": bc, "softIoc": si}, f, indent=0)

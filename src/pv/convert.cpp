@@ -4,6 +4,7 @@
 #include "pv/link.hpp"
 
 #include <cerrno>
+#include <charconv>
 #include <cfloat>
 #include <cinttypes>
 #include <climits>
@@ -51,6 +52,7 @@ double read_double(const Elements& e, uint32_t i) {
     case Dbf::Long: return *reinterpret_cast<const int32_t*>(p);
     case Dbf::ULong: return *reinterpret_cast<const uint32_t*>(p);
     case Dbf::Int64: return double(*reinterpret_cast<const int64_t*>(p));
+    case Dbf::UInt64: return double(*reinterpret_cast<const uint64_t*>(p));
     case Dbf::Float: return *reinterpret_cast<const float*>(p);
     case Dbf::Double: return *reinterpret_cast<const double*>(p);
     case Dbf::String: {
@@ -78,6 +80,7 @@ int64_t read_int(const Elements& e, uint32_t i) {
     case Dbf::Long: return *reinterpret_cast<const int32_t*>(p);
     case Dbf::ULong: return *reinterpret_cast<const uint32_t*>(p);
     case Dbf::Int64: return *reinterpret_cast<const int64_t*>(p);
+    case Dbf::UInt64: return int64_t(*reinterpret_cast<const uint64_t*>(p)); // above 2^63: wraps, as a C cast
     default: return 0;
     }
 }
@@ -94,6 +97,7 @@ void write_double(const Elements& e, uint32_t i, double v) {
     case Dbf::Long: *reinterpret_cast<int32_t*>(p) = saturate<int32_t>(v); break;
     case Dbf::ULong: *reinterpret_cast<uint32_t*>(p) = saturate<uint32_t>(v); break;
     case Dbf::Int64: *reinterpret_cast<int64_t*>(p) = saturate<int64_t>(v); break;
+    case Dbf::UInt64: *reinterpret_cast<uint64_t*>(p) = saturate<uint64_t>(v); break;
     case Dbf::Float: *reinterpret_cast<float*>(p) = float(v); break;
     case Dbf::Double: *reinterpret_cast<double*>(p) = v; break;
     case Dbf::String: format_double(v, 15, p, e.stride); break;
@@ -113,6 +117,7 @@ void write_int(const Elements& e, uint32_t i, int64_t v) {
     case Dbf::Long: *reinterpret_cast<int32_t*>(p) = saturate_int<int32_t>(v); break;
     case Dbf::ULong: *reinterpret_cast<uint32_t*>(p) = saturate_int<uint32_t>(v); break;
     case Dbf::Int64: *reinterpret_cast<int64_t*>(p) = v; break;
+    case Dbf::UInt64: *reinterpret_cast<uint64_t*>(p) = uint64_t(v); break; // dbConvert's cast
     case Dbf::Float: *reinterpret_cast<float*>(p) = float(v); break;
     case Dbf::Double: *reinterpret_cast<double*>(p) = double(v); break;
     case Dbf::String: std::snprintf(p, e.stride, "%" PRId64, v); break;
@@ -353,6 +358,23 @@ bool parse_field(Record& r, const FieldDesc& f, std::string_view text, std::stri
         *static_cast<uint16_t*>(e.data) = uint16_t(k);
         return true;
     }
+    if (f.dbf == Dbf::UInt64) { // the full unsigned range (epicsParseUInt64)
+        uint64_t u = 0;
+        std::string_view t = text;
+        while (!t.empty() && (t.front() == ' ' || t.front() == '\t')) t.remove_prefix(1);
+        int base = 10;
+        if (t.size() > 2 && t[0] == '0' && (t[1] == 'x' || t[1] == 'X')) {
+            t.remove_prefix(2);
+            base = 16;
+        }
+        auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), u, base);
+        if (ec != std::errc() || end != t.data() + t.size()) {
+            if (err) *err = SB() << "'" << text << "' is not an unsigned 64-bit integer (field " << f.name << ", DBF_UINT64)";
+            return false;
+        }
+        *static_cast<uint64_t*>(e.data) = u;
+        return true;
+    }
     if (is_integer_dbf(f.dbf)) {
         int64_t v;
         if (!parse_int(text, v)) {
@@ -419,6 +441,7 @@ std::string format_field(Record& r, const FieldDesc& f) {
         }
         return buf;
     }
+    case Dbf::UInt64: return std::to_string(*reinterpret_cast<const uint64_t*>(p));
     default: return std::to_string(read_int(e, 0));
     }
 }

@@ -162,9 +162,10 @@ void Database::apply_field(Record& rec, const DbField& f, const std::string& fil
     if (!fd)
         throw Error(SB() << f.loc.str() << ": record type " << rec.type().name() << " has no field "
                          << f.name << " (record " << rec.name() << ")");
-    if (fd->flags & kReadOnly)
-        throw Error(SB() << f.loc.str() << ": field " << f.name << " of record " << rec.name()
-                         << " is read-only");
+    // A read-only field (SPC_NOMOD) is set from a file as base's dbPutString sets it (no check of
+    // `special`); clients and dbpf still cannot write it. RTYP is no field of base's static database.
+    if ((fd->flags & kReadOnly) && f.name == "RTYP")
+        throw Error(SB() << f.loc.str() << ": record " << rec.name() << ": RTYP is the record type, not a field a database sets");
     if (fd->flags & kArray)
         throw Error(SB() << f.loc.str() << ": field " << f.name << " of record " << rec.name()
                          << " is an array; initial array values are not supported");

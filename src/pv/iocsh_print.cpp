@@ -141,6 +141,7 @@ bool print_field(const Database& db, std::string_view channel, std::ostream& os)
     case Dbf::Long:
     case Dbf::ULong:
     case Dbf::Int64:
+    case Dbf::UInt64:
     case Dbf::Float:
     case Dbf::Double:
         break;
@@ -171,10 +172,10 @@ bool print_field(const Database& db, std::string_view channel, std::ostream& os)
     }
 
     // As many elements as dbgf's 800-byte buffer holds.
-    static const std::size_t kElemSize[] = {kStringSize, 1, 1, 2, 2, 4, 4, 8, 4, 8, 2, 2};
+    static const std::size_t kElemSize[] = {kStringSize, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8, 2, 2};
     const uint32_t n = std::min<uint32_t>(e.count, uint32_t(800 / kElemSize[int(type)]));
     static const char* kNames[] = {"STRING", "CHAR",  "UCHAR", "SHORT",  "USHORT", "LONG",
-                                   "ULONG",  "INT64", "FLOAT", "DOUBLE", "ENUM",   "ENUM"};
+                                   "ULONG",  "INT64", "UINT64", "FLOAT", "DOUBLE", "ENUM",   "ENUM"};
     label(kNames[int(type)], n);
     const char* p = static_cast<const char*>(e.data);
     if (type == Dbf::Char && n > 1) {
@@ -225,6 +226,12 @@ bool print_field(const Database& db, std::string_view channel, std::ostream& os)
             uint32_t v;
             std::memcpy(&v, p, sizeof v);
             line.add(fmt("%u = 0x%x", v, v));
+            break;
+        }
+        case Dbf::UInt64: {
+            uint64_t v;
+            std::memcpy(&v, p, sizeof v);
+            line.add(fmt("%" PRIu64 " = 0x%" PRIx64, v, v));
             break;
         }
         case Dbf::Int64: {

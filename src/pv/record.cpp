@@ -191,7 +191,7 @@ std::vector<FieldDesc> Record::common_fields() {
         BEAMCTL_FIELD(R, FLNK, flnk, FwdLink, 0),
         BEAMCTL_FIELD(R, AMSG, amsg, String, kReadOnly),
         BEAMCTL_FIELD(R, NAMSG, namsg, String, kReadOnly),
-        BEAMCTL_FIELD(R, UTAG, utag, Int64, kReadOnly),
+        BEAMCTL_FIELD(R, UTAG, utag, UInt64, kReadOnly),
     };
 }
 
@@ -219,6 +219,7 @@ void type_range(Dbf t, double& hi, double& lo) {
     case Dbf::Long: hi = 2147483647.0; lo = -2147483648.0; break;
     case Dbf::ULong: hi = 4294967295.0; lo = 0; break;
     case Dbf::Int64: hi = 9223372036854775807.0; lo = -9223372036854775808.0; break;
+    case Dbf::UInt64: hi = 18446744073709551615.0; lo = 0; break;
     case Dbf::Float: hi = 1e30; lo = -1e30; break;
     case Dbf::Double: hi = 1e300; lo = -1e300; break;
     default: hi = lo = 0;

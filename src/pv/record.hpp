@@ -264,7 +264,7 @@ public:
     Link flnk;           // forward link: processed after this record
     char amsg[40] = {};  // alarm message of STAT/SEVR (recGblSetSevrMsg)
     char namsg[40] = {}; // pending alarm message (NSTA/NSEV)
-    int64_t utag = 0;    // user tag (base's DBF_UINT64, held here as DBF_INT64): device support sets it
+    uint64_t utag = 0;   // user tag (DBF_UINT64): device support sets it
 
     static std::vector<FieldDesc> common_fields(); // dbCommon part of every type's table
 

@@ -200,7 +200,7 @@ template <typename Self> struct AnalogBase : Record {
 };
 
 
-// FTVL/FTA (menuFtype) to the element type and size beamctl stores; false for UINT64 and ENUM.
+// FTVL/FTA (menuFtype) to the element type and size beamctl stores; false for ENUM.
 inline bool ftvl_type(uint16_t ftvl, Dbf& t, uint16_t& size) {
     switch (ftvl) {
     case 0: t = Dbf::String; size = kStringSize; return true;
@@ -211,6 +211,7 @@ inline bool ftvl_type(uint16_t ftvl, Dbf& t, uint16_t& size) {
     case 5: t = Dbf::Long; size = 4; return true;
     case 6: t = Dbf::ULong; size = 4; return true;
     case 7: t = Dbf::Int64; size = 8; return true;
+    case 8: t = Dbf::UInt64; size = 8; return true;
     case 9: t = Dbf::Float; size = 4; return true;
     case 10: t = Dbf::Double; size = 8; return true;
     default: return false;

@@ -517,6 +517,8 @@ struct CompressRecord : Record {
 
 // ---------------------------------------------------------------- histogram
 // VAL counts SGNL (read from SVL, or SIOL in simulation) in NELM bins of WDTH from LLIM to ULIM.
+// Simulation mode as base 7's histogramRecord readValue: SIML gives SIMM (menuYesNo), which swaps
+// SCAN and SSCN; in simulation SIOL reads SVAL into SGNL (after SDLY when SDLY >= 0) with SIMS.
 const Menu kMenuHistogramCmd{"histogramCMD", {"Read", "Clear", "Start", "Stop"}};
 
 struct HistogramRecord : Record {
@@ -526,13 +528,14 @@ struct HistogramRecord : Record {
     uint16_t cmd = 0;
     double ulim = 0, llim = 0, wdth = 0, sgnl = 0, sdel = 0, sval = 0;
     int16_t prec = 0, mdel = 0, mcnt = 0;
-    uint16_t simm = 0, sims = 0;
     uint32_t hopr = 0, lopr = 0;
-    Link svl, siol, siml;
+    Link svl;
+    Simulation sim;
     char val_placeholder = 0;
     std::vector<uint32_t> counts;
     int wdog_pending = 0; // SDEL watchdog requests in flight (only the newest acts)
     const FieldDesc* val_fd = type().find("VAL");
+    const FieldDesc* simm_fd = type().find("SIMM");
 
     static std::vector<FieldDesc> fields() {
         using R = HistogramRecord;
@@ -551,24 +554,28 @@ struct HistogramRecord : Record {
             BEAMCTL_FIELD(R, MDEL, mdel, Short, 0),
             BEAMCTL_FIELD(R, MCNT, mcnt, Short, kReadOnly),
             BEAMCTL_FIELD(R, SDEL, sdel, Double, 0),
-            BEAMCTL_FIELD(R, SIOL, siol, InLink, 0),
-            BEAMCTL_FIELD(R, SVAL, sval, Double, 0),
-            BEAMCTL_FIELD(R, SIML, siml, InLink, 0),
-            BEAMCTL_MENU(R, SIMM, simm, kMenuYesNo, 0),
-            BEAMCTL_MENU(R, SIMS, sims, kMenuAlarmSevr, 0),
-            BEAMCTL_FIELD(R, HOPR, hopr, ULong, kMeta),
-            BEAMCTL_FIELD(R, LOPR, lopr, ULong, kMeta),
         };
         v.insert(v.end(), add.begin(), add.end());
+        // The simulation fields in histogramRecord.dbd's order (SVAL between SIOL and SIML).
+        std::vector<FieldDesc> sim_fields;
+        add_simulation_fields<R>(sim_fields, false, false);
+        auto take = [&](std::string_view name) {
+            for (const FieldDesc& f : sim_fields)
+                if (name == f.name) v.push_back(f);
+        };
+        take("SIOL");
+        v.push_back(BEAMCTL_FIELD(R, SVAL, sval, Double, 0));
+        for (auto name : {"SIML", "SIMM", "SIMS", "OLDSIMM", "SSCN", "SDLY"}) take(name);
+        auto display = {BEAMCTL_FIELD(R, HOPR, hopr, ULong, kMeta), BEAMCTL_FIELD(R, LOPR, lopr, ULong, kMeta)};
+        v.insert(v.end(), display.begin(), display.end());
         return v;
     }
     void init() override {
         check_count("NELM", nelm);
         counts.assign(nelm, 0);
         wdth = (ulim - llim) / nelm;
-        double s;
-        if (load_constant(siml, s)) simm = s != 0;
-        load_constant(siol, sval);
+        sim_init(*this, sim, *simm_fd);
+        load_constant(sim.siol, sval);
         if (load_constant(svl, sgnl)) udf = 0;
         wdog_start();
     }
@@ -577,7 +584,12 @@ struct HistogramRecord : Record {
         ++wdog_pending;
         call_after(sdel);
     }
-    void on_delay() override { // wdogCallback: post counts that changed, then again after SDEL
+    void on_delay(int tag) override {
+        if (tag == kSimDelayTag) {
+            sim_resume(*this, sim);
+            return;
+        }
+        // wdogCallback: post counts that changed, then again after SDEL
         if (--wdog_pending > 0) return;
         if (mcnt > 0) {
             stamp_time();
@@ -605,6 +617,7 @@ struct HistogramRecord : Record {
         ++mcnt;
     }
     PutStatus special(const FieldDesc& f) override {
+        sim_special(*this, sim, f, simm_fd);
         if (is(f, "CMD")) { // SPC_CALC: Read/Clear clear, Start/Stop set CSTA
             if (cmd <= 1) clear();
             else csta = cmd == 2;
@@ -633,15 +646,13 @@ struct HistogramRecord : Record {
         return prec_of(f, nullptr, prec);
     }
     ProcessResult process() override {
+        SimStep step = sim_begin(*this, sim, *simm_fd);
+        if (step == SimStep::Wait) return ProcessResult::Async;
         pact = 1;
         bool count = true;
-        if (!siml.empty() && !siml.is_constant()) {
-            double s = simm;
-            if (read_link(siml, s)) simm = s != 0;
-        }
-        if (simm == 1) {
-            set_sevr(kStatSimm, sims);
-            if (read_link(siol, sval) && linked(siol)) {
+        if (step == SimStep::Now) {
+            count = read_link(sim.siol, sval); // a failed SIOL read adds no count (status != 0)
+            if (count) {
                 sgnl = sval;
                 udf = 0;
             }

@@ -1029,6 +1029,7 @@ struct WaveformRecord : Record {
         case 5: t = Dbf::Long; size = 4; return true;
         case 6: t = Dbf::ULong; size = 4; return true;
         case 7: t = Dbf::Int64; size = 8; return true;
+        case 8: t = Dbf::UInt64; size = 8; return true;
         case 9: t = Dbf::Float; size = 4; return true;
         case 10: t = Dbf::Double; size = 8; return true;
         default: return false;

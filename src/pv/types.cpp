@@ -26,7 +26,8 @@ Prim native_prim(Dbf f) {
     case Dbf::UShort:
     case Dbf::Long: return Prim::Long;
     case Dbf::ULong:
-    case Dbf::Int64: return Prim::Double;
+    case Dbf::Int64:
+    case Dbf::UInt64: return Prim::Double;
     case Dbf::Float: return Prim::Float;
     case Dbf::Double: return Prim::Double;
     case Dbf::Enum:
@@ -40,7 +41,7 @@ Prim native_prim(Dbf f) {
 
 const char* dbf_name(Dbf f) {
     static const char* names[] = {"DBF_STRING", "DBF_CHAR",   "DBF_UCHAR", "DBF_SHORT",
-                                  "DBF_USHORT", "DBF_LONG",   "DBF_ULONG", "DBF_INT64",
+                                  "DBF_USHORT", "DBF_LONG",   "DBF_ULONG", "DBF_INT64", "DBF_UINT64",
                                   "DBF_FLOAT",  "DBF_DOUBLE", "DBF_ENUM",  "DBF_MENU",
                                   "DBF_INLINK", "DBF_OUTLINK", "DBF_FWDLINK"};
     return names[int(f)];

@@ -17,6 +17,7 @@ enum class Dbf : uint8_t {
     Long,
     ULong,
     Int64,
+    UInt64, // UTAG, FTVL UINT64 (served over CA as DBR_DOUBLE, as base does)
     Float,
     Double,
     Enum, // record-defined state strings (bi/bo/mbbi/mbbo VAL)

@@ -506,3 +506,67 @@ record(calc, "simulated") { field(SCAN, "Event") field(EVNT, "sim_evt") field(CA
     EXPECT_DOUBLE_EQ(getd("simulated"), 1);
     EXPECT_DOUBLE_EQ(getd("real"), 1);
 }
+
+TEST_F(Conformance, HistogramSimulationDelaysSwapsScanAndCountsSval) {
+    load(R"(
+record(ao, "sim") { field(VAL, "2.5") }
+record(ao, "mode") { field(VAL, "0") }
+record(histogram, "h") { field(SIOL, "sim") field(SIML, "mode") field(SIMS, "MAJOR") field(SDLY, "0.5")
+                         field(SSCN, "10 second") field(NELM, "4") field(ULIM, "4") }
+)");
+    start_clock();
+    EXPECT_EQ(gets("h.SSCN"), "10 second");
+    EXPECT_EQ(gets("h.OLDSIMM"), "NO");
+    put("mode", 1);
+    bool done = false;
+    put("h.PROC", 1, [&](PutStatus) { done = true; });
+    EXPECT_EQ(gets("h.SCAN"), "10 second"); // SIML gave SIMM YES: SCAN and SSCN swapped
+    EXPECT_EQ(gets("h.SSCN"), "Passive");
+    EXPECT_DOUBLE_EQ(getd("h.PACT"), 1); // waiting for SDLY
+    EXPECT_FALSE(done);
+    advance(0.6);
+    EXPECT_TRUE(done);
+    EXPECT_DOUBLE_EQ(getd("h.SGNL"), 2.5); // SVAL through SIOL, counted in bin 2
+    Address a = addr("h");
+    double counts[4] = {};
+    db.get(a, Prim::Double, counts, 4);
+    EXPECT_DOUBLE_EQ(counts[2], 1);
+    EXPECT_EQ(gets("h.STAT"), "SIMM");
+    EXPECT_EQ(gets("h.SEVR"), "MAJOR");
+    put_str("h.SIMM", "NO"); // a client's put swaps back
+    EXPECT_EQ(gets("h.SCAN"), "Passive");
+    EXPECT_EQ(gets("h.OLDSIMM"), "YES");
+}
+
+TEST_F(Conformance, ReadOnlyFieldsAreSetFromAFileAsBaseSetsThemButNotByClients) {
+    // base's dbPutString does not look at `special`: a .db may set an SPC_NOMOD field
+    load(R"(
+record(histogram, "h") { field(WDTH, "7") field(CSTA, "0") }
+record(waveform, "w") { field(NELM, "4") field(NORD, "0") }
+)");
+    EXPECT_DOUBLE_EQ(getd("h.CSTA"), 0); // not counting, as the file said
+    EXPECT_DOUBLE_EQ(getd("w.NORD"), 0);
+    EXPECT_EQ(put("h.CSTA", 1), PutStatus::ReadOnly); // a client still cannot
+    EXPECT_DOUBLE_EQ(getd("h.CSTA"), 0);
+    EXPECT_NE(load_error(R"(record(ai, "r") { field(RTYP, "bo") })").find("RTYP"), std::string::npos);
+}
+
+TEST_F(Conformance, Uint64FieldsHoldTheFullUnsignedRange) {
+    load(R"(
+record(ai, "u") { field(UTAG, "18446744073709551615") }
+record(waveform, "w") { field(FTVL, "UINT64") field(NELM, "3") }
+)");
+    EXPECT_DOUBLE_EQ(getd("u.UTAG"), 18446744073709551615.0); // DBR_DOUBLE over CA, as base
+    const FieldDesc* f = db.find("u")->type().find("UTAG");
+    ASSERT_NE(f, nullptr);
+    EXPECT_EQ(f->dbf, Dbf::UInt64);
+    EXPECT_EQ(native_prim(f->dbf), Prim::Double);
+    double v[3] = {1, 4294967296.0 * 8, -1};
+    ASSERT_EQ(db.put(addr("w"), Prim::Double, v, 3), PutStatus::Ok);
+    double got[3] = {};
+    db.get(addr("w"), Prim::Double, got, 3);
+    EXPECT_DOUBLE_EQ(got[0], 1);
+    EXPECT_DOUBLE_EQ(got[1], 4294967296.0 * 8); // past 32 bits
+    EXPECT_DOUBLE_EQ(got[2], 0);                // a negative double saturates at 0
+    EXPECT_NE(load_error(R"(record(ai, "bad") { field(UTAG, "-1") })").find("DBF_UINT64"), std::string::npos);
+}

@@ -174,6 +174,8 @@ record(aSub, "a") { field(LFLG, "READ") field(SUBL, "name") }
 }
 
 TEST_F(RecordsSub, ASubBadFtIsALoadError) {
-    std::string e = load_error(R"(record(aSub, "x") { field(FTC, "UINT64") })");
-    EXPECT_NE(e.find("record x: FTC UINT64 is not supported for aSub"), std::string::npos) << e;
+    std::string e = load_error(R"(record(aSub, "x") { field(FTC, "ENUM") })");
+    EXPECT_NE(e.find("record x: FTC ENUM is not supported for aSub"), std::string::npos) << e;
+    load(R"(record(aSub, "u") { field(FTC, "UINT64") field(NOC, "2") })"); // 64-bit unsigned arrays load
+    EXPECT_EQ(gets("u.FTC"), "UINT64");
 }
