@@ -116,7 +116,16 @@ def client(out_path):
             return {"error": "no answer"}
         return {k: norm(d[k]) for k in meta_keys if k in d}
 
+    t_start = time.time()
+    last_step = [None]
+
+    def progress(step):
+        if step != last_step[0]:
+            last_step[0] = step
+            print(f"[{time.time() - t_start:7.1f} s] {step}", file=sys.stderr, flush=True)
+
     def snap(step, names):
+        progress(step)
         for n in names:
             c = chan(n)
             if c is None:
@@ -418,6 +427,7 @@ def client(out_path):
         for n in names:
             if not ca.isConnected(chids[n]):
                 chids[n] = None
+        progress("46 defaults")
         for rtype, fields in sweep:
             for fname, dbf, settable in fields:
                 n = f"cf:t:{rtype}.{fname}"
@@ -431,7 +441,9 @@ def client(out_path):
                 obs[key] = norm(v)
         values = {"DBF_STRING": "ab", "DBF_MENU": "1", "DBF_ENUM": "1", "DBF_INLINK": "2",
                   "DBF_OUTLINK": "2", "DBF_FWDLINK": "", "DBF_FLOAT": "2.5", "DBF_DOUBLE": "2.5"}
+        progress("47 put")
         for rtype, fields in sweep:
+            progress(f"47 put {rtype}")
             for fname, dbf, settable in fields:
                 if not settable or fname in ("PROC", "DTYP", "SCAN", "PHAS", "EVNT", "PRIO", "TPRO"):
                     continue

@@ -52,7 +52,7 @@ public:
             const State now = state();
             judge(name_, s == pv::PutStatus::Ok, now.rbv, target, now.deadband, shared);
         });
-        // A put refused before processing never calls back.
+        // A refused put calls back and returns the refusal: judge() acts once.
         if (st != pv::PutStatus::Ok) {
             const State now = state();
             judge(name_, false, now.rbv, target, now.deadband, shared);

@@ -111,7 +111,28 @@ double SmartControl::get(const pv::Address& a) const {
 }
 
 bool SmartControl::put(const pv::Address& a, double v, pv::PutCallback cb) {
-    return db_.put(a, pv::Prim::Double, &v, 1, std::move(cb)) == pv::PutStatus::Ok;
+    if (!cb) return db_.put(a, pv::Prim::Double, &v, 1) == pv::PutStatus::Ok;
+    // A refused put calls back and returns the refusal; the callers act on the refusal, so the
+    // callback answers only a put that was taken (at once or later).
+    struct Pending {
+        bool in_put = true, early = false;
+        pv::PutStatus status = pv::PutStatus::Ok;
+        pv::PutCallback cb;
+    };
+    auto p = std::make_shared<Pending>();
+    p->cb = std::move(cb);
+    const pv::PutStatus st = db_.put(a, pv::Prim::Double, &v, 1, [p](pv::PutStatus s) {
+        if (p->in_put) {
+            p->early = true;
+            p->status = s;
+        } else {
+            p->cb(s);
+        }
+    });
+    p->in_put = false;
+    if (st != pv::PutStatus::Ok) return false;
+    if (p->early) p->cb(p->status);
+    return true;
 }
 
 double SmartControl::pv_value(const std::string& rec) const {

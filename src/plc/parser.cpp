@@ -6,6 +6,7 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <set>
 
 namespace beamctl::plc::detail {
@@ -142,7 +143,16 @@ public:
         toks_ = &toks;
         pos_ = 0;
         auto block = make(NK::block, cur());
-        if (!check_brackets()) return block;
+        if (auto bad = check_brackets()) {
+            // The statements before the mismatch are parsed as a file of their own (their errors
+            // come too); nothing after it can be told apart reliably.
+            std::vector<Token> head(toks.begin(), toks.begin() + std::ptrdiff_t(bad->cut));
+            head.push_back(toks.back()); // the end token
+            if (bad->cut > 0) block = parse_file(head, library);
+            toks_ = &toks;
+            error(toks[bad->at], bad->message);
+            return block;
+        }
         bool ended = true; // the last statement has its ';' (or there is none yet)
         while (!is(Tok::end)) {
             if (is(Tok::semicolon)) {
@@ -240,12 +250,20 @@ private:
         return n;
     }
 
-    // ExprTk's bracket check: every bracket matched, before anything is parsed.
-    bool check_brackets() {
+    // ExprTk's bracket check: every bracket matched, before anything is parsed. On a mismatch,
+    // `cut` is where the statements before it end (after the last top-level ';' ahead of the first
+    // bracket involved), so those can still be parsed and their errors reported.
+    struct BracketError {
+        std::size_t at;
+        std::string message;
+        std::size_t cut;
+    };
+    std::optional<BracketError> check_brackets() {
         std::vector<std::size_t> stack;
         depth_.assign(toks_->size(), 0);
-        bool ok = true;
-        for (std::size_t i = 0; i < toks_->size(); ++i) {
+        std::optional<BracketError> bad;
+        std::size_t i = 0;
+        for (; i < toks_->size() && !bad; ++i) {
             const Token& t = (*toks_)[i];
             depth_[i] = static_cast<int>(stack.size());
             if (t.type == Tok::lparen || t.type == Tok::lbracket || t.type == Tok::lbrace) {
@@ -255,25 +273,30 @@ private:
                                  : t.type == Tok::rbracket ? Tok::lbracket
                                                            : Tok::lbrace;
                 if (stack.empty()) {
-                    error(t, SB() << "unmatched " << to_string(t.type));
-                    return false;
+                    bad = BracketError{i, SB() << "unmatched " << to_string(t.type), i};
+                    break;
                 }
                 const Token& o = (*toks_)[stack.back()];
                 if (o.type != open) {
-                    error(t, SB() << to_string(t.type) << " does not match " << to_string(o.type)
-                                  << " at " << src_.loc(o.line, o.offset).str());
-                    return false;
+                    bad = BracketError{i, SB() << to_string(t.type) << " does not match " << to_string(o.type)
+                                                << " at " << src_.loc(o.line, o.offset).str(), i};
+                    break;
                 }
                 stack.pop_back();
                 depth_[i] = static_cast<int>(stack.size());
             }
         }
-        if (!stack.empty()) {
-            const Token& o = (*toks_)[stack.back()];
-            error(o, SB() << to_string(o.type) << " is never closed");
-            ok = false;
-        }
-        return ok;
+        if (!bad && !stack.empty())
+            bad = BracketError{stack.back(), SB() << to_string((*toks_)[stack.back()].type) << " is never closed", 0};
+        if (!bad) return bad;
+        std::size_t first = stack.empty() ? bad->at : std::min(bad->at, stack.front());
+        bad->cut = 0;
+        for (std::size_t k = first; k-- > 0;)
+            if (depth_[k] == 0 && (*toks_)[k].type == Tok::semicolon) {
+                bad->cut = k + 1;
+                break;
+            }
+        return bad;
     }
 
     // After a syntax error: skip to the end of the statement (a ';' or a closing '}' at the top

@@ -790,9 +790,13 @@ uint32_t Database::get(const Address& a, Prim t, void* dest, uint32_t n) const {
 
 PutStatus Database::put(const Address& a, Prim t, const void* data, uint32_t n, PutCallback cb) {
     stats_.puts++;
+    // A refusal answers the put-callback too (every put gets its completion): a read-only field,
+    // or DISP set and the field not DISP (base's dbNotify putDisabledType: notifyError, PUTFAIL).
     if (!a.writable() || (a.rec->disp && !is_named(*a.field, "DISP"))) {
         stats_.bad_puts++;
-        return PutStatus::ReadOnly;
+        PutStatus st = a.writable() ? PutStatus::Failed : PutStatus::ReadOnly;
+        if (cb) cb(st);
+        return st;
     }
     Depth depth(*this);
     Record& r = *a.rec;

@@ -297,6 +297,22 @@ TEST(PlcErrors, AllErrorsAreCollected) {
     EXPECT_EQ(e.errors()[3].substr(0, e.errors()[3].find('\n')), "t.plc:3:19: unknown name 'baz'");
 }
 
+TEST(PlcErrors, StatementsBeforeABracketMismatchStillReportTheirErrors) {
+    // an unbalanced bracket hides where later statements begin, not the errors before it
+    TableHost h;
+    const CompileError e = compile_error(h, "static.a := foo;\n"
+                                            "static.b := 1 +* 2;\n"
+                                            "static.c := (1 + 2;\n"
+                                            "static.d := bar;\n");
+    ASSERT_EQ(e.errors().size(), 3u) << e.what();
+    EXPECT_EQ(e.errors()[0].substr(0, e.errors()[0].find('\n')), "t.plc:1:13: unknown name 'foo'");
+    EXPECT_EQ(e.errors()[1].substr(0, e.errors()[1].find('\n')), "t.plc:2:16: expected a value, found '*'");
+    EXPECT_EQ(e.errors()[2].substr(0, e.errors()[2].find('\n')), "t.plc:3:13: '(' is never closed");
+    const CompileError u = compile_error(h, "static.a := foo;\nstatic.b := 2);\n");
+    ASSERT_EQ(u.errors().size(), 2u) << u.what();
+    EXPECT_EQ(u.errors()[1].substr(0, u.errors()[1].find('\n')), "t.plc:2:14: unmatched ')'");
+}
+
 TEST(PlcErrors, SyntaxErrorsNameWhatWasExpected) {
     EXPECT_NE(first_error("static.a := (1 + 2];").find("t.plc:1:19: ']' does not match '('"),
               std::string::npos);

@@ -570,3 +570,21 @@ record(waveform, "w") { field(FTVL, "UINT64") field(NELM, "3") }
     EXPECT_DOUBLE_EQ(got[2], 0);                // a negative double saturates at 0
     EXPECT_NE(load_error(R"(record(ai, "bad") { field(UTAG, "-1") })").find("DBF_UINT64"), std::string::npos);
 }
+
+TEST_F(Conformance, PutsToARecordWithDispSetFailAndCompleteTheirCallback) {
+    // base's dbNotify: putDisabledType ends the put-callback with notifyError (ECA_PUTFAIL)
+    load(R"(record(ao, "a") { field(DISP, "1") })");
+    bool called = false;
+    PutStatus seen = PutStatus::Ok;
+    EXPECT_EQ(put("a", 3, [&](PutStatus st) {
+                  called = true;
+                  seen = st;
+              }),
+              PutStatus::Failed);
+    EXPECT_TRUE(called);
+    EXPECT_EQ(seen, PutStatus::Failed);
+    EXPECT_DOUBLE_EQ(getd("a"), 0);
+    EXPECT_EQ(put("a.DISP", 0), PutStatus::Ok); // DISP itself stays writable
+    EXPECT_EQ(put("a", 3), PutStatus::Ok);
+    EXPECT_DOUBLE_EQ(getd("a"), 3);
+}
