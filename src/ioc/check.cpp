@@ -118,7 +118,11 @@ public:
                 std::vector<Error> errors;
                 motion::AxisConfig c = motion::load_axis_config(a.file, a.macros, errors);
                 for (const auto& e : errors) errors_.add(chain + ": " + e.what());
+                if (!errors.empty()) failed_axes_.push_back(SB() << "axes[" << i << "] (" << a.file << ")");
                 warnings_.insert(warnings_.end(), c.warnings.begin(), c.warnings.end());
+            } else {
+                unreadable_axes_.push_back(chain + ": "); // the IOC build says it again: once is enough
+                failed_axes_.push_back(SB() << "axes[" << i << "] (" << a.file << ")");
             }
             for (std::size_t k = 0; k < a.encoders.size(); ++k) {
                 const auto& enc = a.encoders[k];
@@ -159,6 +163,27 @@ public:
         }
     }
 
+    // The IOC build's errors without the follow-ons of what the first pass found: an unreadable
+    // axis file again, and "no axis n" of PLC code or kinematics said with the axis that did not load.
+    void second_pass(const ErrorList& build) {
+        for (const std::string& m : build.messages()) {
+            bool repeat = false;
+            for (const std::string& chain : unreadable_axes_)
+                repeat = repeat || m.rfind(chain, 0) == 0;
+            if (repeat) continue;
+            std::size_t at = m.find("no axis ");
+            if (at == std::string::npos || failed_axes_.empty()) {
+                errors_.add(m);
+                continue;
+            }
+            std::string note = " [";
+            for (std::size_t k = 0; k < failed_axes_.size(); ++k) note += (k ? ", " : "") + failed_axes_[k];
+            note += failed_axes_.size() == 1 ? " did not load: see its errors]" : " did not load: see their errors]";
+            std::size_t eol = m.find('\n');
+            errors_.add(eol == std::string::npos ? m + note : m.substr(0, eol) + note + m.substr(eol));
+        }
+    }
+
     void databases(const config::IocConfig& cfg) {
         pv::Database db;
         for (std::size_t i = 0; i < cfg.db.size(); ++i) {
@@ -178,6 +203,8 @@ private:
     }
 
     ErrorList& errors_;
+    std::vector<std::string> unreadable_axes_; // the chains of axis entries whose file cannot be read
+    std::vector<std::string> failed_axes_;     // "axes[i] (file)" of every entry whose file has errors
 
 public:
     std::vector<std::string> warnings_; // of the axis and encoder files
@@ -191,8 +218,9 @@ CheckReport check_ioc(const std::string& path, const MacroMap& macros) {
     config::IocConfig cfg = config::IocConfig::load(path, errors, macros);
     std::ifstream probe(path);
     bool bus_errors = false; // the IOC cannot be built without its buses: the second pass waits
+    Checker checker(errors);
     if (probe) { // the files it names, each with all its errors
-        Checker c(errors);
+        Checker& c = checker;
         const ethercat::Catalog* catalog = nullptr;
         errors.capture([&] { catalog = &ethercat::Catalog::builtin(); });
         std::size_t before = errors.size();
@@ -201,16 +229,18 @@ CheckReport check_ioc(const std::string& path, const MacroMap& macros) {
         c.axes(cfg);
         c.plcs(cfg);
         c.databases(cfg);
-        report.warnings = std::move(c.warnings_);
+        report.warnings = c.warnings_;
     }
     if (probe && !bus_errors) { // the errors between the files: the IOC as `run` builds it (repeats dropped)
         for (auto& bc : cfg.buses) bc.link.resolve_timeout_s = 1; // a check does not wait for a scanner
         rt::MonotonicClock clock;
-        Checker(errors).collect([&] {
+        ErrorList build;
+        Checker(build).collect([&] {
             Ioc ioc(cfg, clock);
             report.pvs = ioc.database().size();
             report.buses = ioc.bus_count();
         });
+        checker.second_pass(build);
     }
     report.errors = errors.messages();
     return report;

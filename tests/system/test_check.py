@@ -186,3 +186,58 @@ def test_mistakes_of_several_files_come_in_one_run_with_their_chain_and_run_repo
     run_errors = [line for line in run.stderr.splitlines() if re.match(r"^/\S+:\d+:\d+: ", line)]
     assert run_errors == errors, "\n".join(run_errors) + "\n---\n" + text
     assert "ready:" not in run.stdout
+
+
+FOLLOW_ON = """ioc: {name: FO}
+engine: {rate_hz: 1000}
+buses:
+  - id: 0
+    link: {type: sim}
+    slaves:
+      - {position: 0, type: EK1100}
+      - {position: 1, type: EL7041}
+      - {position: 2, type: EL7041}
+axes:
+  - {file: jack.yaml, macros: {AX_ID: 1, AX_NAME: J1, DRV_SLAVE: 1}}
+  - {file: nothere.yaml, macros: {AX_ID: 2, AX_NAME: J2, DRV_SLAVE: 2}}
+  - {file: jack.yaml, macros: {AX_ID: 3, AX_NAME: J3, DRV_SLAVE: 2}}
+kinematics:
+  - name: pair
+    virtual: [3]
+    real: [1]
+    inverse: |
+      ax1 := ax3 +;
+      ax1 := ax9 * 2;
+      ax1 := (ax3;
+  - name: other
+    virtual: [2]
+    real: [1]
+    inverse: |
+      ax1 := ax2;
+plcs:
+  - {file: main.plc}
+"""
+
+
+def test_an_axis_that_does_not_load_is_named_once_and_its_follow_ons_say_so(tmp_path):
+    """A missing axis file comes once (at the ioc.yaml line that names it); PLC code and a
+    kinematics group naming that axis say that it did not load; an inverse with a bracket that is
+    never closed still reports the errors of the statements before it."""
+    shutil.copy(JACK, tmp_path / "jack.yaml")
+    ioc = tmp_path / "ioc.yaml"
+    ioc.write_text(FOLLOW_ON)
+    (tmp_path / "main.plc").write_text("ax2.drv.enable := 1;\n")
+    r = check(ioc)
+    assert r.returncode == 1, r.stdout + r.stderr
+    errors = [line for line in r.stderr.splitlines() if re.match(r"^/\S+:\d+:\d+: ", line)]
+    text = "\n".join(errors)
+    assert sum("nothere.yaml: No such file" in e or "nothere.yaml: cannot open" in e for e in errors) == 1, text
+    note = f"[axes[1] ({tmp_path}/nothere.yaml) did not load: see its errors]"
+    plc = [e for e in errors if "main.plc" in e]
+    assert len(plc) == 1 and "no axis 2" in plc[0] and plc[0].endswith(note), text
+    other = [e for e in errors if "kinematics 'other'" in e]
+    assert len(other) == 1 and other[0].endswith(f"no axis 2 (virtual) {note}"), text
+    pair = [e for e in errors if "kinematics 'pair' inverse:" in e]
+    assert [e.split(" inverse:")[1].split(":")[0] for e in pair] == ["1", "2", "3"], text
+    assert pair[2].endswith("'(' is never closed"), text
+    assert r.stderr.rstrip().endswith(f"{ioc}: {len(errors)} errors"), r.stderr
