@@ -410,7 +410,7 @@ def client(out_path):
                 return f"request {ca_message(st).decode()}"
             libca.ca_flush_io()
             t0 = time.time()
-            while "r" not in done and time.time() - t0 < 3:
+            while "r" not in done and time.time() - t0 < 1.5:
                 ca.poll(0.01)
             return ca_message(done["r"]).decode() if "r" in done else "no callback"
 
@@ -445,7 +445,8 @@ def client(out_path):
         for rtype, fields in sweep:
             progress(f"47 put {rtype}")
             for fname, dbf, settable in fields:
-                if not settable or fname in ("PROC", "DTYP", "SCAN", "PHAS", "EVNT", "PRIO", "TPRO"):
+                # DISP would refuse every later put; the scan and device fields move the record
+                if not settable or fname in ("PROC", "DTYP", "SCAN", "PHAS", "EVNT", "PRIO", "TPRO", "DISP"):
                     continue
                 n = f"cf:p:{rtype}.{fname}"
                 key = f"47 put|cf:p:{rtype}|{fname}"

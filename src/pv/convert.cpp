@@ -241,12 +241,14 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
             uint16_t v = *reinterpret_cast<const uint16_t*>(src);
             const char* strs[kEnumStates] = {};
             int n = r.enum_strings(f, strs);
-            if (v < n && strs[v])
+            if (f.menu == &kMenuSoftDtyp && !has_device_support(r.type().name()))
+                d[0] = 0; // a DBF_DEVICE field with no choices
+            else if (v < n && strs[v])
                 copy_string(d, kStringSize, strs[v]);
             else if (f.menu && v < f.menu->choices.size())
                 copy_string(d, kStringSize, f.menu->choices[v]);
-            else if (f.menu)
-                copy_string(d, kStringSize, "Illegal_Value");
+            else if (f.menu) // a menu index without a choice (SSCN's 65535): its number, as softIoc serves it
+                std::snprintf(d, kStringSize, "%u", unsigned(v));
             else if (n > 0) // a state without a string, or none (mbbi's 65535): empty, as softIoc
                 d[0] = 0;
             else

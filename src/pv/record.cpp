@@ -92,6 +92,11 @@ const char* dtyp_refusal(std::string_view type, uint16_t dtyp) {
     default: return nullptr;
     }
 }
+bool has_device_support(std::string_view type) {
+    for (const char* t : {"aSub", "calc", "compress", "dfanout", "fanout", "permissive", "sel", "seq", "state", "sub"})
+        if (type == t) return false;
+    return true;
+}
 const Menu kMenuPriority{"menuPriority", {"LOW", "MEDIUM", "HIGH"}};
 const Menu kMenuOif{"aoOIF", {"Full", "Incremental"}};
 
@@ -235,7 +240,9 @@ void Record::metadata(const FieldDesc& f, Metadata& md) const {
 }
 
 int16_t Record::precision(const FieldDesc& f) const {
-    return (f.dbf == Dbf::Float || f.dbf == Dbf::Double) ? 15 : 0; // recGblGetPrec default
+    // dbConvert's getDoubleString starts from 6; a record type without get_precision keeps it,
+    // and recGblGetPrec keeps it too (record types override this where base's get_precision acts)
+    return (f.dbf == Dbf::Float || f.dbf == Dbf::Double) ? 6 : 0;
 }
 
 bool Record::set_sevr(uint16_t new_stat, uint16_t new_sevr, std::string_view msg) {

@@ -39,6 +39,9 @@ bool soft_dtyp(uint16_t dtyp);
 // Why record type `type` cannot have DTYP choice `dtyp` of kMenuSoftDtyp (as base's devSoft.dbd
 // lists them), or nullptr when it can.
 const char* dtyp_refusal(std::string_view type, uint16_t dtyp);
+// False for base's record types that have no device support (calc, seq, sub, ...): their DTYP
+// reads as an empty string, as a DBF_DEVICE field with no choices does in base.
+bool has_device_support(std::string_view type);
 extern const Menu kMenuScan, kMenuPini, kMenuAlarmSevr, kMenuAlarmStat, kMenuYesNo, kMenuFtype,
     kMenuPostOnChange, kMenuPostAlways, kMenuOmsl, kMenuIvoa, kMenuSoftDtyp, kMenuPriority, kMenuOif;
 

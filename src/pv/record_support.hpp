@@ -551,7 +551,7 @@ template <typename T> struct IntegerOutRecord : IntegerBase<IntegerOutRecord<T>,
         v.push_back(BEAMCTL_INT_FIELD(R, DRVL, drvl, kProcess | kProp | kEgu));
         add_output_fields<R>(v, kIntegerDbf<T>);
         if (kHasOopt) {
-            v.push_back(BEAMCTL_INT_FIELD(R, PVAL, pval, kReadOnly));
+            v.push_back(BEAMCTL_INT_FIELD(R, PVAL, pval, 0));
             v.push_back(BEAMCTL_MENU(R, OOCH, ooch, kMenuYesNo, 0));
             v.push_back(BEAMCTL_MENU(R, OOPT, oopt, kMenuLongoutOopt, 0));
         }

@@ -46,7 +46,7 @@ const Menu kMenuAaiPost{"aaiPOST", {"Always", "On Change"}};
 // VAL is NELM (subArray: MALM) elements of FTVL; NORD of them are valid.
 template <typename Self> struct ArrayBase : Record {
     using Record::Record;
-    uint16_t ftvl = 10; // DOUBLE
+    uint16_t ftvl = 0; // STRING: menuFtype choice 0, base's default (no initial())
     uint32_t nelm = 1, nord = 0;
     int16_t prec = 0;
     char egu[16] = {};
@@ -191,6 +191,7 @@ struct AaoRecord : AaBase<AaoRecord> {
     void init() override {
         allocate("NELM", nelm);
         nord = nelm == 1;
+        if (out.kind == Link::Kind::Empty || out.kind == Link::Kind::Constant) nord = 0; // devAaoSoft init_record
         sim_init(*this, sim, *simm_fd);
         if (omsl == 1 && load_constant(dol, *val_fd)) udf = 0; // fetchValue(init): constant DOL
     }
@@ -641,9 +642,10 @@ struct HistogramRecord : Record {
         Record::metadata(f, md);
         if (&f == val_fd) fill_limits(md, hopr, lopr, hopr, lopr);
     }
-    int16_t precision(const FieldDesc& f) const override { // SDEL: histogramSDELprecision
-        if (is(f, "SDEL")) return 2;
-        return prec_of(f, nullptr, prec);
+    int16_t precision(const FieldDesc& f) const override { // histogramRecord's get_precision
+        if (is(f, "SDEL")) return 2; // histogramSDELprecision
+        if (is(f, "ULIM") || is(f, "LLIM") || is(f, "SGNL") || is(f, "SVAL") || is(f, "WDTH")) return prec;
+        return Record::precision(f);
     }
     ProcessResult process() override {
         SimStep step = sim_begin(*this, sim, *simm_fd);

@@ -158,6 +158,10 @@ struct CalcoutRecord : CalcBase<CalcoutRecord> {
     char oevt[40] = {};
     bool delayed = false;
     const FieldDesc* oval_fd = type().find("OVAL");
+    int16_t precision(const FieldDesc& f) const override {
+        if (is(f, "ODLY")) return 2; // calcoutODLYprecision
+        return CalcBase::precision(f);
+    }
     const FieldDesc* ocal_fd = type().find("OCAL");
 
     static std::vector<FieldDesc> fields() {
@@ -169,8 +173,8 @@ struct CalcoutRecord : CalcBase<CalcoutRecord> {
             BEAMCTL_MENU(R, DOPT, dopt, kMenuCalcoutDopt, 0),
             BEAMCTL_FIELD(R, OCAL, ocal_text, String, kProcess),
             BEAMCTL_FIELD(R, OVAL, oval, Double, kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, POVL, povl, Double, kReadOnly | kEgu | kDisplayHopr),
-            BEAMCTL_FIELD(R, PVAL, pval, Double, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, POVL, povl, Double, kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, PVAL, pval, Double, kEgu | kDisplayHopr),
             BEAMCTL_FIELD(R, ODLY, odly, Double, 0),
             BEAMCTL_FIELD(R, DLYA, dlya, UShort, kReadOnly),
             BEAMCTL_MENU(R, IVOA, ivoa, kMenuIvoa, 0),
@@ -308,7 +312,7 @@ constexpr int kGroups = 16;
 template <typename Self> struct Selecting : Record {
     using Record::Record;
     int32_t val = 0;
-    uint16_t selm = 0, seln = 0;
+    uint16_t selm = 0, seln = 1; // SELN initial("1") (seq, fanout)
     int16_t offs = 0, shft = -1;
     Link sell;
     const FieldDesc* val_fd = type().find("VAL");
@@ -369,7 +373,7 @@ struct SeqRecord : Selecting<SeqRecord> {
         using R = SeqRecord;
         auto v = selection_fields();
         auto add = {
-            BEAMCTL_FIELD(R, OLDN, oldn, UShort, kReadOnly),
+            BEAMCTL_FIELD(R, OLDN, oldn, UShort, 0),
             BEAMCTL_FIELD(R, PREC, prec, Short, kMeta),
         };
         v.insert(v.end(), add.begin(), add.end());
@@ -404,8 +408,10 @@ struct SeqRecord : Selecting<SeqRecord> {
         do_fd.bind(type(), do_n, kGroups);
         for (int i = 0; i < kGroups; ++i) load_constant(dol[i], dov[i]);
         selection_init();
+        oldn = seln; // seqRecord init_record
     }
     int16_t precision(const FieldDesc& f) const override {
+        if (f.name[0] == 'D' && f.name[1] == 'L' && f.name[2] == 'Y') return 2; // DLYn: seqDLYprecision
         if (f.dbf == Dbf::Double) return prec;
         return Record::precision(f);
     }
@@ -561,7 +567,7 @@ struct SelRecord : AnalogBase<SelRecord> {
 
     explicit SelRecord(const RecordType& t) : AnalogBase(t) {
         std::fill(std::begin(args), std::end(args), NAN); // unused inputs take no part
-        std::fill(std::begin(last), std::end(last), NAN);
+        std::fill(std::begin(last), std::end(last), 0.0); // LA..LL start 0, as base's
     }
     static std::vector<FieldDesc> fields() {
         using R = SelRecord;

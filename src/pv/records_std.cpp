@@ -193,7 +193,7 @@ struct AoRecord : AnalogBase<AoRecord> {
         using R = AoRecord;
         auto v = analog_fields(common_fields());
         auto add = {
-            BEAMCTL_FIELD(R, OVAL, oval, Double, kReadOnly | kEgu | kDisplayHopr),
+            BEAMCTL_FIELD(R, OVAL, oval, Double, kEgu | kDisplayHopr),
             BEAMCTL_FIELD(R, PVAL, pval, Double, kReadOnly | kEgu | kDisplayHopr),
             BEAMCTL_FIELD(R, DRVH, drvh, Double, kProcess | kProp | kEgu),
             BEAMCTL_FIELD(R, DRVL, drvl, Double, kProcess | kProp | kEgu),
@@ -474,13 +474,17 @@ struct BoRecord : BinaryBase<BoRecord> {
         Record::metadata(f, md);
         if (&f == val_fd) md.ctrl_hi = 65535; // boRecord's get_control_double (as softIoc serves)
     }
+    int16_t precision(const FieldDesc& f) const override {
+        if (is(f, "HIGH")) return 2; // boHIGHprecision
+        return Record::precision(f);
+    }
     static std::vector<FieldDesc> fields() {
         using R = BoRecord;
         auto v = binary_fields(common_fields());
         add_output_fields<R>(v, Dbf::UShort);
         v.push_back(BEAMCTL_FIELD(R, HIGH, high, Double, 0));
-        v.push_back(BEAMCTL_FIELD(R, RBV, rbv, Long, kReadOnly));
-        v.push_back(BEAMCTL_FIELD(R, ORBV, orbv, Long, kReadOnly));
+        v.push_back(BEAMCTL_FIELD(R, RBV, rbv, ULong, kReadOnly));
+        v.push_back(BEAMCTL_FIELD(R, ORBV, orbv, ULong, kReadOnly));
         add_simulation_fields<R>(v, true, true);
         return v;
     }
@@ -569,7 +573,7 @@ template <typename Self> struct MbbBase : Record {
     int32_t rbv = 0, orbv = 0;
     int16_t nobt = 0, shft = 0;
     uint16_t lalm = 0, mlst = 0;
-    uint8_t sdef = 0;
+    int16_t sdef = 0; // DBF_SHORT
     double aftc = 0, afvl = 0;
     Link inp, dol, out; // Soft Channel: mbbi INP; mbbo DOL (OMSL closed_loop) and OUT
     uint16_t omsl = 0, ivoa = 0, ivov = 0;
@@ -597,11 +601,11 @@ template <typename Self> struct MbbBase : Record {
             BEAMCTL_FIELD(R, RVAL, rval, ULong, kProcess),
             BEAMCTL_FIELD(R, ORAW, oraw, ULong, kReadOnly),
             BEAMCTL_FIELD(R, MASK, mask, ULong, 0),
-            BEAMCTL_FIELD(R, NOBT, nobt, Short, 0),
-            BEAMCTL_FIELD(R, SHFT, shft, Short, 0),
+            BEAMCTL_FIELD(R, NOBT, nobt, UShort, 0),
+            BEAMCTL_FIELD(R, SHFT, shft, UShort, 0),
             BEAMCTL_FIELD(R, LALM, lalm, UShort, kReadOnly),
             BEAMCTL_FIELD(R, MLST, mlst, UShort, kReadOnly),
-            BEAMCTL_FIELD(R, SDEF, sdef, UChar, kReadOnly),
+            BEAMCTL_FIELD(R, SDEF, sdef, Short, kReadOnly),
         };
         v.insert(v.end(), add.begin(), add.end());
         return v;
@@ -779,8 +783,8 @@ struct MbboRecord : MbbBase<MbboRecord> {
         using R = MbboRecord;
         auto v = mbb_fields(common_fields());
         add_output_fields<R>(v, Dbf::UShort);
-        v.push_back(BEAMCTL_FIELD(R, RBV, rbv, Long, kReadOnly));
-        v.push_back(BEAMCTL_FIELD(R, ORBV, orbv, Long, kReadOnly));
+        v.push_back(BEAMCTL_FIELD(R, RBV, rbv, ULong, kReadOnly));
+        v.push_back(BEAMCTL_FIELD(R, ORBV, orbv, ULong, kReadOnly));
         add_simulation_fields<R>(v, true, true);
         return v;
     }
@@ -973,7 +977,7 @@ struct StringoutRecord : StringBase<StringoutRecord> {
 // ---------------------------------------------------------------- waveform
 struct WaveformRecord : Record {
     using Record::Record;
-    uint16_t ftvl = 10; // DOUBLE
+    uint16_t ftvl = 0; // STRING: menuFtype choice 0, base's default (no initial())
     uint32_t nelm = 1, nord = 0;
     char egu[16] = {};
     int16_t prec = 0;
@@ -1058,9 +1062,10 @@ struct WaveformRecord : Record {
     void set_count(const FieldDesc& f, uint32_t n) override {
         if (&f == val_fd) nord = n;
     }
-    int16_t precision(const FieldDesc& f) const override {
+    int16_t precision(const FieldDesc& f) const override { // PREC for VAL and every double field
         if (&f == val_fd) return prec;
-        return Record::precision(f);
+        if (f.dbf == Dbf::Float || f.dbf == Dbf::Double) return (prec < 0 || prec > 15) ? 15 : prec;
+        return 0;
     }
     void metadata(const FieldDesc& f, Metadata& md) const override {
         Record::metadata(f, md);

@@ -82,11 +82,14 @@ struct SubRecord : AnalogBase<SubRecord> {
                 val = c.val;
             }
         }
-        if (snam[0]) {
-            const RecordRoutines::Routine* r = RecordRoutines::global().find(snam);
-            if (!r || !r->sub) routine_missing(*this, missing_routine_message("SNAM", snam, "sub"));
-            else routine = r->sub;
+        if (!snam[0]) { // base's subRecord init_record: "SNAM is empty", and the record never processes
+            init_error("SNAM is empty: the record never processes (PACT stays 1, as in EPICS base)");
+            pact = 1;
+            return;
         }
+        const RecordRoutines::Routine* r = RecordRoutines::global().find(snam);
+        if (!r || !r->sub) routine_missing(*this, missing_routine_message("SNAM", snam, "sub"));
+        else routine = r->sub;
         mlst = alst = lalm = val;
     }
     PutStatus special(const FieldDesc& f) override {

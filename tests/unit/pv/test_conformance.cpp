@@ -588,3 +588,12 @@ TEST_F(Conformance, PutsToARecordWithDispSetFailAndCompleteTheirCallback) {
     EXPECT_EQ(put("a", 3), PutStatus::Ok);
     EXPECT_DOUBLE_EQ(getd("a"), 3);
 }
+
+TEST_F(Conformance, ASubRecordWithoutSnamNeverProcesses) {
+    // base's subRecord init_record: "SNAM is empty", PACT TRUE for good
+    load(R"(record(sub, "s") { field(INPA, "2") })");
+    EXPECT_DOUBLE_EQ(getd("s.PACT"), 1);
+    db.process(*db.find("s"));
+    EXPECT_DOUBLE_EQ(getd("s"), 0);
+    EXPECT_DOUBLE_EQ(getd("s.A"), 2); // the constant input was loaded at init
+}
