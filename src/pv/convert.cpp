@@ -3,6 +3,7 @@
 #include "core/error.hpp"
 #include "pv/link.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cfloat>
@@ -100,7 +101,7 @@ void write_double(const Elements& e, uint32_t i, double v) {
     case Dbf::UInt64: *reinterpret_cast<uint64_t*>(p) = saturate<uint64_t>(v); break;
     case Dbf::Float: *reinterpret_cast<float*>(p) = float(v); break;
     case Dbf::Double: *reinterpret_cast<double*>(p) = v; break;
-    case Dbf::String: format_double(v, 15, p, e.stride); break;
+    case Dbf::String: format_double(v, 6, p, e.stride); break; // putDoubleString's default precision
     default: break; // links are written as text only
     }
 }
@@ -176,12 +177,35 @@ bool put_string(Record& r, const FieldDesc& f, const Elements& e, uint32_t i, st
 } // namespace
 
 void format_double(double v, int prec, char* out, std::size_t size) {
+    // libCom's cvtDoubleToString, which dbConvert uses for every DBR_STRING of a double: up to 8
+    // decimals and |v| <= 1e7 in fixed point, the last digit rounded half up from the truncated
+    // next one; otherwise "%*.*e" (more decimals, or |v| > 1e16) or "%.*f" with at most 3.
     if (prec < 0) prec = 0;
-    if (prec > 17) prec = 17;
-    if (std::isnan(v) || std::isinf(v) || v > 1e16 || v < -1e16)
-        std::snprintf(out, size, "%.*g", prec ? prec : 1, v);
-    else
-        std::snprintf(out, size, "%.*f", prec, v);
+    if (std::isnan(v) || prec > 8 || v > 1e7 || v < -1e7) {
+        if (prec > 8 || v > 1e16 || v < -1e16)
+            std::snprintf(out, size, "%*.*e", std::min(prec, 17) + 7, std::min(prec, 17), v);
+        else
+            std::snprintf(out, size, "%.*f", std::min(prec, 3), v);
+        return;
+    }
+    static constexpr int32_t kScale[] = {1, 10, 100, 1000, 10000, 100000, 1000000, 10000000, 100000000};
+    char buf[32];
+    char* p = buf;
+    if (v < 0) {
+        *p++ = '-';
+        v = -v;
+    }
+    int32_t whole = int32_t(v);
+    const int32_t scale = kScale[prec];
+    int32_t fraction = int32_t((v - whole) * scale * 10);
+    fraction = (fraction + 5) / 10; // half up
+    if (fraction / scale >= 1) {
+        ++whole;
+        fraction -= scale;
+    }
+    p += std::snprintf(p, buf + sizeof buf - p, "%d", int(whole));
+    if (prec > 0) p += std::snprintf(p, buf + sizeof buf - p, ".%0*d", prec, int(fraction));
+    copy_string(out, size, std::string_view(buf, std::size_t(p - buf)));
 }
 
 bool parse_double(std::string_view s, double& out) {
@@ -249,10 +273,10 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
                 copy_string(d, kStringSize, f.menu->choices[v]);
             else if (f.menu) // a menu index without a choice (SSCN's 65535): its number, as softIoc serves it
                 std::snprintf(d, kStringSize, "%u", unsigned(v));
-            else if (n > 0) // a state without a string, or none (mbbi's 65535): empty, as softIoc
+            else if (n > 0 || v <= 15) // a state without a string, or none: empty, as softIoc
                 d[0] = 0;
-            else
-                std::snprintf(d, kStringSize, "%u", unsigned(v));
+            else // mbbi/mbbo get_enum_str beyond the 16 states
+                copy_string(d, kStringSize, "Illegal Value");
         } else if (e.type == Dbf::Float || e.type == Dbf::Double) {
             format_double(read_double(e, i), r.precision(f), d, kStringSize);
         } else {
@@ -310,6 +334,10 @@ bool put_element(Record& r, const FieldDesc& f, const Elements& e, uint32_t i, P
     case Prim::Double: {
         double v = *static_cast<const double*>(src);
         if (is_integer_dbf(e.type) && std::isnan(v)) return false;
+        if (e.type == Dbf::String && (f.flags & kArray)) { // a STRING array's VAL: its PREC
+            format_double(v, r.precision(f), static_cast<char*>(e.data) + std::size_t(i) * e.stride, e.stride);
+            return true;
+        }
         write_double(e, i, v);
         return true;
     }

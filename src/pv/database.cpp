@@ -726,7 +726,7 @@ bool Database::resolve(std::string_view channel, Address& out, std::string* why)
         out.native = native_prim(e.type);
         out.count = e.capacity;
     } else {
-        out.native = native_prim(fd->dbf);
+        out.native = native_prim(r->elements(*fd).type); // the type as the record serves it now (cvt_dbaddr)
         out.count = 1;
     }
     return true;

@@ -360,6 +360,7 @@ struct SeqRecord : Selecting<SeqRecord> {
     using Selecting::Selecting;
     uint16_t oldn = 0;
     int16_t prec = 0;
+    const int dly1_index = type().find("DLY1")->index; // DLY0 (the group before DLY1) has PREC
     double dly[kGroups] = {};
     Link dol[kGroups];
     double dov[kGroups] = {};
@@ -411,7 +412,7 @@ struct SeqRecord : Selecting<SeqRecord> {
         oldn = seln; // seqRecord init_record
     }
     int16_t precision(const FieldDesc& f) const override {
-        if (f.name[0] == 'D' && f.name[1] == 'L' && f.name[2] == 'Y') return 2; // DLYn: seqDLYprecision
+        if (f.index >= dly1_index && f.name[0] == 'D' && f.name[1] == 'L' && f.name[2] == 'Y') return 2; // DLY1..: seqDLYprecision
         if (f.dbf == Dbf::Double) return prec;
         return Record::precision(f);
     }

@@ -788,6 +788,12 @@ struct MbboRecord : MbbBase<MbboRecord> {
         add_simulation_fields<R>(v, true, true);
         return v;
     }
+    // mbboRecord's cvt_dbaddr: without any state defined (SDEF 0), VAL is a DBF_USHORT (a number
+    // to clients: DBR_LONG natively, its digits as DBR_STRING, and a string put is a number).
+    Elements elements(const FieldDesc& f) override {
+        if (&f == val_fd && !sdef) return Elements{Dbf::UShort, &val, 1, 1, 2};
+        return MbbBase::elements(f);
+    }
     ProcessResult process() override {
         SimStep step = sim_begin(*this, sim, *simm_fd);
         if (step == SimStep::Wait) return ProcessResult::Async;

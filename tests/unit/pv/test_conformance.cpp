@@ -597,3 +597,39 @@ TEST_F(Conformance, ASubRecordWithoutSnamNeverProcesses) {
     EXPECT_DOUBLE_EQ(getd("s"), 0);
     EXPECT_DOUBLE_EQ(getd("s.A"), 2); // the constant input was loaded at init
 }
+
+TEST_F(Conformance, FieldsReadAsSoftIocServesThem) {
+    // each case was a difference of bench/conformance_db.py's sweep of every field of every type
+    load(R"(
+record(ao, "a") { field(VAL, "2.5") }
+record(ao, "p") { field(VAL, "123456789.125") field(PREC, "2") }
+record(ao, "e") { field(VAL, "2.5") field(PREC, "10") }
+record(longin, "li") {}
+record(bo, "b") {}
+record(calcout, "co") {}
+record(seq, "s") { field(PREC, "3") }
+record(mbbo, "m") {}
+record(mbbo, "ms") { field(ZRST, "zero") field(ONST, "one") }
+record(waveform, "w") {}
+record(fanout, "f") {}
+)");
+    EXPECT_EQ(gets("a"), "3");               // cvtDoubleToString rounds the last digit half up
+    EXPECT_EQ(gets("p"), "123456789.12");    // beyond 1e7: "%.*f", at most 3 decimals
+    EXPECT_EQ(gets("e"), " 2.5000000000e+00"); // more than 8 decimals: "%*.*e"
+    EXPECT_EQ(gets("li.SDLY"), "-1.000000"); // no get_precision: 6
+    EXPECT_EQ(gets("b.HIGH"), "0.00");       // boHIGHprecision
+    EXPECT_EQ(gets("co.ODLY"), "0.00");      // calcoutODLYprecision
+    EXPECT_EQ(gets("s.DLY1"), "0.00");       // seqDLYprecision
+    EXPECT_EQ(gets("s.DLY0"), "0.000");      // the group before DLY1: PREC
+    EXPECT_EQ(gets("li.SSCN"), "65535");     // a menu index without a choice: its number
+    EXPECT_EQ(gets("co.DTYP"), "Soft Channel");
+    EXPECT_EQ(gets("s.DTYP"), "");           // seq has no device support
+    EXPECT_EQ(gets("w.FTVL"), "STRING");     // menuFtype's first choice
+    EXPECT_EQ(gets("f.SELN"), "1");
+    EXPECT_EQ(addr("m").native, Prim::Long);  // no state defined: VAL is a DBF_USHORT
+    EXPECT_EQ(put_str("m", "3"), PutStatus::Ok);
+    EXPECT_EQ(gets("m"), "3");
+    EXPECT_EQ(addr("ms").native, Prim::Enum);
+    EXPECT_EQ(put_str("ms", "one"), PutStatus::Ok);
+    EXPECT_EQ(gets("ms"), "one");
+}
