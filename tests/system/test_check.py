@@ -188,35 +188,14 @@ def test_mistakes_of_several_files_come_in_one_run_with_their_chain_and_run_repo
     assert "ready:" not in run.stdout
 
 
-FOLLOW_ON = """ioc: {name: FO}
-engine: {rate_hz: 1000}
-buses:
-  - id: 0
-    link: {type: sim}
-    slaves:
-      - {position: 0, type: EK1100}
-      - {position: 1, type: EL7041}
-      - {position: 2, type: EL7041}
-axes:
-  - {file: jack.yaml, macros: {AX_ID: 1, AX_NAME: J1, DRV_SLAVE: 1}}
-  - {file: nothere.yaml, macros: {AX_ID: 2, AX_NAME: J2, DRV_SLAVE: 2}}
-  - {file: jack.yaml, macros: {AX_ID: 3, AX_NAME: J3, DRV_SLAVE: 2}}
-kinematics:
-  - name: pair
-    virtual: [3]
-    real: [1]
-    inverse: |
-      ax1 := ax3 +;
-      ax1 := ax9 * 2;
-      ax1 := (ax3;
-  - name: other
-    virtual: [2]
-    real: [1]
-    inverse: |
-      ax1 := ax2;
-plcs:
-  - {file: main.plc}
-"""
+# PHASES's IOC with the second axis file missing, two kinematics groups and PLC code naming it
+FOLLOW_ON = (PHASES.replace("priorty: 50", "priority: 50")
+             .replace("{file: jack.yaml, macros: {AX_ID: 2, AX_NAME: J2, DRV_SLAVE: 5}}",
+                      "{file: nothere.yaml, macros: {AX_ID: 2, AX_NAME: J2, DRV_SLAVE: 2}}")
+             .replace("    real: [1, 2]\n    inverse: |\n      ax1 := ax3 +;\n",
+                      "    real: [1]\n    inverse: |\n      ax1 := ax3 +;\n      ax1 := ax9 * 2;\n      ax1 := (ax3;\n"
+                      "  - name: other\n    virtual: [2]\n    real: [1]\n    inverse: |\n      ax1 := ax2;\n")
+             .replace("db:\n  - {file: extra.db}\n", "plcs:\n  - {file: main.plc}\n"))
 
 
 def test_an_axis_that_does_not_load_is_named_once_and_its_follow_ons_say_so(tmp_path):
@@ -225,6 +204,7 @@ def test_an_axis_that_does_not_load_is_named_once_and_its_follow_ons_say_so(tmp_
     never closed still reports the errors of the statements before it."""
     shutil.copy(JACK, tmp_path / "jack.yaml")
     ioc = tmp_path / "ioc.yaml"
+    assert "nothere.yaml" in FOLLOW_ON and "name: other" in FOLLOW_ON and "main.plc" in FOLLOW_ON
     ioc.write_text(FOLLOW_ON)
     (tmp_path / "main.plc").write_text("ax2.drv.enable := 1;\n")
     r = check(ioc)
