@@ -294,22 +294,23 @@ int run_softioc(const SoftIocOptions& o) {
 
     // Signals: TERM/INT stop cleanly, HUP reloads the access-security file.
     const std::string acf_path = shell.acf_file(), acf_subs = shell.acf_substitutions();
-    std::function<void()> reload;
+    std::function<bool()> reload; // true: reloaded
     if (!acf_path.empty()) {
         reload = [&, acf_path, acf_subs] {
-            if (acf_subs.empty()) {
-                server->reload_access_security(acf_path);
-                return;
-            }
+            if (acf_subs.empty()) return server->reload_access_security(acf_path);
             try {
                 server->set_access_security(load_acf(acf_path, acf_subs));
                 LOG_INFO(lg, "access security reloaded from " << acf_path);
+                return true;
             } catch (const Error& e) {
                 LOG_ERR(lg, "access security reload failed, keeping the previous rules: " << e.what());
+                return false;
             }
         };
     }
-    LoopSignals signals(loop, reload);
+    LoopSignals signals(loop, reload ? std::function<void()>([&reload] { (void)reload(); }) : std::function<void()>());
+    // devIocStats's READACF re-reads the ACF as SIGHUP does; SYSRESET stops as SIGTERM does
+    pv::IocStats::set_admin_hooks(reload, [&loop] { loop.call_after(0, [&loop] { loop.stop(); }); });
     if (!db.records().empty()) loop.call_every(0.01, [&db] { db.scan_periodic(EventLoop::now_s()); });
     if (!o.autosave_dir.empty()) pv::autosave_defaults_after_init(autosave, db, o.autosave_period_s);
     if (autosave.set_count() > 0) {
@@ -325,6 +326,7 @@ int run_softioc(const SoftIocOptions& o) {
                 unsigned(server->udp_port()));
     std::fflush(stdout);
     loop.run();
+    pv::IocStats::set_admin_hooks({}, {});
     autosave.flush(); // a clean stop saves what changed since the last save
     return exit_status;
 }

@@ -47,6 +47,7 @@ enum beamctl_ftype {
     BEAMCTL_FT_LONG = 5,   /* int32_t */
     BEAMCTL_FT_ULONG = 6,  /* uint32_t */
     BEAMCTL_FT_INT64 = 7,  /* int64_t */
+    BEAMCTL_FT_UINT64 = 8, /* uint64_t */
     BEAMCTL_FT_FLOAT = 9,  /* float */
     BEAMCTL_FT_DOUBLE = 10 /* double */
 };

@@ -1051,6 +1051,9 @@ int Ioc::run() {
     for (auto& b : buses_) b.bus->start_health();
     std::string acf = cfg_.acf;
     LoopSignals signals(loop, acf.empty() ? std::function<void()>() : [&] { server.reload_access_security(acf); });
+    // devIocStats's READACF re-reads the ACF as SIGHUP does; SYSRESET stops as SIGTERM does
+    pv::IocStats::set_admin_hooks(acf.empty() ? std::function<bool()>() : [&] { return server.reload_access_security(acf); },
+                                  [&loop] { loop.call_after(0, [&loop] { loop.stop(); }); });
     loop.call_every(0.01, [this] { publish(); });
     loop.call_every(0.01, [this] { db_.scan_periodic(EventLoop::now_s()); });
     if (autosave_) {
@@ -1118,6 +1121,7 @@ int Ioc::run() {
     }
     if (plans_) plans_->set_scheduler({}); // the loop goes now
     db_.ioc_stats().set_ca_counts({});    // and the server
+    pv::IocStats::set_admin_hooks({}, {});
     return 0;
 }
 

@@ -2,6 +2,7 @@
 
 #include "pv/database.hpp"
 #include "pv/record.hpp"
+#include "pv/sub_routines.hpp"
 
 #include <dirent.h>
 #include <sys/resource.h>
@@ -173,7 +174,36 @@ double process_cpu_s() {
 
 const auto g_start_wall_s = wall_s(); // up_time counts from program start
 
+// ---- the subroutines of devIocStats's READACF and SYSRESET (base's asSubRecordFunctions.c and
+// devIocStatsSub.c name them; built in, found by SNAM as a dlload-ed library's are)
+std::function<bool()> g_reload_acf;
+std::function<void()> g_restart;
+
+long as_sub_init(beamctl_sub*) { return 0; }
+long as_sub_process(beamctl_sub* s) { // a put of 1 re-reads the ACF; VAL reads 0 after
+    if (s->val != 1.0) return 0;
+    s->val = 0;
+    if (!g_reload_acf) {
+        std::fprintf(stderr, "%s: asSubProcess: this IOC has no access-security file to re-read\n", s->name);
+        return -1;
+    }
+    return g_reload_acf() ? 0 : -1;
+}
+long reboot_proc(beamctl_sub* s) { // A..F all 0 and L 1: restart (a clean stop here)
+    if (!(s->a < 0.5 && s->b < 0.5 && s->c < 0.5 && s->d < 0.5 && s->e < 0.5 && s->f < 0.5 && s->l > 0.5)) return 0;
+    if (!g_restart) return -1;
+    std::fprintf(stderr, "%s: IOC reboot started (beamctl: a clean stop)\n", s->name);
+    g_restart();
+    return 0;
+}
+
 } // namespace
+
+void add_builtin_routines(RecordRoutines& routines) {
+    routines.add({"asSubInit", as_sub_init, nullptr, ""});
+    routines.add({"asSubProcess", as_sub_process, nullptr, ""});
+    routines.add({"rebootProc", reboot_proc, nullptr, ""});
+}
 
 // One record's link to a devIocStats parameter.
 class IocStats::Device : public LinkDevice {
@@ -279,6 +309,11 @@ IocStats::IocStats() {
 IocStats::~IocStats() = default;
 
 void IocStats::set_release(std::string text) { g_release = std::move(text); }
+
+void IocStats::set_admin_hooks(std::function<bool()> reload_acf, std::function<void()> restart) {
+    g_reload_acf = std::move(reload_acf);
+    g_restart = std::move(restart);
+}
 
 LinkDevice* IocStats::bind(Record& r, const Link& l, uint16_t dtyp, std::string* why) {
     std::string p = l.kind == Link::Kind::Hw ? l.s().address : std::string();
@@ -429,9 +464,22 @@ void IocStats::tick(Database& db, double now_s) {
 const char* IocStats::database_text() {
     // The records of devIocStats's iocAdmin/Db/ioc.template and of iocAdminSoft.substitutions's
     // environment records, under the same names, with the same device parameters and alarm limits
-    // (so that alarm handler and archiver set-ups made for them work). Not provided: READACF
-    // (asSubProcess) and SYSRESET (rebootProc).
+    // (so that alarm handler and archiver set-ups made for them work), READACF and SYSRESET with
+    // their subroutines (set_admin_hooks).
     return R"DB(
+record(sub, "$(IOC):READACF") {
+  field(DESC, "$(IOC) ACF Update")
+  field(INAM, "asSubInit")
+  field(SNAM, "asSubProcess")
+  field(BRSV, "INVALID")
+}
+record(sub, "$(IOC):SYSRESET") {
+  alias("$(IOC):SysReset")
+  field(DESC, "IOC Restart")
+  field(SNAM, "rebootProc")
+  field(BRSV, "INVALID")
+  field(L, "1")
+}
 record(mbbo, "$(IOC):ACCESS") {
   field(DESC, "$(IOC) Acc Mode")
   field(PINI, "YES")

@@ -8,6 +8,8 @@
 // group's SCAN "I/O Intr" records. Threading: the database thread only (Database::scan_periodic).
 #pragma once
 
+#include <functional>
+
 #include "pv/link.hpp"
 
 #include <array>
@@ -50,6 +52,12 @@ public:
     // What EPICS_VERS and EPICS_VERSION read ("beamctl 0.1.0, EPICS 7.0.8 records"); the
     // program sets it once at start.
     static void set_release(std::string text);
+    // What devIocStats's two subroutine records do, as the program that serves them can: READACF
+    // (a put of 1; asSubProcess) calls `reload_acf` (true: reloaded) and reads 0 again, a failure
+    // raising its BRSV alarm; SYSRESET (rebootProc, with A..F 0 and L 1) calls `restart` — for
+    // beamctl a clean stop, which procServ or systemd follow with a new start. Either may be
+    // empty (that record then fails its processing). Set by the program once, on its loop thread.
+    static void set_admin_hooks(std::function<bool()> reload_acf, std::function<void()> restart);
     // The records of devIocStats's ioc.template and iocAdminSoft's environment records, for the
     // macro IOC (the IOC's name), as .db text: what `beamctl run` serves for `ioc.stats` and
     // `beamctl softioc --ioc-stats NAME` loads.

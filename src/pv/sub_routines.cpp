@@ -7,7 +7,11 @@
 namespace beamctl::pv {
 
 RecordRoutines& RecordRoutines::global() {
-    static RecordRoutines* r = new RecordRoutines; // never destroyed: routines may run until exit
+    static RecordRoutines* r = [] { // never destroyed: routines may run until exit
+        auto* routines = new RecordRoutines;
+        add_builtin_routines(*routines);
+        return routines;
+    }();
     return *r;
 }
 

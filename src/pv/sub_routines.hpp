@@ -39,6 +39,10 @@ private:
     std::vector<std::string> libraries_;
 };
 
+// Registers the routines beamctl provides itself (devIocStats's asSubInit, asSubProcess and
+// rebootProc: pv/ioc_stats.cpp); RecordRoutines::global() calls it when it is made.
+void add_builtin_routines(RecordRoutines& routines);
+
 // The error message for a routine name no library provides (INAM/SNAM of record `record`).
 std::string missing_routine_message(std::string_view field, std::string_view routine, std::string_view kind);
 

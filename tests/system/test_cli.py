@@ -128,7 +128,7 @@ def test_check_and_db_expand_macros_from_the_command_line(tmp_path):
     ioc = write_ioc(tmp_path)
     r = beamctl("check", "-m", "NAME=MAC,P=MAC:", "-m", "POS=1", ioc)
     assert r.returncode == 0, r.stderr
-    assert r.stdout == f"{ioc}: OK (95 PVs, 1 bus(es))\n", r.stdout
+    assert r.stdout == f"{ioc}: OK (97 PVs, 1 bus(es))\n", r.stdout
     r = beamctl("db", "-m", "NAME=MAC,P=MAC:,POS=1", ioc)
     assert r.returncode == 0, r.stderr
     assert 'record(bi, "MAC:m0s001-BI01")' in r.stdout, r.stdout[:500]

@@ -50,7 +50,7 @@ def test_imported_device_is_usable_through_beamctl_catalog(tmp_path):
 
     r = beamctl("check", ioc, catalog=cat)
     assert r.returncode == 0, r.stderr
-    assert r.stdout == f"{ioc}: OK (95 PVs, 1 bus(es))\n", r.stdout
+    assert r.stdout == f"{ioc}: OK (97 PVs, 1 bus(es))\n", r.stdout
     # the vendor's repeated entry names become <Pdo>_<Entry>; the highest revision is used
     r = beamctl("signals", ioc, "ec0.s1.Ch*", catalog=cat)
     assert r.returncode == 0, r.stderr

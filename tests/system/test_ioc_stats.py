@@ -120,3 +120,34 @@ record(ai, "{ioc}:OWN_FDS") {{ field(DTYP, "IOC stats") field(INP, "@fd") field(
         srv.kill()
         forget_pvs(f"{ioc}:")
         release_port(port)
+
+
+def test_readacf_rereads_the_acf_and_sysreset_stops_the_ioc_cleanly(tmp_path):
+    """devIocStats's READACF (asSubProcess) and SYSRESET (rebootProc), as a facility's admin
+    screen drives them: a put of 1 to READACF re-reads the ACF (a broken file raises BRSV and
+    keeps the old rules); SYSRESET.PROC stops the IOC as SIGTERM does, exit status 0."""
+    require_binary()
+    name = f"SR{os.getpid() % 100000}"
+    acf = tmp_path / "ioc.acf"
+    acf.write_text("ASG(DEFAULT) {\n  RULE(1, WRITE)\n}\n")
+    cfg = tmp_path / "ioc.yaml"
+    cfg.write_text(f"ioc: {{name: {name}}}\nca: {{acf: {acf}}}\n")
+    port = acquire_port()
+    srv = RunServer(tmp_path, cfg, port)
+    try:
+        srv.start()
+        readacf = connect(f"{name}:READACF")
+        assert ca.put(readacf, 1, wait=True) == 1
+        assert wait_for(lambda: ca.get(readacf) == 0, timeout=5)
+        assert get(f"{name}:READACF.SEVR") == 0  # NO_ALARM
+        acf.write_text("ASG(DEFAULT) {\n  RULE(1, WRITE\n")  # broken: the old rules stay
+        assert ca.put(readacf, 1, wait=True) == 1
+        assert wait_for(lambda: get(f"{name}:READACF.SEVR") == 3, timeout=5)  # INVALID (BRSV)
+        assert ca.put(connect(f"{name}:SYSRESET.PROC"), 1, wait=True) == 1
+        assert srv.proc.wait(timeout=20) == 0
+        assert wait_for(lambda: any("stopping: stopping axes" in l for l in srv.stdout_lines), timeout=5), srv.stdout_lines
+    finally:
+        srv.stop()
+        srv.kill()
+        forget_pvs(f"{name}:")
+        release_port(port)

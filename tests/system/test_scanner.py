@@ -339,7 +339,7 @@ def test_check_takes_scanner_files_and_scanner_iocs(tmp_path):
     r = check(EXAMPLE / "scanner.yaml")
     assert r.returncode == 0 and "scanner.yaml: OK (a scanner file, 1 bus(es))" in r.stdout, r.stdout + r.stderr
     r = check(EXAMPLE / "ioc_a.yaml")  # slaves listed with their types: checked without the scanner
-    assert r.returncode == 0 and "OK (200 PVs, 1 bus(es))" in r.stdout, r.stdout + r.stderr
+    assert r.returncode == 0 and "OK (202 PVs, 1 bus(es))" in r.stdout, r.stdout + r.stderr
     bad = tmp_path / "scanner.yaml"
     bad.write_text((EXAMPLE / "scanner.yaml").read_text().replace("type: EL3104", "type: EL3999"))
     shutil.copy(EXAMPLE / "plant.yaml", tmp_path / "plant.yaml")

@@ -130,3 +130,32 @@ record(ai, "good") { field(DTYP, "IOC stats") field(INP, "@no_of_cpus") field(PI
     e = load_error(R"(record(ai, "x") { field(DTYP, "IOC stats clusts") field(INP, "@clust_info 0 0 0") })");
     EXPECT_NE(e.find("IOC stats clusts"), std::string::npos) << e;
 }
+
+TEST_F(IocStatsTest, ReadAcfRereadsTheAccessSecurityFileAndSysResetRestarts) {
+    int reloads = 0, restarts = 0;
+    bool reload_ok = true;
+    IocStats::set_admin_hooks([&] { return ++reloads, reload_ok; }, [&] { ++restarts; });
+    load_builtin();
+    EXPECT_TRUE(db.record_errors().empty()) << db.record_errors().front(); // the routines are built in
+    EXPECT_EQ(put("TEST:READACF", 1), PutStatus::Ok); // asSubProcess: a put of 1
+    EXPECT_EQ(reloads, 1);
+    EXPECT_DOUBLE_EQ(getd("TEST:READACF"), 0);        // reads 0 again
+    EXPECT_EQ(gets("TEST:READACF.SEVR"), "NO_ALARM");
+    EXPECT_EQ(put("TEST:READACF", 0), PutStatus::Ok); // 0 does nothing
+    EXPECT_EQ(reloads, 1);
+    reload_ok = false;
+    put("TEST:READACF", 1);
+    EXPECT_EQ(reloads, 2);
+    EXPECT_EQ(gets("TEST:READACF.SEVR"), "INVALID"); // BRSV
+    EXPECT_EQ(put("TEST:SYSRESET.A", 1), PutStatus::Ok);
+    put("TEST:SYSRESET.PROC", 1);
+    EXPECT_EQ(restarts, 0);                          // rebootProc: only with A..F 0 and L 1
+    put("TEST:SYSRESET.A", 0);                       // A is pp(TRUE): this processes it
+    EXPECT_EQ(restarts, 1);
+    put("TEST:SysReset.PROC", 1);                    // the alias
+    EXPECT_EQ(restarts, 2);
+    IocStats::set_admin_hooks({}, {});
+    put("TEST:SYSRESET.PROC", 1);
+    EXPECT_EQ(restarts, 2);
+    EXPECT_EQ(gets("TEST:SYSRESET.SEVR"), "INVALID"); // no way to restart here
+}
