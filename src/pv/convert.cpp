@@ -279,6 +279,8 @@ void get_element(const Record& r, const FieldDesc& f, const Elements& e, uint32_
                 copy_string(d, kStringSize, "Illegal Value");
         } else if (e.type == Dbf::Float || e.type == Dbf::Double) {
             format_double(read_double(e, i), r.precision(f), d, kStringSize);
+        } else if (e.type == Dbf::UInt64) {
+            std::snprintf(d, kStringSize, "%" PRIu64, *reinterpret_cast<const uint64_t*>(src));
         } else {
             std::snprintf(d, kStringSize, "%" PRId64, read_int(e, i));
         }

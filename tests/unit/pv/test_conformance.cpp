@@ -557,6 +557,7 @@ record(ai, "u") { field(UTAG, "18446744073709551615") }
 record(waveform, "w") { field(FTVL, "UINT64") field(NELM, "3") }
 )");
     EXPECT_DOUBLE_EQ(getd("u.UTAG"), 18446744073709551615.0); // DBR_DOUBLE over CA, as base
+    EXPECT_EQ(gets("u.UTAG"), "18446744073709551615");
     const FieldDesc* f = db.find("u")->type().find("UTAG");
     ASSERT_NE(f, nullptr);
     EXPECT_EQ(f->dbf, Dbf::UInt64);
