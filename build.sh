@@ -65,19 +65,41 @@ unit() {
 
 fuzz() {
     # Builds the libFuzzer targets with clang and runs each for a short time (a smoke run;
-    # longer campaigns: FUZZ_SECONDS=600 bash build.sh fuzz).
+    # longer campaigns: FUZZ_SECONDS=600 bash build.sh fuzz), JOBS targets at a time (each is one
+    # process on one core).
     # only the targets and the libraries they link (not the rest of the engine)
     build fuzz $(cd tests/fuzz && ls fuzz_*.cpp | sed 's/\.cpp$//')
-    local secs=${FUZZ_SECONDS:-20}
+    local secs=${FUZZ_SECONDS:-20} batch=() failed=0
+    mkdir -p build/fuzz/logs
+    run_batch() {
+        local pids=() t
+        for t in "${batch[@]}"; do
+            local name corpus
+            name=$(basename "$t")
+            corpus="tests/fuzz/corpus/$name"
+            mkdir -p "build/fuzz/corpus/$name"
+            "$t" -max_total_time="$secs" -print_final_stats=1 "build/fuzz/corpus/$name" \
+                $( [ -d "$corpus" ] && echo "$corpus" ) >"build/fuzz/logs/$name.log" 2>&1 &
+            pids+=($!)
+        done
+        local i
+        for i in "${!batch[@]}"; do
+            local name rc=0
+            name=$(basename "${batch[$i]}")
+            wait "${pids[$i]}" || rc=$?
+            echo "== $name for ${secs}s"
+            grep -E "stat::number_of_executed_units|Done|ERROR|SUMMARY" "build/fuzz/logs/$name.log" || true
+            [ "$rc" = 0 ] || { echo "fuzz target $name failed (exit $rc; build/fuzz/logs/$name.log)"; failed=1; }
+        done
+        batch=()
+    }
     for t in build/fuzz/tests/fuzz/fuzz_*; do
         [ -x "$t" ] || continue
-        local corpus="tests/fuzz/corpus/$(basename "$t")"
-        mkdir -p "build/fuzz/corpus/$(basename "$t")"
-        echo "== $(basename "$t") for ${secs}s"
-        "$t" -max_total_time="$secs" -print_final_stats=1 "build/fuzz/corpus/$(basename "$t")" \
-            $( [ -d "$corpus" ] && echo "$corpus" ) 2>&1 | grep -E "stat::number_of_executed_units|Done|ERROR|SUMMARY" || true
-        [ "${PIPESTATUS[0]}" = 0 ] || { echo "fuzz target $(basename "$t") failed"; exit 1; }
+        batch+=("$t")
+        [ "${#batch[@]}" -ge "$JOBS" ] && run_batch
     done
+    [ "${#batch[@]}" -gt 0 ] && run_batch
+    [ "$failed" = 0 ] || exit 1
 }
 
 system() {

@@ -65,6 +65,13 @@ public:
         if (!ch_ || !ch_->connected() || !ch_->write_access()) return false;
         return ch_->put_raw(t, data, n);
     }
+    bool put_notify(pv::Prim t, const void* data, uint32_t n, std::function<void(bool)> done) override {
+        if (!ch_ || !ch_->connected() || !ch_->write_access()) return false;
+        // The completion may come after the link was released (relinked, record removed): dropped.
+        return ch_->put_raw(t, data, n, [gone = released_flag_, done = std::move(done)](const Result& r) {
+            if (!*gone) done(r.ok());
+        });
+    }
     bool connected() const override { return ch_ && ch_->connected(); }
     pv::Prim type() const override {
         if (have_) return last_.prim;
@@ -72,6 +79,7 @@ public:
     }
     void release() override {
         released_ = true;
+        *released_flag_ = true;
         str_mon_.reset();
         mon_.reset();
         ch_.reset();
@@ -105,6 +113,7 @@ private:
     char string_[pv::kStringSize] = {};
     bool have_ = false, have_string_ = false;
     bool released_ = false;
+    std::shared_ptr<bool> released_flag_ = std::make_shared<bool>(false); // for late completions
 };
 
 CaLinks::CaLinks(pv::Database& db, ClientConfig cfg) : CaLinks(db) { cfg_ = std::move(cfg); }

@@ -401,6 +401,7 @@ IocConfig IocConfig::parse(const std::string& text, const std::string& path, Err
             if (k.has("inverse") == k.has("file"))
                 k.error("give the inverse transform as 'inverse' (PLC code) or 'file', one of them");
             e.code = k["inverse"].string().value_or("");
+            if (k.has("inverse")) e.code_at = k["inverse"].text_loc(&e.code_block);
             if (auto f = k["file"].string()) {
                 e.file = resolve(dir, *f);
                 e.file_where = k["file"].where();

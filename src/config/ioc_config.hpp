@@ -123,7 +123,9 @@ struct PlcEntry {
 struct KinematicsEntry {
     std::string name;
     std::vector<int> virt, real;        // axis ids
-    std::string code;                   // inline inverse, or
+    std::string code;                   // inline inverse (at code_at; code_block: a `|` block), or
+    SourceLoc code_at;
+    bool code_block = false;
     std::string file;                   // resolved path of a file with it
     MacroMap macros;
     std::vector<std::string> include;   // resolved directories searched by `include`

@@ -295,6 +295,29 @@ SourceLoc YamlNode::loc() const {
     return rd_->loc(node_);
 }
 
+SourceLoc YamlNode::text_loc(bool* literal) const {
+    if (literal) *literal = false;
+    SourceLoc l = loc();
+    if (!is_scalar() || !rd_) return l;
+    const YAML::Mark m = node_.Mark();
+    const auto& starts = rd_->line_starts_;
+    const std::string& text = rd_->text_;
+    if (m.line < 0 || m.column < 0 || std::size_t(m.line) >= starts.size()) return l;
+    const std::size_t at = starts[std::size_t(m.line)] + std::size_t(m.column);
+    if (at >= text.size() || (text[at] != '|' && text[at] != '>')) return l;
+    for (std::size_t line = std::size_t(m.line) + 1; line < starts.size(); ++line) { // first non-blank
+        std::size_t b = starts[line], e = text.find('\n', b);
+        if (e == std::string::npos) e = text.size();
+        std::size_t i = text.find_first_not_of(" \t\r", b);
+        if (i == std::string::npos || i >= e) continue;
+        if (literal) *literal = text[at] == '|';
+        // The text's line 1 is the line after the indicator (leading blank lines are kept), at
+        // the block's indentation (its first non-blank line's).
+        return SourceLoc{l.file, m.line + 2, int(i - b) + 1};
+    }
+    return l;
+}
+
 void YamlNode::error(const std::string& what) const {
     if (!rd_) return;
     if (path_.empty())

@@ -90,6 +90,9 @@ public:
     // Where its key is; for a list item, the item; for an absent key, its mapping's key.
     SourceLoc key_loc() const { return key_at_; }
     const YAML::Node& yaml() const { return node_; }
+    // Where a scalar's text begins: loc(), or for a `|`/`>` block the first character of its first
+    // line; *literal is set for a `|` block (its lines are the file's lines, at that column).
+    SourceLoc text_loc(bool* literal = nullptr) const;
     // The raw text of a scalar, before expansion ("" for anything else).
     std::string raw() const { return is_scalar() ? node_.Scalar() : std::string(); }
 

@@ -32,6 +32,11 @@ public:
         o.macros = e.macros;
         o.include_path = e.include;
         o.max_loop_iterations = 100000; // a transform is straight-line code; a runaway loop faults
+        if (e.file.empty()) { // inline: errors name the lines of the IOC file
+            o.origin = e.code_at;
+            o.origin_block = e.code_block;
+            o.origin_label = SB() << "kinematics '" << e.name << "' inverse";
+        }
         std::string name = e.file.empty() ? std::string(SB() << (e.where.empty() ? ioc_file : e.where) << ": kinematics '" << e.name << "' inverse") : e.file;
         program_ = std::make_unique<plc::Program>(e.file.empty() ? plc::Program::compile(e.code, name, *this, o)
                                                                  : plc::Program::compile_file(e.file, *this, o));

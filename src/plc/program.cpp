@@ -200,7 +200,15 @@ Program Program::compile(std::string_view text, const std::string& filename, Hos
         }
         MacroMap macros = options.macros;
         const int first = static_cast<int>(src.lines.size());
-        detail::preprocess(src, text, filename, macros, options.include_path, diags);
+        detail::Embedding at;
+        const SourceLoc& o = options.origin;
+        if (o.line > 0) {
+            at.line_base = o.line - 1;
+            at.first_col_base = o.col - 1;
+            at.col_base = options.origin_block ? o.col - 1 : 0;
+            at.label = options.origin_label;
+        }
+        detail::preprocess(src, text, o.line > 0 ? o.file : filename, macros, options.include_path, diags, at);
         const int last = static_cast<int>(src.lines.size());
         if (diags.empty()) {
             std::vector<std::vector<detail::Token>> libs;

@@ -74,6 +74,12 @@ struct CompileOptions {
     int max_call_depth = 64;               // nested calls of `function`s per scan
     int max_errors = 50;                   // compile errors collected before giving up
     bool strict = false; // also an error: each construct beamctl accepts and ECMC's ExprTk refuses
+    // compile() of a text inside another file (kinematics code in ioc.yaml): errors name
+    // origin.file and the lines there. The text's first character is at origin; with
+    // origin_block (a YAML `|` block) every line keeps origin's column, else only the first does.
+    SourceLoc origin;
+    bool origin_block = false;
+    std::string origin_label; // said after the place in errors ("kinematics 'k' inverse")
 };
 
 // Result of one scan. Anything but ok means the scan stopped at the faulting instruction: values

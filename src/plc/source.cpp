@@ -61,7 +61,7 @@ std::string include_chain(const Source& src, int file) {
     std::string out;
     for (int f = file; f >= 0 && src.files[f].parent_file >= 0; f = src.files[f].parent_file) {
         const SourceFile& parent = src.files[src.files[f].parent_file];
-        out += SB() << "\n  included from " << parent.path << ":" << src.files[f].parent_line;
+        out += SB() << "\n  included from " << parent.path << ":" << parent.file_line(src.files[f].parent_line);
     }
     return out;
 }
@@ -209,7 +209,8 @@ public:
         , include_path_(include_path)
         , diags_(diags) {}
 
-    void run(std::string_view text, const std::string& path) {
+    void run(std::string_view text, const std::string& path, const Embedding& embedding) {
+        embedding_ = embedding;
         process(text, path, -1, 0);
         if (filter_.in_block())
             diags_.add(src_.diagnostic_at(filter_.block_file, filter_.block_line, filter_.block_col,
@@ -223,6 +224,12 @@ private:
         sf.path = path;
         sf.parent_file = parent_file;
         sf.parent_line = parent_line;
+        if (parent_file < 0) {
+            sf.line_base = embedding_.line_base;
+            sf.first_col_base = embedding_.first_col_base;
+            sf.col_base = embedding_.col_base;
+            sf.label = embedding_.label;
+        }
         std::size_t start = 0;
         while (start < text.size()) {
             std::size_t end = text.find('\n', start);
@@ -388,6 +395,7 @@ private:
     MacroMap& macros_;
     const std::vector<std::string>& include_path_;
     Diagnostics& diags_;
+    Embedding embedding_; // of the root text
     CommentFilter filter_;
     std::vector<std::string> stack_; // canonical paths of the files being read
 };
@@ -398,7 +406,8 @@ SourceLoc Source::loc(int line, int offset) const {
     if (line < 0 || line >= static_cast<int>(lines.size())) return SourceLoc{};
     const SourceLine& l = lines[line];
     const int off = std::clamp(offset, 0, static_cast<int>(l.col.size()) - 1);
-    return SourceLoc{files[l.file].path, l.line, l.col[off]};
+    const SourceFile& f = files[l.file];
+    return SourceLoc{f.path, f.file_line(l.line), f.file_col(l.line, l.col[off])};
 }
 
 std::string Source::diagnostic(int line, int offset, const std::string& message) const {
@@ -426,7 +435,9 @@ std::string Source::diagnostic_at(int file, int raw_line, int col,
                                   const std::string& message) const {
     const SourceFile& f = files[file];
     SB out;
-    out << f.path << ":" << raw_line << ":" << col << ": " << message;
+    out << f.path << ":" << f.file_line(raw_line) << ":" << f.file_col(raw_line, col) << ": ";
+    if (!f.label.empty()) out << f.label << ": ";
+    out << message;
     if (raw_line >= 1 && raw_line <= static_cast<int>(f.raw.size())) {
         const std::string& text = f.raw[raw_line - 1];
         out << "\n" << text << "\n" << caret_line(text, col);
@@ -435,8 +446,8 @@ std::string Source::diagnostic_at(int file, int raw_line, int col,
 }
 
 void preprocess(Source& src, std::string_view text, const std::string& filename, MacroMap& macros,
-                const std::vector<std::string>& include_path, Diagnostics& diags) {
-    Preprocessor(src, macros, include_path, diags).run(text, filename);
+                const std::vector<std::string>& include_path, Diagnostics& diags, const Embedding& embedding) {
+    Preprocessor(src, macros, include_path, diags).run(text, filename, embedding);
 }
 
 } // namespace beamctl::plc::detail

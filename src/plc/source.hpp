@@ -31,6 +31,18 @@ struct SourceFile {
     std::vector<std::string> raw; // original lines, without line ends
     int parent_line = -1;         // the `include` line in the including file (raw line, 1-based)
     int parent_file = -1;
+    // A text inside another file (kinematics code in ioc.yaml): added to its line numbers, and
+    // to the columns of its first line and of the others, when a place in it is named.
+    int line_base = 0, first_col_base = 0, col_base = 0;
+    std::string label; // what the text is, said after the place ("kinematics 'k' inverse")
+    int file_line(int raw_line) const { return raw_line + line_base; }
+    int file_col(int raw_line, int col) const { return col + (raw_line == 1 ? first_col_base : col_base); }
+};
+
+// Where a root text sits in the file that holds it (see SourceFile::line_base).
+struct Embedding {
+    int line_base = 0, first_col_base = 0, col_base = 0;
+    std::string label;
 };
 
 // One line of preprocessed code.
@@ -60,7 +72,8 @@ public:
 // `macros` grows by `substitute` lines (msi keeps them for the rest of its input). Errors go to
 // `diags`; the offending line is skipped.
 void preprocess(Source& src, std::string_view text, const std::string& filename, MacroMap& macros,
-                const std::vector<std::string>& include_path, Diagnostics& diags);
+                const std::vector<std::string>& include_path, Diagnostics& diags,
+                const Embedding& embedding = {});
 
 // Reads a whole file; throws beamctl::Error naming the path if it cannot be read.
 std::string read_file(const std::string& path);

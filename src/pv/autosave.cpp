@@ -78,6 +78,13 @@ bool capture(const Database& db, const std::string& name, SavedValue& out) {
     const FieldDesc& f = *a.field;
     out.name = name;
     out.values.clear();
+    if (a.kind == Address::Kind::StringHead) { // a long string (lsi VAL): its text whole
+        Elements e = r.elements(f);
+        const char* s = static_cast<const char*>(e.data);
+        out.array = false;
+        out.values.emplace_back(s, strnlen(s, e.capacity));
+        return true;
+    }
     if (!(f.flags & kArray)) {
         out.array = false;
         out.values.push_back(format_field(r, f));
@@ -487,7 +494,12 @@ struct Autosave::Impl {
             return false;
         }
         PutStatus st;
-        if (v.array || (a.field->flags & kArray)) {
+        Address whole;
+        if (a.kind == Address::Kind::StringHead && !v.array && db.resolve(v.name + "$", whole)) {
+            std::string z = v.values.empty() ? std::string() : v.values[0];
+            z.push_back('\0');
+            st = db.store_value(whole, Prim::Char, z.data(), uint32_t(std::min<std::size_t>(z.size(), whole.count)));
+        } else if (v.array || (a.field->flags & kArray)) {
             if (v.values.empty()) return true;
             std::vector<char> buf(v.values.size() * kStringSize, '\0');
             for (std::size_t k = 0; k < v.values.size(); ++k)

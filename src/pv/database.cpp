@@ -74,6 +74,7 @@ bool is_named(const FieldDesc& f, const char* n) { return std::strcmp(f.name, n)
 
 // A double seen as a field, for converting link values that are not in a record.
 const FieldDesc kScratchDouble{"", Dbf::Double, 0, 8, nullptr, nullptr};
+const FieldDesc kScratchString{"", Dbf::String, 0, kStringSize, nullptr, nullptr}; // a number's text: precision 6
 
 // The CA type a value travels in between two fields (dbFastLinkConv keeps strings and enums).
 Prim transfer_prim(Dbf to, Dbf from) {
@@ -82,9 +83,23 @@ Prim transfer_prim(Dbf to, Dbf from) {
     return Prim::Double;
 }
 
+// "Async Soft Channel" (devSoftCallback) of a record whose DTYP is base's soft menu.
+bool async_soft(const Record& r) {
+    const FieldDesc* f = r.type().find("DTYP");
+    return r.dtyp == kDtypAsyncSoft && f && f->menu == &kMenuSoftDtyp;
+}
+
+// A link to a long string (lsi VAL) carries it whole to a char array, one string to the rest.
+void as_string_head(Address& a, Prim t, uint32_t n) {
+    if (!(a.field->flags & kLongString) || (t == Prim::Char && n > 1)) return;
+    a.kind = Address::Kind::StringHead;
+    a.native = Prim::String;
+    a.count = 1;
+}
+
 // The type a link's value comes in: its target field's, a CA link's remote native type.
 Dbf source_dbf(const Link& l) {
-    if (l.target_field()) return l.target_field()->dbf;
+    if (l.target_field()) return (l.target_field()->flags & kLongString) ? Dbf::String : l.target_field()->dbf;
     if (l.kind == Link::Kind::Hw && l.device() && l.device()->is_text()) return Dbf::String;
     if (RemoteLink* rl = l.remote()) {
         switch (rl->type()) {
@@ -721,7 +736,11 @@ bool Database::resolve(std::string_view channel, Address& out, std::string* why)
         out.count = fd->size;
         return true;
     }
-    if (fd->flags & kArray) {
+    if ((fd->flags & kLongString) && !long_string) {
+        out.kind = Address::Kind::StringHead;
+        out.native = Prim::String;
+        out.count = 1;
+    } else if (fd->flags & kArray) {
         Elements e = r->elements(*fd);
         out.native = native_prim(e.type);
         out.count = e.capacity;
@@ -733,17 +752,26 @@ bool Database::resolve(std::string_view channel, Address& out, std::string* why)
 }
 
 bool Database::readable_as(const Address& a, Prim t) const {
-    if (t == Prim::String || a.kind != Address::Kind::Field || a.field->dbf != Dbf::String ||
-        (a.field->flags & kArray))
+    if (t == Prim::String) return true;
+    std::string_view text; // a string field's text: readable as a number only when it is one
+    if (a.kind == Address::Kind::StringHead) {
+        Elements e = a.rec->elements(*a.field);
+        const char* s = static_cast<const char*>(e.data);
+        text = std::string_view(s, strnlen(s, std::min<std::size_t>(e.capacity, kStringSize - 1)));
+    } else if (a.kind == Address::Kind::Field && a.field->dbf == Dbf::String && !(a.field->flags & kArray)) {
+        const char* s = static_cast<const char*>(a.field->addr(*a.rec));
+        text = std::string_view(s, strnlen(s, a.field->size));
+    } else {
         return true;
+    }
     if (t == Prim::Enum) return false;
-    const char* s = static_cast<const char*>(a.field->addr(*a.rec));
     double v;
-    return parse_double(std::string_view(s, strnlen(s, a.field->size)), v);
+    return parse_double(text, v);
 }
 
 uint32_t Database::current_count(const Address& a) const {
     if (a.kind == Address::Kind::RecordType) return 1;
+    if (a.kind == Address::Kind::StringHead) return a.rec->elements(*a.field).count ? 1 : 0;
     if (a.kind == Address::Kind::LongString) {
         const char* s = static_cast<const char*>(a.field->addr(*a.rec));
         return uint32_t(strnlen(s, a.field->size) + 1 > a.field->size ? a.field->size
@@ -764,6 +792,16 @@ uint32_t Database::get(const Address& a, Prim t, void* dest, uint32_t n) const {
         get_element(*a.rec, *a.rec->type().find("NAME"), e, 0, t, out);
         std::memset(out + esz, 0, (n - 1) * esz);
         return 1;
+    }
+    if (a.kind == Address::Kind::StringHead) { // the first 39 characters (dbGet's getStringString)
+        Elements chars = a.rec->elements(*a.field);
+        char head[kStringSize] = {};
+        const char* s = static_cast<const char*>(chars.data);
+        std::memcpy(head, s, strnlen(s, std::min<std::size_t>(chars.capacity, kStringSize - 1)));
+        uint32_t valid = chars.count ? 1 : 0;
+        if (n && valid) get_element(*a.rec, *a.field, Elements{Dbf::String, head, 1, 1, kStringSize}, 0, t, out);
+        std::memset(out + valid * esz, 0, (n - std::min(n, valid)) * esz);
+        return valid;
     }
     if (a.kind == Address::Kind::LongString) {
         const char* s = static_cast<const char*>(a.field->addr(*a.rec));
@@ -800,9 +838,12 @@ PutStatus Database::put(const Address& a, Prim t, const void* data, uint32_t n, 
     }
     Depth depth(*this);
     Record& r = *a.rec;
-    if (cb && r.notify_ && (r.notify_->active || !r.notify_->queue.empty())) {
-        // Another put-callback is in progress on this record: wait behind it (arrival order).
+    bool busy = r.pact && !r.in_process_; // asynchronous processing in progress (dbNotify: restart)
+    if (cb && (busy || (r.notify_ && (r.notify_->active || !r.notify_->queue.empty())))) {
+        // Another put-callback is in progress on this record, or the record is busy: wait behind
+        // it (arrival order); the put, its processing and its callback follow the completion.
         const char* p = static_cast<const char*>(data);
+        if (!r.notify_) r.notify_ = std::make_unique<NotifyState>();
         r.notify_->queue.push_back(
             {a, t, std::vector<char>(p, p + std::size_t(n) * prim_size(t)), n, std::move(cb)});
         return PutStatus::Ok;
@@ -818,6 +859,14 @@ PutStatus Database::store(const Address& a, Prim t, const void* data, uint32_t n
     auto fail = [](PutStatus st) { return st; };
     if (n == 0) return fail(PutStatus::BadValue);
 
+    if (a.kind == Address::Kind::StringHead) { // one string (a number: its text) into the chars
+        char text[kStringSize] = {};
+        if (!put_element(r, kScratchString, Elements{Dbf::String, text, 1, 1, kStringSize}, 0, t, src))
+            return fail(PutStatus::BadValue);
+        Address chars = a;
+        chars.kind = Address::Kind::Field;
+        return store(chars, Prim::Char, text, uint32_t(strnlen(text, kStringSize - 1) + 1));
+    }
     if (is_link(f.dbf)) { // a new link: parsed and resolved now, or refused (the old one stays)
         char text[kStringSize];
         if (t == Prim::String) {
@@ -951,6 +1000,33 @@ void Database::async_complete(Record& r, PutStatus st) {
         if (st != PutStatus::Ok && pn->status == PutStatus::Ok) pn->status = st;
         if (--pn->pending == 0 && pn->started) finish_notify(pn);
     }
+    if (r.in_process_) return; // process_record goes on (RPRO, FLNK) once process() returns
+    Depth depth(*this);
+    // recGblFwdLink of an asynchronous completion: processed again if a put came meanwhile (RPRO),
+    // then the put-callbacks that waited for the record to finish (dbNotify's restart list).
+    if (r.rpro) {
+        r.rpro = 0;
+        scan_once(r);
+    }
+    if (!r.pact) restart_waiting(r);
+}
+
+void Database::link_put_done(Record& r, bool ok) {
+    if (!r.link_wait_) return;
+    r.link_wait_ = false;
+    if (r.in_process_) return; // completed at once: process_record goes on
+    Depth depth(*this);
+    link_forward(r, r.flnk); // recGblFwdLink of the second pass (PACT still set)
+    if (!ok) stats_.link_errors++;
+    r.async_done(ok ? PutStatus::Ok : PutStatus::Failed); // a refused remote put never reports success
+}
+
+void Database::restart_waiting(Record& r) {
+    while (r.notify_ && !r.notify_->active && !r.notify_->queue.empty() && !r.pact) {
+        NotifyState::Queued q = std::move(r.notify_->queue.front());
+        r.notify_->queue.pop_front();
+        do_put(q.addr, q.type, q.data.data(), q.count, std::move(q.cb));
+    }
 }
 
 bool Database::disabled(Record& r) {
@@ -986,6 +1062,10 @@ void Database::process_record(Record& r) {
     r.done_in_process_ = false;
     ProcessResult res = r.process();
     r.in_process_ = false;
+    if (r.link_wait_ && res == ProcessResult::Done) { // an Async Soft Channel put is on its way
+        r.pact = 1;
+        res = ProcessResult::Async;
+    }
     if (res == ProcessResult::Async && !r.done_in_process_) {
         if (notify_ && !r.pn_) { // the put-callback waits for this record too
             r.pn_ = notify_;
@@ -1103,6 +1183,7 @@ bool Database::link_get(Record& r, Link& l, Prim t, void* dest, uint32_t n, uint
         a.field = l.target_field();
         a.native = native_prim(l.target_field()->dbf);
         a.count = (l.target_field()->flags & kArray) ? tr.elements(*l.target_field()).capacity : 1;
+        as_string_head(a, t, n);
         uint32_t c = get(a, t, dest, n);
         *got = std::min(c, n);
         r.inherit_sevr(l.ms, tr.stat, tr.sevr);
@@ -1126,6 +1207,15 @@ bool Database::link_put(Record& r, Link& l, Prim t, const void* src, uint32_t n)
     }
     case Link::Kind::Db: {
         if (RemoteLink* rl = l.remote()) { // CA link: a put, not waited for
+            if (r.in_process_ && !r.link_wait_ && async_soft(r)) {
+                // devAoSoftCallback & co: the record stays busy (PACT) until the remote put completed;
+                // monitors were posted, FLNK and a put-callback wait (link_put_done).
+                r.link_wait_ = true;
+                Record* rec = &r;
+                if (rl->put_notify(t, src, n, [this, rec](bool ok) { link_put_done(*rec, ok); })) return true;
+                r.link_wait_ = false;
+                break;
+            }
             if (rl->put(t, src, n)) return true;
             break;
         }
@@ -1137,6 +1227,7 @@ bool Database::link_put(Record& r, Link& l, Prim t, const void* src, uint32_t n)
         a.field = &tf;
         a.native = native_prim(tf.dbf);
         a.count = (tf.flags & kArray) ? tr.elements(tf).capacity : 1;
+        as_string_head(a, t, n);
         if (!a.writable() || is_link(tf.dbf) || store(a, t, src, n) != PutStatus::Ok) break;
         tr.inherit_sevr(l.ms, r.nsta, r.nsev);
         if ((tf.flags & kProcField) || (l.proc == Link::kPp && tr.scan == 0)) process_record(tr);
@@ -1215,11 +1306,7 @@ void Database::notify_complete(Record& r, PutStatus st) {
         r.notify_->active = nullptr;
         cb(st);
     }
-    while (r.notify_ && !r.notify_->active && !r.notify_->queue.empty()) {
-        NotifyState::Queued q = std::move(r.notify_->queue.front());
-        r.notify_->queue.pop_front();
-        do_put(q.addr, q.type, q.data.data(), q.count, std::move(q.cb));
-    }
+    restart_waiting(r);
 }
 
 void Database::process(Record& r) {

@@ -21,7 +21,9 @@ namespace beamctl::pv {
 
 // A resolved channel name: one field of one record, seen as `count` elements of type `native`.
 struct Address {
-    enum class Kind : uint8_t { Field, LongString, RecordType };
+    // Field: the field as it is; LongString: "FIELD$" of a DBF_STRING field, its chars as an array;
+    // StringHead: a kLongString char array read without '$', one DBF_STRING; RecordType: ".RTYP".
+    enum class Kind : uint8_t { Field, LongString, StringHead, RecordType };
     Record* rec = nullptr;
     const FieldDesc* field = nullptr; // nullptr for Kind::RecordType (".RTYP")
     Kind kind = Kind::Field;
@@ -191,6 +193,11 @@ public:
     void post(Record& r, const FieldDesc* f, unsigned mask);
     // Completes the active put-callback of r and starts the next queued one.
     void notify_complete(Record& r, PutStatus st);
+    // Runs the put-callbacks queued on r (arrival order) while r is free: no put-callback active
+    // and not busy (pact).
+    void restart_waiting(Record& r);
+    // The remote put an Async Soft Channel record waits for has completed (ok: without error).
+    void link_put_done(Record& r, bool ok);
 
     // Periodic scanning: processes records whose SCAN period elapsed. `now_s` is monotonic time.
     void scan_periodic(double now_s);

@@ -19,6 +19,7 @@
 #include "core/error.hpp"
 #include "pv/types.hpp"
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -69,6 +70,10 @@ public:
     virtual bool value(Value& out) const = 0;
     // Writes n elements of type t without waiting (WRITE); false while disconnected or read-only.
     virtual bool put(Prim t, const void* data, uint32_t n) = 0;
+    // Writes with completion (WRITE_NOTIFY, dbCaPutLinkCallback): done(true) once the remote
+    // processing completed, done(false) on an error or a disconnection; returns false (and never
+    // calls done) while disconnected or read-only. done runs on the database thread.
+    virtual bool put_notify(Prim t, const void* data, uint32_t n, std::function<void(bool ok)> done) = 0;
     virtual bool connected() const = 0;
     // The remote field's native type once known (Double before).
     virtual Prim type() const = 0;

@@ -56,6 +56,10 @@ enum FieldFlag : uint16_t {
     kDisplayHopr = 1 << 7, // display limits are HOPR/LOPR (VAL and the alarm limits)
     kScanField = 1 << 8,   // SCAN, PHAS, EVNT: a put moves the record to another scan list
     kProcField = 1 << 9,   // PROC: a put or a link to it always processes the record
+    // A long string (lsi, lso and printf VAL/OVAL; a kArray of chars): over CA one DBF_STRING, its
+    // first 39 characters and no element while LEN is 0 (their cvt_dbaddr and get_array_info);
+    // "FIELD$" is the char array whole.
+    kLongString = 1 << 10,
 };
 
 // Describes one field of a record type. `addr` returns the storage of that field in a record.
@@ -285,6 +289,7 @@ private:
     bool initialised_ = false;       // init_records ran init() (its links are resolved)
     bool in_process_ = false;        // inside process()
     bool done_in_process_ = false;   // async_done() was called inside process()
+    bool link_wait_ = false;         // an Async Soft Channel put over CA waits for its completion
     PutStatus done_status_ = PutStatus::Ok;
 };
 

@@ -1,7 +1,8 @@
 // The small record types of EPICS base 7: permissive, state and printf (permissiveRecord.c,
 // stateRecord.c, printfRecord.c and devPrintfSoft.c). printf formats FMT with values read from
 // INP0..INP9 into a long-string VAL (SIZV characters) as base's doPrintf does; over CA VAL is a
-// DBF_STRING (its first 40 characters, as softIoc serves it), links to char arrays get it whole.
+// DBF_STRING (its first 39 characters, as softIoc serves it; VAL$ whole), links to char arrays get
+// it whole.
 // The code is ours.
 // Threading: the database thread, as every record.
 #include "pv/record_support.hpp"
@@ -103,13 +104,6 @@ struct PrintfRecord : Record {
     char scratch[kStringSize] = {}; // a string read through a link
     const FieldDesc* val_fd = type().find("VAL");
     const FieldDesc* len_fd = type().find("LEN");
-    // VAL whole, as the char array a link to an array field (an lsi/lso/waveform VAL) carries.
-    // a function-local static: the class is complete in a function body (clang requires it)
-    static const FieldDesc& long_desc() {
-        static const FieldDesc d{"VAL", Dbf::Char, kArray, 1, nullptr,
-                                        [](Record& r) -> void* { return static_cast<PrintfRecord&>(r).val_buf.data(); }};
-        return d;
-    }
     // a function-local static: the class is complete in a function body (clang requires it)
     static const FieldDesc& scratch_desc() {
         static const FieldDesc d{"", Dbf::String, 0, kStringSize, nullptr,
@@ -121,7 +115,7 @@ struct PrintfRecord : Record {
         using R = PrintfRecord;
         auto v = common_fields();
         auto add = {
-            FieldDesc{"VAL", Dbf::String, kVal, kStringSize, nullptr,
+            FieldDesc{"VAL", Dbf::Char, kVal | kArray | kLongString, 1, nullptr,
                       [](Record& r) -> void* { return static_cast<R&>(r).val_buf.data(); }},
             BEAMCTL_FIELD(R, SIZV, sizv, UShort, kInitOnly),
             BEAMCTL_FIELD(R, LEN, len, ULong, kReadOnly),
@@ -143,7 +137,7 @@ struct PrintfRecord : Record {
         len = 0;
     }
     Elements elements(const FieldDesc& f) override {
-        if (&f == &long_desc()) return Elements{Dbf::Char, val_buf.data(), len, sizv, 1};
+        if (&f == val_fd) return Elements{Dbf::Char, val_buf.data(), len, sizv, 1};
         return Record::elements(f);
     }
 
@@ -311,7 +305,7 @@ struct PrintfRecord : Record {
         stamp_time();
         // devPrintfSoft: VAL to OUT (a char array target gets it whole, another field a string).
         if (out.target_field() && (out.target_field()->flags & kArray)) {
-            write_link(out, long_desc());
+            write_link(out, *val_fd);
         } else if (linked(out)) {
             copy_string(scratch, sizeof scratch, std::string_view(val_buf.data(), strnlen(val_buf.data(), sizv)));
             write_link(out, scratch_desc());

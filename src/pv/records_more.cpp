@@ -286,8 +286,9 @@ using Int64inRecord = IntegerInRecord<int64_t>; // record_support.hpp, shared wi
 using Int64outRecord = IntegerOutRecord<int64_t>;
 
 // ---------------------------------------------------------------- lsi, lso
-// Long strings: VAL is a char array of SIZV (16..32767) characters, NUL-terminated, read and
-// written whole as `caget -S` / `caput -S` do; LEN is strlen(VAL) + 1. Links to a char array
+// Long strings: VAL is a char array of SIZV (16..32767) characters, NUL-terminated; over CA
+// "VAL" is one DBF_STRING (its first 39 characters) and "VAL$" the char array whole, read and
+// written as `caget -S` / `caput -S` do; LEN is strlen(VAL) + 1. Links to a char array
 // carry the whole string; links to a scalar field carry its first 39 characters as DBR_STRING
 // (dbGetLinkLS, dbPutLinkLS).
 template <typename Self> struct LongStringBase : Record {
@@ -315,8 +316,8 @@ template <typename Self> struct LongStringBase : Record {
     static std::vector<FieldDesc> long_string_fields(std::vector<FieldDesc> v) {
         using R = Self;
         auto add = {
-            BEAMCTL_FIELD(R, VAL, val_placeholder, Char, kVal | kArray),
-            BEAMCTL_FIELD(R, OVAL, oval_placeholder, Char, kReadOnly | kArray),
+            BEAMCTL_FIELD(R, VAL, val_placeholder, Char, kVal | kArray | kLongString),
+            BEAMCTL_FIELD(R, OVAL, oval_placeholder, Char, kReadOnly | kArray | kLongString),
             BEAMCTL_FIELD(R, SIZV, sizv, UShort, kInitOnly),
             BEAMCTL_FIELD(R, LEN, len, ULong, kReadOnly),
             BEAMCTL_FIELD(R, OLEN, olen, ULong, kReadOnly),

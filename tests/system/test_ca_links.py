@@ -18,12 +18,17 @@ DB_B = """
 record(ao, "$(P)B:val") { field(VAL, "1") field(HIGH, "5") field(HSV, "MAJOR") }
 record(ao, "$(P)B:sink") { field(VAL, "0") }
 record(calc, "$(P)B:count") { field(CALC, "VAL+1") }
+record(ao, "$(P)B:slow") { field(FLNK, "$(P)B:delay") }
+record(calcout, "$(P)B:delay") { field(INPA, "$(P)B:slow") field(CALC, "A") field(ODLY, "3") field(OUT, "$(P)B:done PP") }
+record(ao, "$(P)B:done") {}
 """
 
 DB_A = """
 record(ai, "$(P)A:in") { field(INP, "$(P)B:val CP MS") }
 record(calc, "$(P)A:seen") { field(INPA, "$(P)B:val CP") field(INPB, "$(P)A:seen") field(CALC, "B+1") }
 record(ao, "$(P)A:out") { field(OUT, "$(P)B:sink CA") field(FLNK, "$(P)B:count.PROC CA") }
+record(ao, "$(P)A:async") { field(DTYP, "Async Soft Channel") field(OUT, "$(P)B:slow CA") field(FLNK, "$(P)A:after") }
+record(calc, "$(P)A:after") { field(CALC, "VAL+1") }
 """
 
 
@@ -73,6 +78,20 @@ def test_ca_output_and_forward_links_write_the_other_ioc(ioc, prefix):
     assert wait_for(lambda: get(p + "B:sink") == 3.5, timeout=30), a.stderr()[-2000:]
     assert wait_for(lambda: get(p + "B:count") == count0 + 1, timeout=30)  # FLNK .PROC CA
     assert get(p + "A:out.SEVR") == 0
+
+
+def test_async_soft_channel_output_completes_when_the_other_ioc_has(ioc, prefix):
+    """devAoSoftCallback: A's put-callback ends only once B's processing of the put (a calcout
+    that writes B:done after its 3 s ODLY) has completed; A's FLNK runs then too."""
+    p = prefix
+    a, b = start_pair(ioc)
+    assert wait_for(lambda: get(p + "A:in") == 1, timeout=30)  # A's links are up
+    assert get(p + "A:after") == 0
+    assert put(p + "A:async", 4) == 1
+    assert get(p + "B:done") == 4, a.stderr()[-2000:]  # B finished before A reported done
+    assert get(p + "A:after") == 1
+    assert get(p + "A:async.PACT") == 0
+    assert get(p + "A:async.SEVR") == 0
 
 
 def test_link_goes_invalid_when_the_other_ioc_dies_and_reconnects_when_it_returns(ioc, prefix):

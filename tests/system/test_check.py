@@ -170,7 +170,8 @@ def test_mistakes_of_several_files_come_in_one_run_with_their_chain_and_run_repo
     assert len(bad) >= 4 and any("positionActual01" in e for e in bad), text
     assert all(e.startswith(chain + f"{tmp_path}/jack.yaml:") for e in bad), text
     assert not any("ec0.s1." in e or "ec0.s2." in e for e in errors), text
-    assert f"{where(ioc, 'name: pair')}: kinematics 'pair' inverse:1:13: expected a value, found ';'" in text, text
+    # the inline inverse's error at its line and column of ioc.yaml (the ';' of `ax1 := ax3 +;`)
+    assert f"{where(ioc, ';')}: kinematics 'pair' inverse: expected a value, found ';'" in text, text
     db = tmp_path / "extra.db"
     assert f"{where(db, '1)')}: expected ',' after field name 'VAL', found '1'" in text, text
     assert f"{where(db, '@')}: invalid '@'" in text, text
@@ -218,6 +219,9 @@ def test_an_axis_that_does_not_load_is_named_once_and_its_follow_ons_say_so(tmp_
     other = [e for e in errors if "kinematics 'other'" in e]
     assert len(other) == 1 and other[0].endswith(f"no axis 2 (virtual) {note}"), text
     pair = [e for e in errors if "kinematics 'pair' inverse:" in e]
-    assert [e.split(" inverse:")[1].split(":")[0] for e in pair] == ["1", "2", "3"], text
+    lines = [int(e.split(":")[1]) for e in pair]  # ioc.yaml's lines of the three statements
+    first = int(where(ioc, "ax1 := ax3 +;").split(":")[1])
+    assert lines == [first, first + 1, first + 2], text
+    assert pair[0].startswith(where(ioc, "ax1 := ax3 +;").rsplit(":", 1)[0] + ":"), text
     assert pair[2].endswith("'(' is never closed"), text
     assert r.stderr.rstrip().endswith(f"{ioc}: {len(errors)} errors"), r.stderr

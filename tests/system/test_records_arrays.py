@@ -10,9 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from conftest import BEAMCTL, wait_for
+from conftest import BEAMCTL, connect, wait_for
 
 import epics
+from epics import ca, dbr
 
 
 def caget(name, **kw):
@@ -95,6 +96,38 @@ record(printf, "$(P)msg") { field(FMT, "T=%.1f n=%d (%x)") field(INP0, "$(P)t") 
     p = prefix
     assert caput(p + "msg.PROC", 1) == 1
     assert caget(p + "msg", as_string=True) == "T=21.5 n=3 (3)"
+
+
+def test_long_strings_are_one_string_and_the_char_array_with_dollar(ioc, prefix):
+    """lsi/lso/printf VAL as softIoc serves it: "VAL" one DBR_STRING (its first 39 characters),
+    "VAL$" the char array whole (caget -S)."""
+    ioc.start("""
+record(lso, "$(P)lso") { field(SIZV, "120") }
+record(lsi, "$(P)lsi") { field(SIZV, "120") field(INP, "$(P)lso") }
+record(printf, "$(P)pf") { field(FMT, "%s; and then more text from the format") field(INP0, "$(P)lso") field(SIZV, "120") }
+""")
+    p = prefix
+    text = "a long string of more than forty characters, as a beamline name can be"
+    chid = connect(p + "lso")
+    assert ca.field_type(chid) == dbr.STRING
+    assert ca.element_count(chid) == 1
+    whole = connect(p + "lso.VAL$")
+    assert ca.field_type(whole) == dbr.CHAR
+    assert ca.element_count(whole) == 120
+    assert caput(p + "lso.VAL$", text, wait=True) == 1
+    assert caget(p + "lso") == text[:39]
+    assert caget(p + "lso.VAL$", as_string=True) == text
+    assert caget(p + "lso.LEN") == len(text) + 1
+    assert caput(p + "lsi.PROC", 1, wait=True) == 1
+    assert caget(p + "lsi.VAL$", as_string=True) == text  # a link to a char array: whole
+    assert caput(p + "pf.PROC", 1, wait=True) == 1
+    # %s of a link to lso (not lso.VAL$): its DBR_STRING, 39 characters (dbGetLinkLS)
+    formatted = text[:39] + "; and then more text from the format"
+    assert caget(p + "pf") == formatted[:39]
+    assert caget(p + "pf.VAL$", as_string=True) == formatted
+    assert caput(p + "lso", "short", wait=True) == 1  # a DBR_STRING put
+    assert caget(p + "lso.VAL$", as_string=True) == "short"
+    assert caget(p + "lso.LEN") == 6
 
 
 ROUTINES = Path(str(BEAMCTL)).parent / "tests" / "unit" / "record_routines_plugin.so"

@@ -260,8 +260,11 @@ TEST(IocKinematics, ConfigurationErrorsNameWhatAndWhere) {
     EXPECT_NE(e.find("no axis 13"), std::string::npos) << e;
     e = config_error("  - {name: s, virtual: [11, 12], real: [1, 2], inverse: \"ax1 := ax11;\"}\n");
     EXPECT_NE(e.find("does not assign ax2"), std::string::npos) << e;
-    e = config_error("  - {name: s, virtual: [11, 12], real: [1, 2], inverse: \"ax1 := ax11 +; ax2 := ax7;\"}\n");
-    EXPECT_NE(e.find("kinematics 's' inverse:1:"), std::string::npos) << e; // file:line:col of the code
+    const std::string bad = "  - {name: s, virtual: [11, 12], real: [1, 2], inverse: \"ax1 := ax11 +; ax2 := ax7;\"}\n";
+    e = config_error(bad);
+    // the place in ioc.yaml (line 13, the entry): the ';' is the 14th character of the code
+    const std::string at = "ioc.yaml:13:" + std::to_string(bad.find('"') + 1 + 14) + ": kinematics 's' inverse: ";
+    EXPECT_NE(e.find(at + "expected a value"), std::string::npos) << at << "\n" << e;
     EXPECT_NE(e.find("ax7"), std::string::npos) << e;                      // and the second error too
     e = config_error(ok + "  - {name: t, virtual: [12], real: [2], inverse: \"ax2 := ax12;\"}\n");
     EXPECT_NE(e.find("axis 12 is a virtual axis of another group"), std::string::npos) << e;

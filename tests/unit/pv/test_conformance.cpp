@@ -469,11 +469,11 @@ record(aao, "o") { field(NELM, "3") field(FTVL, "DOUBLE") field(SIOL, "wf PP") f
     EXPECT_EQ(gets("l.SEVR"), "MINOR");
     EXPECT_EQ(gets("l.STAT"), "SIMM");
     char buf[64] = {};
-    db.get(addr("l"), Prim::Char, buf, 40);
+    db.get(addr("l.VAL$"), Prim::Char, buf, 40);
     EXPECT_STREQ(buf, "simulated");
     process("env");
     char env[64] = {};
-    db.get(addr("env"), Prim::Char, env, 64);
+    db.get(addr("env.VAL$"), Prim::Char, env, 64);
     EXPECT_STREQ(env, "a long string from the environment");
     double v[3] = {1, 2, 3};
     db.put(addr("o"), Prim::Double, v, 3);

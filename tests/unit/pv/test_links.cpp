@@ -311,6 +311,42 @@ record(ao, "t") {}
     EXPECT_EQ(st, PutStatus::Ok);
 }
 
+// dbNotify and recGblFwdLink: a put to a record busy in asynchronous processing (PACT, here a
+// calcout waiting ODLY after a scan or a plain put) processes it again when it completes (RPRO);
+// a put-callback waits for the completion, then puts, processes and calls back.
+TEST_F(Links, PutsToABusyRecordRunWhenItCompletes) {
+    load(R"(
+record(calcout, "co") { field(CALC, "A") field(OUT, "t PP") field(ODLY, "0.5") }
+record(ao, "t") {}
+)");
+    put("co.A", 1); // no callback: busy for 0.5 s
+    EXPECT_EQ(getd("co.PACT"), 1);
+    put("co.A", 2); // stored, processing requested again (RPRO)
+    EXPECT_EQ(getd("co.RPRO"), 1);
+    advance(0.6);
+    EXPECT_EQ(getd("t"), 1); // the output computed when it started
+    EXPECT_EQ(getd("co.RPRO"), 0);
+    EXPECT_EQ(getd("co.PACT"), 1); // processing again, for A = 2
+    advance(0.6);
+    EXPECT_EQ(getd("t"), 2);
+    EXPECT_EQ(getd("co.PACT"), 0);
+
+    put("co.A", 3);
+    int done = 0;
+    put("co.A", 4, [&](PutStatus s) {
+        ++done;
+        EXPECT_EQ(s, PutStatus::Ok);
+    });
+    EXPECT_EQ(getd("co.A"), 3); // not put yet: waits for the restart
+    advance(0.6);
+    EXPECT_EQ(getd("t"), 3);
+    EXPECT_EQ(getd("co.A"), 4); // restarted: put, processing for 0.5 s
+    EXPECT_EQ(done, 0);
+    advance(0.6);
+    EXPECT_EQ(getd("t"), 4);
+    EXPECT_EQ(done, 1);
+}
+
 TEST_F(Links, PutCallbackWaitsForAsynchronousRecordsDownTheChain) {
     load(R"(
 record(ao, "start") { field(FLNK, "co") }

@@ -18,8 +18,13 @@ struct Recorder : Subscription {
 };
 
 struct RecordsMisc : DbTest {
+    // "rec" as `caget -S rec.VAL$` names a long string: its characters whole.
+    static std::string whole(const char* n) {
+        std::string s(n);
+        return (s.find('.') == std::string::npos ? s + ".VAL" : s) + "$";
+    }
     std::string get_chars(const char* n) {
-        Address a = addr(n);
+        Address a = addr(whole(n).c_str());
         std::vector<char> buf(a.count + 1, 0);
         db.get(a, Prim::Char, buf.data(), a.count);
         return std::string(buf.data());

@@ -20,13 +20,18 @@ struct Recorder : Subscription {
 };
 
 struct RecordsMore : DbTest {
+    // "rec" as `caget -S rec.VAL$` names a long string: its characters whole.
+    static std::string whole(const char* n) {
+        std::string s(n);
+        return (s.find('.') == std::string::npos ? s + ".VAL" : s) + "$";
+    }
     // A char array written as `caput -S` does: the characters and their NUL.
     PutStatus put_chars(const char* n, const char* s) {
-        return db.put(addr(n), Prim::Char, s, uint32_t(std::strlen(s) + 1));
+        return db.put(addr(whole(n).c_str()), Prim::Char, s, uint32_t(std::strlen(s) + 1));
     }
     // A char array read as `caget -S` does.
     std::string get_chars(const char* n) {
-        Address a = addr(n);
+        Address a = addr(whole(n).c_str());
         std::vector<char> buf(a.count + 1, 0);
         db.get(a, Prim::Char, buf.data(), a.count);
         return std::string(buf.data());
@@ -249,8 +254,8 @@ record(stringout, "so") {}
 record(lso, "c") { field(DOL, {const: "from the start"}) }
 record(lsi, "small") { field(SIZV, "3") }
 )");
-    EXPECT_EQ(addr("o").count, 100u);
-    EXPECT_EQ(addr("small").count, 16u); // SIZV is at least 16
+    EXPECT_EQ(addr("o.VAL$").count, 100u);
+    EXPECT_EQ(addr("small.VAL$").count, 16u); // SIZV is at least 16
     EXPECT_EQ(get_chars("c"), "from the start");
     EXPECT_EQ(getd("c.LEN"), 15);
     const char* text = "a string much longer than the forty characters of DBR_STRING, 72 chars";
@@ -267,6 +272,49 @@ record(lsi, "small") { field(SIZV, "3") }
     put_chars("o", longer.c_str());
     EXPECT_EQ(get_chars("o"), std::string(99, 'x'));
     EXPECT_EQ(getd("o.LEN"), 100);
+}
+
+// As base's cvt_dbaddr/get_array_info serve them: "VAL" is one DBF_STRING (its first 39
+// characters; no element before a value), "VAL$" the char array; links to scalars carry a string.
+TEST_F(RecordsMore, LongStringValIsOneStringAndVal$TheCharArray) {
+    load(R"(
+record(lso, "o") { field(SIZV, "100") }
+record(lsi, "never") {}
+record(stringin, "si") { field(INP, "o") }
+record(longin, "li") { field(INP, "o") }
+record(stringout, "so") { field(OUT, "o PP") }
+)");
+    Address head = addr("o"), oval = addr("o.OVAL"), chars = addr("o.VAL$");
+    EXPECT_EQ(head.native, Prim::String);
+    EXPECT_EQ(head.count, 1u);
+    EXPECT_EQ(oval.native, Prim::String);
+    EXPECT_EQ(chars.native, Prim::Char);
+    EXPECT_EQ(chars.count, 100u);
+    EXPECT_EQ(db.current_count(addr("never")), 0u); // LEN 0: no element
+    char none[kStringSize] = "x";
+    EXPECT_EQ(db.get(addr("never"), Prim::String, none, 1), 0u);
+    EXPECT_EQ(none[0], 0);
+    const std::string text = "a string much longer than the forty characters of DBR_STRING";
+    ASSERT_EQ(put_chars("o", text.c_str()), PutStatus::Ok);
+    EXPECT_EQ(db.current_count(head), 1u);
+    EXPECT_EQ(gets("o"), text.substr(0, 39));
+    EXPECT_EQ(gets("o.OVAL"), text.substr(0, 39));
+    // A DBR_STRING put: the string, LEN from it; a number put: its text.
+    ASSERT_EQ(put_str("o", "short one"), PutStatus::Ok);
+    EXPECT_EQ(get_chars("o"), "short one");
+    EXPECT_EQ(getd("o.LEN"), 10);
+    double v = 2.5;
+    ASSERT_EQ(db.put(head, Prim::Double, &v, 1), PutStatus::Ok);
+    EXPECT_EQ(get_chars("o"), "2.500000"); // putDoubleString: precision 6 (lso has no PREC)
+    EXPECT_EQ(getd("o"), 2.5); // a string that is a number reads as one
+    put("si.PROC", 1);
+    EXPECT_EQ(gets("si"), "2.500000");
+    put("li.PROC", 1);
+    EXPECT_EQ(getd("li"), 2);
+    EXPECT_EQ(gets("li.SEVR"), "NO_ALARM");
+    put_str("so", "from a stringout");
+    EXPECT_EQ(get_chars("o"), "from a stringout");
+    EXPECT_EQ(getd("o.LEN"), 17);
 }
 
 TEST_F(RecordsMore, LsiReadsStringsAndLsoPostsOnChangeOrAlways) {
