@@ -839,7 +839,8 @@ PutStatus Database::put(const Address& a, Prim t, const void* data, uint32_t n, 
     Depth depth(*this);
     Record& r = *a.rec;
     bool busy = r.pact && !r.in_process_; // asynchronous processing in progress (dbNotify: restart)
-    if (cb && (busy || (r.notify_ && (r.notify_->active || !r.notify_->queue.empty())))) {
+    // A link field is put and answered at once, never processed (dbProcessNotify's DBF_xxxLINK case).
+    if (cb && !is_link(a.field->dbf) && (busy || (r.notify_ && (r.notify_->active || !r.notify_->queue.empty())))) {
         // Another put-callback is in progress on this record, or the record is busy: wait behind
         // it (arrival order); the put, its processing and its callback follow the completion.
         const char* p = static_cast<const char*>(data);

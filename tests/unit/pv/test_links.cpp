@@ -332,6 +332,15 @@ record(ao, "t") {}
     EXPECT_EQ(getd("co.PACT"), 0);
 
     put("co.A", 3);
+    // a link field is put and answered at once, busy or not (dbProcessNotify)
+    char link[kStringSize] = "t.VAL";
+    int link_done = 0;
+    db.put(addr("co.INPB"), Prim::String, link, 1, [&](PutStatus s) {
+        ++link_done;
+        EXPECT_EQ(s, PutStatus::Ok);
+    });
+    EXPECT_EQ(link_done, 1);
+    EXPECT_EQ(gets("co.INPB"), "t.VAL NPP NMS");
     int done = 0;
     put("co.A", 4, [&](PutStatus s) {
         ++done;
