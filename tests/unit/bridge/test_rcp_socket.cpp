@@ -63,10 +63,13 @@ struct Peer {
 // Runs the loop until `done` is true (checked every 10 ms) or `limit_s` passed.
 bool run_until(EventLoop& loop, const std::function<bool()>& done, double limit_s = 10) {
     double end = EventLoop::now_s() + limit_s;
-    bool ok = false;
+    bool ok = false, stopping = false; // one stop() a run (a queued second one ends the next run)
     auto id = loop.call_every(0.01, [&] {
         if (done()) ok = true;
-        if (ok || EventLoop::now_s() > end) loop.stop();
+        if (!stopping && (ok || EventLoop::now_s() > end)) {
+            stopping = true;
+            loop.stop();
+        }
     });
     loop.run();
     loop.cancel(id);

@@ -85,8 +85,14 @@ struct ClientTest : ::testing::Test {
     bool run_until(const std::function<bool()>& pred, double timeout_s = 10) {
         if (pred()) return true;
         double end = EventLoop::now_s() + timeout_s;
+        // One stop() a run: a second tick before the first stop is taken would leave a stop
+        // queued, which would end the next run_until at once.
+        bool stopping = false;
         auto id = loop.call_every(0.002, [&] {
-            if (pred() || EventLoop::now_s() > end) loop.stop();
+            if (!stopping && (pred() || EventLoop::now_s() > end)) {
+                stopping = true;
+                loop.stop();
+            }
         });
         loop.run();
         loop.cancel(id);
