@@ -494,11 +494,14 @@ struct Autosave::Impl {
             return false;
         }
         PutStatus st;
+        // A text stored whole through a char-array address ("rec.FIELD$"): its characters and NUL.
+        auto store_text = [&](const Address& chars, std::string z) {
+            z.push_back('\0');
+            return db.store_value(chars, Prim::Char, z.data(), uint32_t(std::min<std::size_t>(z.size(), chars.count)));
+        };
         Address whole;
         if (a.kind == Address::Kind::StringHead && !v.array && db.resolve(v.name + "$", whole)) {
-            std::string z = v.values.empty() ? std::string() : v.values[0];
-            z.push_back('\0');
-            st = db.store_value(whole, Prim::Char, z.data(), uint32_t(std::min<std::size_t>(z.size(), whole.count)));
+            st = store_text(whole, v.values.empty() ? std::string() : v.values[0]);
         } else if (v.array || (a.field->flags & kArray)) {
             if (v.values.empty()) return true;
             std::vector<char> buf(v.values.size() * kStringSize, '\0');
@@ -509,14 +512,10 @@ struct Autosave::Impl {
             const std::string& s = v.values.empty() ? std::string() : v.values[0];
             Address la;
             if (a.kind == Address::Kind::LongString) { // saved as "rec.FIELD$": the text whole
-                std::string z = s;
-                z.push_back('\0');
-                st = db.store_value(a, Prim::Char, z.data(), uint32_t(std::min<std::size_t>(z.size(), a.count)));
+                st = store_text(a, s);
             } else if (a.field->dbf == Dbf::String && s.size() >= std::size_t(kStringSize) &&
                        db.resolve(v.name + "$", la)) {
-                std::string z = s;
-                z.push_back('\0');
-                st = db.store_value(la, Prim::Char, z.data(), uint32_t(std::min<std::size_t>(z.size(), la.count)));
+                st = store_text(la, s);
             } else {
                 char buf[kStringSize];
                 copy_string(buf, sizeof buf, s);
