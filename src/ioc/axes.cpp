@@ -4,7 +4,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
-#include "ioc/pv_table.hpp"
+#include "module/pv_table.hpp"
 #include "ioc/pv_util.hpp"
 #include "motion/axis_setup.hpp"
 #include "pv/motor_record.hpp"
@@ -149,8 +149,8 @@ std::vector<std::pair<std::string, std::string>> field_init(const std::string& s
 // The axis PVs as ecmccfg's ecmcAxis.db names them, on the axis's data items (ECMC's asyn names
 // where ECMC has them: ax<n>.actpos, .status, .control, ...). The commands are writes: EnaCmd,
 // ExeCmd, StpCmd and RstCmd are bits 0-3 of ax<n>.control, as ecmccfg's asynMask records.
-const PvTable& axis_table() {
-    static const PvTable t{"axis", {
+const module::PvTable& axis_table() {
+    static const module::PvTable t{"axis", {
         {"-PosAct", "ai", "actpos", {{"DESC", "Actual position"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
         {"-VelAct", "ai", "actvel", {{"DESC", "Actual velocity"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)/s"}}},
         {"-PosSet", "ai", "setpos", {{"DESC", "Setpoint position"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
@@ -196,8 +196,8 @@ const PvTable& axis_table() {
 }
 
 // One row per encoder: $(P) = "<axis PV>-Enc01", signals "ax<n>.enc01.*".
-const PvTable& encoder_table() {
-    static const PvTable t{"axis encoder", {
+const module::PvTable& encoder_table() {
+    static const module::PvTable t{"axis encoder", {
         {"-PosAct", "ai", "actpos", {{"DESC", "Encoder $(N) position"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}},
     }};
     return t;
@@ -417,13 +417,13 @@ void IocAxes::make_pvs(Axis& a, registry::Registry& signals) {
     char velo[40];
     std::snprintf(velo, sizeof velo, "%.12g", a.params.trajectory.velocity);
     std::string sp = SB() << "ax" << a.params.id << ".";
-    PvInstance in{a.pv, sp, {{"PREC", std::to_string(a.cfg.epics.precision)}, {"EGU", a.cfg.epics.unit}, {"VELO", velo}}};
+    module::PvInstance in{a.pv, sp, {{"PREC", std::to_string(a.cfg.epics.precision)}, {"EGU", a.cfg.epics.unit}, {"VELO", velo}}};
     pv::DbFile f = make_records(axis_table(), in, signals);
     name_pvs(axis_table(), in, signals);
     for (std::size_t k = 0; k < a.cfg.encoders.size() && k < motion::AxisStatus::kMaxEncoders; ++k) {
         char dash[16];
         std::snprintf(dash, sizeof dash, "-Enc%02zu", k + 1);
-        PvInstance e{a.pv + dash, sp + encoder_key(k) + ".", in.macros};
+        module::PvInstance e{a.pv + dash, sp + encoder_key(k) + ".", in.macros};
         e.macros["N"] = std::to_string(k + 1);
         pv::merge_db(f, make_records(encoder_table(), e, signals));
         name_pvs(encoder_table(), e, signals);

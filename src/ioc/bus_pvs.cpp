@@ -8,8 +8,8 @@
 namespace beamctl::ioc {
 
 // $(P) = "<prefix>m<m>", $(BUS) = "ec<m>.", $(NB) = the histogram's buckets
-const PvTable& bus_table() {
-    static const PvTable t{"bus", {
+const module::PvTable& bus_table() {
+    static const module::PvTable t{"bus", {
         {"-Stat-OK", "bi", "$(BUS)ok", {{"DESC", "Bus OK: all slaves OP, data valid"}, {"ZNAM", "NOT_OK"}, {"ONAM", "OK"}, {"ZSV", "MAJOR"}}},
         {"-LinkUp", "bi", "$(BUS)linkup", {{"DESC", "Cyclic frames come back"}, {"ZNAM", "DOWN"}, {"ONAM", "UP"}, {"ZSV", "MAJOR"}}},
         {"-SlvCntr", "longin", "$(BUS)slavecounter", {{"DESC", "Slaves configured on the bus"}}},
@@ -36,8 +36,8 @@ const PvTable& bus_table() {
 }
 
 // A bus run by a scanner (link type scanner): the attachment, as seed 002's master port reports it.
-const PvTable& scanner_table() {
-    static const PvTable t{"scanner link", {
+const module::PvTable& scanner_table() {
+    static const module::PvTable t{"scanner link", {
         {"-ScnConn", "bi", "$(BUS)scanner.attached", {{"DESC", "Attached to the bus scanner"}, {"ZNAM", "DETACHED"}, {"ONAM", "ATTACHED"}, {"ZSV", "MAJOR"}}},
         {"-ScnCycle", "ai", "$(BUS)scanner.cycle", {{"DESC", "Last scanner cycle seen"}, {"PREC", "0"}}},
         {"-ScnMissed", "longin", "$(BUS)scanner.missed", {{"DESC", "Scanner cycles this IOC never saw"}}},
@@ -47,8 +47,8 @@ const PvTable& scanner_table() {
     return t;
 }
 
-const PvTable& slave_table() {
-    static const PvTable t{"bus slave", {
+const module::PvTable& slave_table() {
+    static const module::PvTable t{"bus slave", {
         {"-Online", "bi", "slavestatus.0", {{"DESC", "Slave answers"}, {"ZNAM", "OFFLINE"}, {"ONAM", "ONLINE"}, {"ZSV", "MAJOR"}}},
         {"-Operational", "bi", "slavestatus.1", {{"DESC", "Slave in OP"}, {"ZNAM", "NOT_OP"}, {"ONAM", "OP"}, {"ZSV", "MAJOR"}}},
         {"-HWType", "stringin", "", {{"VAL", "$(TYPE)"}, {"DESC", "$(NAME)"}}},

@@ -19,7 +19,7 @@
 #pragma once
 
 #include "ethercat/bus.hpp"
-#include "ioc/pv_table.hpp"
+#include "module/pv_table.hpp"
 #include "pv/link.hpp"
 #include "registry/registry.hpp"
 #include "rt/engine.hpp"
@@ -30,11 +30,11 @@
 
 namespace beamctl::ioc {
 
-const PvTable& bus_table();   // $(P) = "<prefix>m<m>", signals "ec<m>." (the thread PVs: "ec<m>.thread.")
-const PvTable& slave_table(); // $(P) = "<prefix>m<m>s<kkk>", signals "ec<m>.s<k>."
+const module::PvTable& bus_table();   // $(P) = "<prefix>m<m>", signals "ec<m>." (the thread PVs: "ec<m>.thread.")
+const module::PvTable& slave_table(); // $(P) = "<prefix>m<m>s<kkk>", signals "ec<m>.s<k>."
 // A scanner link's bus (ec<m>.scanner.attached, .cycle, .missed, .drops, .attaches):
 // $(P)m<m>-ScnConn -ScnCycle -ScnMissed -ScnDrops -ScnAttaches.
-const PvTable& scanner_table();
+const module::PvTable& scanner_table();
 
 // Declares the items of bus `id` with its configured slave positions; `engine` once per IOC.
 void declare_bus_items(registry::Registry& r, int id, const std::vector<int>& slave_positions);

@@ -75,7 +75,7 @@ public:
             const bool out = b.pc.step(k[Block::Enable] != 0, x);
             if (b.over) {
                 if (const uint64_t dc = b.bus->dc_time()) {
-                    const uint64_t x_ns = b.inp.kind == ValueSource::Kind::Time ? dc + c.period_ns : dc;
+                    const uint64_t x_ns = b.inp.kind == module::ValueSource::Kind::Time ? dc + c.period_ns : dc;
                     const unsigned n = unsigned(b.samples.size());
                     b.over->step(q, k[Block::Enable] != 0, x, x_ns, dc, c.period_ns, n);
                     for (unsigned i = 0; i < n; ++i) b.samples[i].set(b.over->sample(i) ? b.cfg.analog_high : b.cfg.analog_low);
@@ -86,7 +86,7 @@ public:
             } else if (!b.timed) {
                 b.out.set(out ? 1 : 0); // unbound: nothing
             } else if (const uint64_t dc = b.bus->dc_time()) { // no DC time yet: nothing to time against
-                const uint64_t x_ns = b.inp.kind == ValueSource::Kind::Time ? dc + c.period_ns : dc;
+                const uint64_t x_ns = b.inp.kind == module::ValueSource::Kind::Time ? dc + c.period_ns : dc;
                 b.timed->step(q, k[Block::Enable] != 0, x, x_ns, dc, c.period_ns);
                 b.start_time.set(int64_t(b.timed->start_time()));
                 b.out.set(b.timed->level() ? 1 : 0);
@@ -128,7 +128,7 @@ public:
                 tr.level = level;
             }
         }
-        const bool gate = f_.gate_.kind == ValueSource::Kind::None || f_.gate_.read(c.t_ns) != 0;
+        const bool gate = f_.gate_.kind == module::ValueSource::Kind::None || f_.gate_.read(c.t_ns) != 0;
         f_.capture_->sample(c.cycle, c.t_ns, in_.data(), gate, trigger, t);
         // the next cycle's appends belong to the capture running now (none after a DISARM)
         const uint64_t running = f_.capture_->armed() ? f_.capture_->capture() : 0;
@@ -275,8 +275,8 @@ IocFlyScan::IocFlyScan(const config::IocConfig& cfg, registry::Registry& reg, pv
             pv::Elements e = r.elements(fd);
             pv::get_element(r, fd, e, 0, pv::Prim::String, buf);
             std::string why;
-            ValueSource src = resolve(buf, why);
-            if (src.kind == ValueSource::Kind::None) {
+            module::ValueSource src = resolve(buf, why);
+            if (src.kind == module::ValueSource::Kind::None) {
                 LOG_WARN(lg, r.name() << ": '" << buf << "' refused: " << why);
                 return pv::PutStatus::Failed;
             }
@@ -439,21 +439,21 @@ bool IocFlyScan::send(Block& b) {
     return false;
 }
 
-ValueSource IocFlyScan::resolve(const std::string& name, std::string& why) const {
-    ValueSource v;
+module::ValueSource IocFlyScan::resolve(const std::string& name, std::string& why) const {
+    module::ValueSource v;
     for (std::size_t i = 0; i < blocks_.size(); ++i) {
         std::string p = SB() << "pcomp" << blocks_[i]->cfg.id << ".";
         if (name.rfind(p, 0) != 0) continue;
         std::string item = name.substr(p.size());
         v.pcomp = &blocks_[i]->pc;
-        if (item == "out") v.kind = ValueSource::Kind::PcompOut;
-        else if (item == "active") v.kind = ValueSource::Kind::PcompActive;
-        else if (item == "produced") v.kind = ValueSource::Kind::PcompProduced;
-        else if (item == "rose") v.kind = ValueSource::Kind::PcompRose;
+        if (item == "out") v.kind = module::ValueSource::Kind::PcompOut;
+        else if (item == "active") v.kind = module::ValueSource::Kind::PcompActive;
+        else if (item == "produced") v.kind = module::ValueSource::Kind::PcompProduced;
+        else if (item == "rose") v.kind = module::ValueSource::Kind::PcompRose;
         else why = SB() << "'" << name << "': a block has out, active, produced and rose";
         return v;
     }
-    return resolve_value(reg_, axes_, name, why);
+    return module::resolve_value(reg_, axes_, name, why);
 }
 
 void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::vector<ethercat::Bus*>& buses,
@@ -464,7 +464,7 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
         Block& b = *bp;
         std::string why;
         b.inp = resolve(b.cfg.input, why);
-        if (b.inp.kind == ValueSource::Kind::None) throw Error(SB() << at(b.cfg.input_where) << ": pcomp" << b.cfg.id << " input: " << why);
+        if (b.inp.kind == module::ValueSource::Kind::None) throw Error(SB() << at(b.cfg.input_where) << ": pcomp" << b.cfg.id << " input: " << why);
         b.want.inp = b.inp;
         if (!b.cfg.output.empty()) {
             b.out = reg_.bind(b.cfg.output, why);
@@ -505,7 +505,7 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
                 last_[ncols.size()].width = samples->size();
                 for (const std::string& e : *samples) {
                     fields_.push_back(resolve(e, why));
-                    if (fields_.back().kind == ValueSource::Kind::None) throw Error(SB() << at(cf.where) << ": capture field " << cf.signal << ": " << why);
+                    if (fields_.back().kind == module::ValueSource::Kind::None) throw Error(SB() << at(cf.where) << ": capture field " << cf.signal << ": " << why);
                     cols.push_back({fields_.size() - 1, daq::CaptureMode::Value});
                 }
                 daq::NexusColumn nc{cf.name, cf.units, cf.signal, daq::to_string(daq::CaptureMode::Value)};
@@ -513,11 +513,11 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
                 ncols.push_back(std::move(nc));
                 continue;
             }
-            ValueSource v = resolve(cf.signal, why);
-            if (v.kind == ValueSource::Kind::None) throw Error(SB() << at(cf.where) << ": capture field: " << why);
+            module::ValueSource v = resolve(cf.signal, why);
+            if (v.kind == module::ValueSource::Kind::None) throw Error(SB() << at(cf.where) << ": capture field: " << why);
             // a UINT64 entry (DC time stamps in ns: beyond a double's 53 bits) is kept exact
-            const bool u64 = v.kind == ValueSource::Kind::Integer && is_uint64_entry(reg_.find(cf.signal));
-            if (u64) v.kind = ValueSource::Kind::Uint64Bits; // value only (check_names)
+            const bool u64 = v.kind == module::ValueSource::Kind::Integer && is_uint64_entry(reg_.find(cf.signal));
+            if (u64) v.kind = module::ValueSource::Kind::Uint64Bits; // value only (check_names)
             fields_.push_back(v);
             for (const std::string& m : cf.modes) {
                 daq::CaptureMode mode = daq::CaptureMode::Value;
@@ -538,7 +538,7 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
                 if (tr.block < 0) {
                     std::string why;
                     tr.sig = resolve(name, why);
-                    if (tr.sig.kind == ValueSource::Kind::None)
+                    if (tr.sig.kind == module::ValueSource::Kind::None)
                         throw Error(SB() << at(c.trigger_where) << ": capture trigger: " << why << " (or pcomp<n>, cycle)");
                 }
             }
@@ -547,7 +547,7 @@ void IocFlyScan::bind(rt::Engine& engine, motion::AxisGroup* axes, const std::ve
         if (!c.gate.empty()) {
             std::string why;
             gate_ = resolve(c.gate, why);
-            if (gate_.kind == ValueSource::Kind::None) throw Error(SB() << at(c.gate_where) << ": capture gate: " << why);
+            if (gate_.kind == module::ValueSource::Kind::None) throw Error(SB() << at(c.gate_where) << ": capture gate: " << why);
         }
         capture_ = std::make_unique<daq::Capture>(fields_.size(), std::move(cols), c.ring_rows);
         daq::CaptureWriter::Options o;

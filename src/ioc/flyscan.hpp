@@ -26,7 +26,7 @@
 #include "daq/timed_output.hpp"
 #include "ethercat/bus.hpp"
 #include "ioc/memmaps.hpp"
-#include "ioc/value_source.hpp"
+#include "module/value_source.hpp"
 #include "motion/axis_group.hpp"
 #include "plc/program.hpp"
 #include "pv/database.hpp"
@@ -82,7 +82,7 @@ private:
     struct Block {
         config::PcompEntry cfg;
         daq::Pcomp pc;
-        ValueSource inp;
+        module::ValueSource inp;
         registry::BoundSignal out;
         // a DC-timestamped output (EL2252): its slave's startTime and activate, and its bus
         std::string timed_prefix; // "ec0.s4." when the output is one
@@ -97,7 +97,7 @@ private:
         struct Cmd {
             daq::PcompParams params;
             bool enable = false;
-            ValueSource inp;
+            module::ValueSource inp;
         };
         Cmd want;
         SpscQueue<Cmd> cmds{64};
@@ -117,7 +117,7 @@ private:
                    *health = nullptr, *state = nullptr, *posn = nullptr, *timed_r = nullptr, *late = nullptr;
     };
     class Stage;
-    ValueSource resolve(const std::string& name, std::string& why) const;
+    module::ValueSource resolve(const std::string& name, std::string& why) const;
     void check_names(); // and claims the outputs
     bool send(Block& b);
     static void to_cells(const Block::Cmd& c, double* cell);
@@ -136,14 +136,14 @@ private:
     // capture
     std::unique_ptr<daq::Capture> capture_;
     std::unique_ptr<daq::CaptureWriter> writer_;
-    std::vector<ValueSource> fields_;
-    ValueSource gate_;
+    std::vector<module::ValueSource> fields_;
+    module::ValueSource gate_;
     // What captures a row: a block's rising OUT (its edge time stamps the row), every cycle, or
     // a signal's rising edge; any of them.
     struct Trigger {
         int block = -1;  // index in blocks_
         bool cycle = false;
-        ValueSource sig; // else
+        module::ValueSource sig; // else
         bool level = false; // RT: the signal's last level
     };
     std::vector<Trigger> triggers_;

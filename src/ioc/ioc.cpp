@@ -9,6 +9,7 @@
 #include "automation/line_server.hpp"
 
 #include "ioc/bus_pvs.hpp"
+#include "ioc/modules.hpp"
 #include "ioc/pv_util.hpp"
 #include "motion/axis_setup.hpp"
 
@@ -348,7 +349,11 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     step([&] { plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_); });
     step([&] { flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get()); });
     step([&] { quadem_ = std::make_unique<IocQuadEm>(cfg_, registry_, db_); }); // before feedback: its values are loop inputs
-    step([&] { feedback_ = std::make_unique<IocFeedback>(cfg_, registry_, db_); });
+    module::BuildContext build{cfg_.prefix, cfg_.path, registry_, db_};
+    for (const ModuleEntry& m : module_table())
+        step([&] {
+            if (auto mod = m.make(cfg_, build)) modules_.push_back(std::move(mod));
+        });
     step([&] { detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s); });
     step([&] { area_ = std::make_unique<IocAreaDetector>(cfg_, db_, EventLoop::now_s); });
     auto engine_clock = [this] { return double(clock_.now_ns()) * 1e-9; }; // automation's clock: virtual in tests
@@ -554,7 +559,7 @@ void Ioc::run_cycles(uint64_t n) {
 
 void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
     std::string m = SB() << cfg_.prefix << "m" << bc.id;
-    PvInstance bus{m, "", {{"BUS", SB() << "ec" << bc.id << "."}, {"NB", std::to_string(rt::kLatencyBuckets)}}};
+    module::PvInstance bus{m, "", {{"BUS", SB() << "ec" << bc.id << "."}, {"NB", std::to_string(rt::kLatencyBuckets)}}};
     pv::DbFile f = make_records(bus_table(), bus, registry_);
     name_pvs(bus_table(), bus, registry_);
     if (bc.link.type == "scanner") {
@@ -566,7 +571,7 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
         std::snprintf(sp, sizeof sp, "s%03d", s.position);
         std::string p = m + sp;
         const ethercat::DeviceDesc* d = catalog_.find(s.type);
-        PvInstance slave{p, SB() << "ec" << bc.id << ".s" << s.position << ".", {{"TYPE", s.type}, {"NAME", d->name.substr(0, 40)}}};
+        module::PvInstance slave{p, SB() << "ec" << bc.id << ".s" << s.position << ".", {{"TYPE", s.type}, {"NAME", d->name.substr(0, 40)}}};
         pv::merge_db(f, make_records(slave_table(), slave, registry_));
         name_pvs(slave_table(), slave, registry_);
         // Process-data entries of the default PDO assignment: a table made from the catalog,
@@ -574,7 +579,7 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
         // image, which shows what its writer sends when an axis, a PLC or a record drives it).
         std::deque<std::string> text; // the rows' strings
         auto keep = [&](std::string x) { return text.emplace_back(std::move(x)).c_str(); };
-        PvTable entries{"bus entries", {}};
+        module::PvTable entries{"bus entries", {}};
         for (const auto& sm : d->sms) {
             if (sm.type != ethercat::SmType::Outputs && sm.type != ethercat::SmType::Inputs) continue;
             bool out = sm.type == ethercat::SmType::Outputs;
@@ -586,7 +591,7 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
                         if (e.name.empty() || e.index == 0) continue;
                         bool analog = e.name.rfind("analog", 0) == 0 || e.bits > 32 || registry::datatype_float_bits(e.datatype) != 0;
                         const char* type = e.bits == 1 ? (out ? "bo" : "bi") : analog ? (out ? "ao" : "ai") : (out ? "longout" : "longin");
-                        PvRow row{keep("-" + entry_pv_suffix(e.name)), type, keep(e.name),
+                        module::PvRow row{keep("-" + entry_pv_suffix(e.name)), type, keep(e.name),
                                   {{"DESC", keep((s.type + " " + e.name).substr(0, 40))}}, out};
                         if (e.bits == 1) row.fields.insert(row.fields.end(), {{"ZNAM", "0"}, {"ONAM", "1"}});
                         entries.rows.push_back(std::move(row));
@@ -596,7 +601,7 @@ void Ioc::make_bus_pvs(BusRt& b, const config::BusConfig& bc) {
         }
         pv::merge_db(f, make_records(entries, slave, registry_));
         name_pvs(entries, slave, registry_);
-        for (const PvRow& row : entries.rows) entry_pvs_[p + row.suffix] = slave.signal_prefix + row.signal;
+        for (const module::PvRow& row : entries.rows) entry_pvs_[p + row.suffix] = slave.signal_prefix + row.signal;
         auto has = [d](const char* name) {
             for (const auto& pd : d->tx_pdos)
                 for (const auto& e : pd.entries)
@@ -654,9 +659,17 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         return nullptr;
     };
     std::string name = l.s().address;
-    if (r.type().name() == "epid" || r.type().name() == "mca") { // "Fast Epid": a loop of feedback:; mca: detectors.mca
+    for (auto& m : modules_) // an object of a module ("Fast Epid": a loop of feedback:)
+        if (m->owns_device(r.type().name(), name)) {
+            std::string reason;
+            auto dev = m->make_device(module::DeviceRequest{r, name, f.dbf == pv::Dbf::OutLink}, reason);
+            if (!dev) return fail(reason);
+            devices_.push_back(std::move(dev));
+            return devices_.back().get();
+        }
+    if (r.type().name() == "mca") { // mca: detectors.mca
         std::string reason;
-        auto dev = r.type().name() == "epid" ? feedback_->make_device(name, reason) : detectors_->make_device(name, reason);
+        auto dev = detectors_->make_device(name, reason);
         if (!dev) return fail(reason);
         devices_.push_back(std::move(dev));
         return devices_.back().get();
@@ -847,7 +860,8 @@ void Ioc::bring_up() {
     binding_cycle_ = 0;
     flyscan_->bind(*engine_, axes_->group(), buses, storages_->storages());
     quadem_->bind(*engine_, axes_->group()); // before the feedback loops: they read its values in the same cycle
-    feedback_->bind(*engine_, axes_->group());
+    module::BindContext bind{*engine_, registry_, axes_->group()};
+    for (auto& m : modules_) m->bind(bind);
     binding_cycle_ = -1;
     // the cameras see the plant's beam of a simulated bus in this process (bus -1: the first with one)
     auto beam_of = [this](int bus) -> IocAreaDetector::BeamSource {
@@ -883,6 +897,7 @@ void Ioc::bring_up() {
     }
     db_.init_records();
     area_->start();
+    for (auto& m : modules_) m->start();
     if (smart_) smart_->start(); // its motors, shutter, trigger and scaler: records of this IOC
     if (compound_) compound_->start(); // their reals and inputs: here, or other IOCs' (run() connects those)
     if (fsms_) fsms_->start();
@@ -901,6 +916,7 @@ void Ioc::publish() {
     storages_->publish();
     flyscan_->publish();
     quadem_->publish();
+    for (auto& m : modules_) m->publish(EventLoop::now_s());
     area_->poll(EventLoop::now_s());
     detectors_->poll(); // mca records follow acquisitions started through the sum or StartAll
     if (smart_) smart_->poll();

@@ -21,13 +21,14 @@
 #include "ioc/detectors.hpp"
 #include "ioc/area_detector.hpp"
 #include "ioc/quadem.hpp"
-#include "ioc/feedback.hpp"
 #include "ioc/flyscan.hpp"
 #include "ioc/kinematics.hpp"
 #include "ioc/memmaps.hpp"
+#include "module/module.hpp"
 #include "ioc/plcs.hpp"
 #include "ioc/pvt.hpp"
 #include "ioc/storages.hpp"
+#include "feedback/feedback_module.hpp"
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
 #include "pv/autosave.hpp"
@@ -81,7 +82,16 @@ public:
     IocKinematics& kinematics() { return *kinematics_; }
     IocPvt& pvt() { return *pvt_; }
     IocFlyScan& flyscan() { return *flyscan_; }
-    IocFeedback& feedback() { return *feedback_; }
+    feedback::FeedbackModule& feedback() { return module<feedback::FeedbackModule>("feedback"); }
+    // The modules of the module table (ioc/modules.cpp) this IOC's file has, in their order.
+    const std::vector<std::unique_ptr<module::Module>>& modules() const { return modules_; }
+    // Its module of type M; Error naming `section` if the file has none.
+    template <class M>
+    M& module(const char* section) {
+        for (auto& m : modules_)
+            if (auto* p = dynamic_cast<M*>(m.get())) return *p;
+        throw Error(SB() << "this IOC has no " << section << ": section");
+    }
     IocDetectors& detectors() { return *detectors_; }
     IocQuadEm& quadem() { return *quadem_; }
     IocAreaDetector& area_detectors() { return *area_; }
@@ -169,7 +179,7 @@ private:
     std::unique_ptr<IocPlcs> plcs_;
     std::unique_ptr<IocKinematics> kinematics_;
     std::unique_ptr<IocPvt> pvt_; // profile moves of the axes with epics.motorRecord.pvt
-    std::unique_ptr<IocFeedback> feedback_; // fast EPID loops (feedback:)
+    std::vector<std::unique_ptr<module::Module>> modules_; // the module table's, in its order
     std::unique_ptr<IocDetectors> detectors_; // simulated detectors (detectors:)
     std::unique_ptr<IocQuadEm> quadem_;       // quad electrometers (detectors.quadem)
     std::unique_ptr<IocAreaDetector> area_;   // simulated cameras (detectors.area_detector)

@@ -2,7 +2,7 @@
 
 #include "daq/pcomp.hpp"
 
-#include "ioc/pv_table.hpp"
+#include "module/pv_table.hpp"
 #include "ioc/pv_util.hpp"
 
 #include "core/error.hpp"
@@ -251,8 +251,8 @@ plc::PlcRuntime::Options IocPlcs::check_options() const {
 }
 
 // A general PLC's PVs, as ecmccfg names them ($(P) = "<prefix>PLCnn"), on its plc<n>.* items.
-static const PvTable& plc_table() {
-    static const PvTable t{"plc", {
+static const module::PvTable& plc_table() {
+    static const module::PvTable t{"plc", {
         {"-EnaCmd", "bo", "enable", {{"DESC", "$(DESC)"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}, {"VAL", "$(ENABLE)"}}, true},
         {"-EnaAct", "bi", "enable", {{"DESC", "PLC running"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}}},
         {"-ScanTime", "ai", "scantime", {{"DESC", "Scan period"}, {"EGU", "s"}, {"PREC", "4"}}},
@@ -264,8 +264,8 @@ static const PvTable& plc_table() {
 }
 
 // An axis PLC's PVs, as ecmccfg's ecmcAxis.db names them ($(P) = "<prefix><axis name>-PLC").
-static const PvTable& axis_plc_table() {
-    static const PvTable t{"axis plc", {
+static const module::PvTable& axis_plc_table() {
+    static const module::PvTable t{"axis plc", {
         {"-EnaCmd", "bo", "enable", {{"DESC", "$(DESC)"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}, {"VAL", "$(ENABLE)"}}, true},
         {"-EnaCmd-RB", "bi", "enable", {{"DESC", "Plc enable"}, {"ZNAM", "Disabled"}, {"ONAM", "Enabled"}}},
         {"-FirstScan", "bi", "firstscan", {{"DESC", "Plc firstscan"}, {"ZNAM", "No"}, {"ONAM", "Yes"}}},
@@ -285,14 +285,14 @@ void IocPlcs::make_pvs(const std::string& prefix, registry::Registry& signals) {
             auto name = axis_names_.find(s.id);
             if (name == axis_names_.end()) continue;
             std::string desc = SB() << "ax" << s.id << " plc " << std::filesystem::path(s.file).filename().string();
-            PvInstance in{prefix + name->second + "-PLC", owners_[i] + ".",
+            module::PvInstance in{prefix + name->second + "-PLC", owners_[i] + ".",
                           {{"DESC", desc.substr(0, 40)}, {"ENABLE", s.enable ? "1" : "0"}}};
             pv::merge_db(f, make_records(axis_plc_table(), in, signals));
             name_pvs(axis_plc_table(), in, signals);
             continue;
         }
         std::string desc = SB() << "plc" << s.id << " " << std::filesystem::path(s.file).filename().string();
-        PvInstance in{prefix + "PLC" + two_digits(s.id), owners_[i] + ".",
+        module::PvInstance in{prefix + "PLC" + two_digits(s.id), owners_[i] + ".",
                       {{"DESC", desc.substr(0, 40)}, {"ENABLE", s.enable ? "1" : "0"}}};
         pv::merge_db(f, make_records(plc_table(), in, signals));
         name_pvs(plc_table(), in, signals);

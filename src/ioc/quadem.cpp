@@ -40,7 +40,7 @@ struct IocQuadEm::Unit {
     config::QuadEmEntry cfg;
     std::string p; // $(P)<name>:
     std::unique_ptr<detector::QuadEm> qe;
-    ValueSource in[4];
+    module::ValueSource in[4];
     registry::BoundSignal ok[4]; // the inputs' buses' masterstatus (unbound: always good)
     // records
     pv::Record *acquire = nullptr, *mode = nullptr, *mode_rbv = nullptr, *num_acquire = nullptr, *num_acquire_rbv = nullptr,
@@ -473,8 +473,8 @@ void IocQuadEm::bind(rt::Engine& engine, motion::AxisGroup* axes) {
         Unit& u = *up;
         for (int i = 0; i < 4; ++i) {
             std::string why;
-            u.in[i] = resolve_value(reg_, axes, u.cfg.currents[i], why);
-            if (u.in[i].kind == ValueSource::Kind::None || u.in[i].kind == ValueSource::Kind::Time)
+            u.in[i] = module::resolve_value(reg_, axes, u.cfg.currents[i], why);
+            if (u.in[i].kind == module::ValueSource::Kind::None || u.in[i].kind == module::ValueSource::Kind::Time)
                 throw Error(SB() << u.cfg.currents_where << ": quadem " << u.cfg.name << " current " << (i + 1) << ": "
                                  << (why.empty() ? std::string("'time' is not a current") : why));
             if (u.in[i].bus >= 0) u.ok[i] = reg_.bind(std::string(SB() << "ec" << u.in[i].bus << ".masterstatus"), why);

@@ -17,7 +17,7 @@
 
 #include "config/ioc_config.hpp"
 #include "detector/quadem.hpp"
-#include "ioc/value_source.hpp"
+#include "module/value_source.hpp"
 #include "pv/database.hpp"
 #include "registry/registry.hpp"
 #include "rt/engine.hpp"

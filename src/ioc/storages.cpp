@@ -2,7 +2,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
-#include "ioc/pv_table.hpp"
+#include "module/pv_table.hpp"
 #include "ioc/pv_util.hpp"
 
 #include <algorithm>
@@ -16,8 +16,8 @@ log::Logger lg("storages");
 
 // A storage's PVs, as ecmccfg names them ($(P) = "<prefix>DSnn"). Soft records: the IOC loop
 // sets them from the storage's snapshots; DataSet and ClrCmd act through their put hooks.
-const PvTable& storage_table() {
-    static const PvTable t{"storage", {
+const module::PvTable& storage_table() {
+    static const module::PvTable t{"storage", {
         {"-DataAct", "waveform", "", {{"DESC", "$(DESC)"}, {"FTVL", "DOUBLE"}, {"NELM", "$(NELM)"}}},
         {"-DataSet", "waveform", "", {{"DESC", "ds$(ID): write from index 0"}, {"FTVL", "DOUBLE"}, {"NELM", "$(NELM)"}}},
         {"-DataIdAct", "ai", "", {{"DESC", "ds$(ID): write index"}, {"PREC", "0"}}},
@@ -48,7 +48,7 @@ IocStorages::IocStorages(const config::IocConfig& cfg, pv::Database& db) : db_(d
         Item it;
         it.ds = std::make_unique<daq::DataStorage>(e.id, e.size, daq::BufferType(e.type), e.capacity, period);
         most = std::max(most, it.ds->capacity());
-        PvInstance in{cfg.prefix + "DS" + two_digits(e.id), "",
+        module::PvInstance in{cfg.prefix + "DS" + two_digits(e.id), "",
                       {{"DESC", e.desc.substr(0, 40)}, {"ID", std::to_string(e.id)}, {"NELM", std::to_string(it.ds->capacity())}}};
         pv::merge_db(f, make_records(storage_table(), in, registry::Registry()));
         items_.push_back(std::move(it));

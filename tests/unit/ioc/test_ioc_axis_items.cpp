@@ -7,7 +7,7 @@
 #include "config/ioc_config.hpp"
 #include "core/error.hpp"
 #include "ioc/ioc.hpp"
-#include "ioc/pv_table.hpp"
+#include "module/pv_table.hpp"
 #include "rt/engine.hpp"
 
 #include <gtest/gtest.h>
@@ -230,13 +230,13 @@ TEST(PvTable, RowsBecomeDeviceRecordsWithTheInstanceMacros) {
         s.owner_kind = registry::OwnerKind::Axis;
         reg.declare(s);
     }
-    ioc::PvTable t{"test", {
+    module::PvTable t{"test", {
         {"-Pos", "ai", "actpos", {{"EGU", "$(EGU)"}, {"DESC", "Position"}}},
         {"-Ena", "bo", "control.0", {{"ZNAM", "Off"}}, true},
         {"-Note", "stringin", "", {{"DESC", "text"}}},
     }};
-    ioc::PvInstance in{"P:M3", "ax3.", {{"EGU", "mm"}}};
-    pv::DbFile f = ioc::make_records(t, in, reg);
+    module::PvInstance in{"P:M3", "ax3.", {{"EGU", "mm"}}};
+    pv::DbFile f = module::make_records(t, in, reg);
     ASSERT_EQ(f.records.size(), 3u);
     auto field = [&](std::size_t i, const std::string& k) {
         for (const auto& fl : f.records[i].fields)
@@ -253,18 +253,18 @@ TEST(PvTable, RowsBecomeDeviceRecordsWithTheInstanceMacros) {
     ASSERT_EQ(f.records[1].infos.size(), 1u);
     EXPECT_EQ(f.records[1].infos[0].name, "asyn:READBACK");
     EXPECT_EQ(field(2, "DTYP"), "<none>"); // a soft record
-    ioc::name_pvs(t, in, reg);
+    module::name_pvs(t, in, reg);
     EXPECT_EQ(reg.find("ax3.actpos")->pv, "P:M3-Pos");
     EXPECT_EQ(reg.find("ax3.control")->pv, ""); // a bit of it is not the signal's PV
-    std::string text = ioc::to_db_text(t);
+    std::string text = module::to_db_text(t);
     EXPECT_NE(text.find("record(ai, \"$(P)-Pos\") {\n  field(DTYP, \"beamctl\")\n  field(INP, \"@$(S)actpos\")\n  field(SCAN, \"I/O Intr\")\n"),
               std::string::npos)
         << text;
     EXPECT_NE(text.find("info(asyn:READBACK, \"1\")"), std::string::npos) << text;
     // a row on a signal the registry does not know is a programming error, named
-    ioc::PvTable bad{"bad", {{"-X", "ai", "nothing", {}}}};
+    module::PvTable bad{"bad", {{"-X", "ai", "nothing", {}}}};
     try {
-        ioc::make_records(bad, in, reg);
+        module::make_records(bad, in, reg);
         FAIL() << "no error";
     } catch (const Error& e) {
         EXPECT_STREQ(e.what(), "PV table 'bad', row -X: no signal 'ax3.nothing'");

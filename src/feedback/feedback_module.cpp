@@ -1,7 +1,7 @@
-#include "ioc/feedback.hpp"
+#include "feedback/feedback_module.hpp"
 
 #include "core/error.hpp"
-#include "ioc/pv_util.hpp"
+#include "pv/database.hpp"
 #include "pv/db_file.hpp"
 
 #include <algorithm>
@@ -9,7 +9,7 @@
 #include <cstdio>
 #include <cstring>
 
-namespace beamctl::ioc {
+namespace beamctl::feedback {
 namespace {
 
 std::string at(const std::string& where) { return where.empty() ? std::string("the IOC file") : where; }
@@ -23,9 +23,9 @@ std::string num(double v) {
 } // namespace
 
 // The Triggers stage's feedback part: every loop, in the order of `feedback:`.
-class IocFeedback::Stage : public rt::Stage {
+class FeedbackModule::Stage : public rt::Stage {
 public:
-    explicit Stage(IocFeedback& f) : f_(f) {}
+    explicit Stage(FeedbackModule& f) : f_(f) {}
     const char* name() const noexcept override { return "feedback"; }
     void run(const rt::CycleInfo& c) noexcept override {
         for (auto& lp : f_.loops_) {
@@ -38,11 +38,11 @@ public:
     }
 
 private:
-    IocFeedback& f_;
+    FeedbackModule& f_;
 };
 
 // "Fast Epid" device support: the record's exchange with its loop.
-class IocFeedback::Device : public feedback::FastEpidDevice {
+class FeedbackModule::Device : public FastEpidDevice {
 public:
     explicit Device(Loop& l) : l_(l) {}
     State exchange(const Params& p) override { return l_.loop->exchange(p); }
@@ -52,7 +52,7 @@ private:
     Loop& l_;
 };
 
-double IocFeedback::Loop::read_output() const noexcept {
+double FeedbackModule::Loop::read_output() const noexcept {
     double raw;
     if (out_float_bits == 32) {
         const uint32_t bits = uint32_t(out.get_raw());
@@ -68,7 +68,7 @@ double IocFeedback::Loop::read_output() const noexcept {
     return raw * cfg.output_scale + cfg.output_offset;
 }
 
-void IocFeedback::Loop::write_output(double v) const noexcept {
+void FeedbackModule::Loop::write_output(double v) const noexcept {
     const double raw = (v - cfg.output_offset) / cfg.output_scale;
     if (out_float_bits == 32) {
         const float f = float(raw);
@@ -87,11 +87,21 @@ void IocFeedback::Loop::write_output(double v) const noexcept {
     }
 }
 
-IocFeedback::IocFeedback(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db) : cfg_(cfg), reg_(reg), db_(db) {
+// One loop's record: synApps' epid with the loop's initial parameters.
+const module::PvTable& FeedbackModule::table() {
+    static const module::PvTable t{"feedback loop",
+                                   {{"", "epid", "",
+                                     {{"DTYP", "Fast Epid"}, {"INP", "@$(NAME)"}, {"SCAN", "$(SCAN)"}, {"DESC", "$(DESC)"},
+                                      {"KP", "$(KP)"}, {"KI", "$(KI)"}, {"KD", "$(KD)"}, {"VAL", "$(VAL)"},
+                                      {"DRVH", "$(DRVH)"}, {"DRVL", "$(DRVL)"}, {"DT", "$(DT)"}, {"FBON", "$(FBON)"},
+                                      {"HOPR", "$(HOPR)"}, {"LOPR", "$(LOPR)"}, {"PREC", "$(PREC)"}, {"EGU", "$(EGU)"}}}}};
+    return t;
+}
+
+FeedbackModule::FeedbackModule(std::vector<config::FeedbackEntry> section, module::BuildContext& ctx) : reg_(ctx.signals) {
     pv::DbFile f;
-    for (const config::FeedbackEntry& e : cfg.feedback) {
+    for (config::FeedbackEntry& e : section) {
         auto l = std::make_unique<Loop>();
-        l->cfg = e;
         // the output: a bus output entry, this loop its one writer
         int bit = -1;
         const registry::Signal* s = reg_.find_with_bit(e.output, bit);
@@ -105,28 +115,31 @@ IocFeedback::IocFeedback(const config::IocConfig& cfg, registry::Registry& reg, 
         if (!reg_.find_with_bit(e.input, in_bit))
             throw Error(SB() << at(e.input_where) << ": feedback " << e.name << " input: no signal '" << e.input
                              << "' in this IOC (`beamctl signals` lists them)");
-        // the record: synApps' epid with the loop's initial parameters
-        f.records.push_back(record("epid", cfg.prefix + e.name,
-                                   {{"DTYP", "Fast Epid"}, {"INP", "@" + e.name}, {"SCAN", e.scan}, {"DESC", e.desc.substr(0, 40)},
-                                    {"KP", num(e.kp)}, {"KI", num(e.ki)}, {"KD", num(e.kd)}, {"VAL", num(e.val)},
-                                    {"DRVH", num(e.drvh)}, {"DRVL", num(e.drvl)}, {"DT", num(e.dt)}, {"FBON", e.fbon ? "On" : "Off"},
-                                    {"HOPR", num(e.hopr)}, {"LOPR", num(e.lopr)}, {"PREC", std::to_string(e.prec)}, {"EGU", e.egu.substr(0, 15)}}));
+        const module::PvInstance in{ctx.prefix + e.name, "",
+                                    {{"NAME", e.name}, {"SCAN", e.scan}, {"DESC", e.desc.substr(0, 40)},
+                                     {"KP", num(e.kp)}, {"KI", num(e.ki)}, {"KD", num(e.kd)}, {"VAL", num(e.val)},
+                                     {"DRVH", num(e.drvh)}, {"DRVL", num(e.drvl)}, {"DT", num(e.dt)}, {"FBON", e.fbon ? "On" : "Off"},
+                                     {"HOPR", num(e.hopr)}, {"LOPR", num(e.lopr)}, {"PREC", std::to_string(e.prec)}, {"EGU", e.egu.substr(0, 15)}}};
+        pv::merge_db(f, make_records(table(), in, reg_));
+        l->cfg = std::move(e);
         loops_.push_back(std::move(l));
     }
-    if (!f.records.empty()) db_.load(f);
+    if (!f.records.empty()) ctx.db.load(f);
 }
 
-IocFeedback::~IocFeedback() = default;
+FeedbackModule::~FeedbackModule() = default;
 
-void IocFeedback::bind(rt::Engine& engine, motion::AxisGroup* axes) {
+void FeedbackModule::bind(module::BindContext& ctx) {
+    rt::Engine& engine = ctx.cycle;
+    motion::AxisGroup* axes = ctx.axes;
     if (loops_.empty()) return;
     const double cycle_s = double(engine.period_ns()) * 1e-9;
     for (auto& lp : loops_) {
         Loop& l = *lp;
         const config::FeedbackEntry& e = l.cfg;
         std::string why;
-        l.inp = resolve_value(reg_, axes, e.input, why);
-        if (l.inp.kind == ValueSource::Kind::None || l.inp.kind == ValueSource::Kind::Time)
+        l.inp = module::resolve_value(reg_, axes, e.input, why);
+        if (l.inp.kind == module::ValueSource::Kind::None || l.inp.kind == module::ValueSource::Kind::Time)
             throw Error(SB() << at(e.input_where) << ": feedback " << e.name << " input: "
                              << (why.empty() ? std::string("'time' is not a controlled value") : why));
         l.out = reg_.bind(e.output, why);
@@ -144,15 +157,18 @@ void IocFeedback::bind(rt::Engine& engine, motion::AxisGroup* axes) {
         int out_bus = -1;
         std::sscanf(e.output.c_str(), "ec%d.", &out_bus);
         l.out_ok = ok_of(out_bus);
-        feedback::FastEpidLoop::Params p;
+        FastEpidLoop::Params p;
         p.setpoint = e.val, p.kp = e.kp, p.ki = e.ki, p.kd = e.kd, p.drvh = e.drvh, p.drvl = e.drvl, p.dt = e.dt, p.fbon = e.fbon;
-        l.loop = std::make_unique<feedback::FastEpidLoop>(cycle_s, p);
+        l.loop = std::make_unique<FastEpidLoop>(cycle_s, p);
     }
     stage_ = std::make_unique<Stage>(*this);
     engine.add_stage(rt::StageOrder::Triggers, *stage_);
 }
 
-std::unique_ptr<pv::LinkDevice> IocFeedback::make_device(std::string_view name, std::string& why) {
+bool FeedbackModule::owns_device(std::string_view record_type, std::string_view) const { return record_type == "epid"; }
+
+std::unique_ptr<pv::LinkDevice> FeedbackModule::make_device(const module::DeviceRequest& rq, std::string& why) {
+    const std::string_view name = rq.address;
     for (auto& lp : loops_)
         if (lp->cfg.name == name) {
             if (!lp->loop) {
@@ -167,4 +183,4 @@ std::unique_ptr<pv::LinkDevice> IocFeedback::make_device(std::string_view name, 
     return nullptr;
 }
 
-} // namespace beamctl::ioc
+} // namespace beamctl::feedback

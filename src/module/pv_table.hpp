@@ -21,7 +21,7 @@
 #include <utility>
 #include <vector>
 
-namespace beamctl::ioc {
+namespace beamctl::module {
 
 struct PvRow {
     const char* suffix; // after the instance's PV prefix: "-PosAct"
@@ -59,4 +59,4 @@ void name_pvs(const PvTable& t, const PvInstance& in, registry::Registry& signal
 // IOC serves, in the form a user would write it (docs, `beamctl pvs`-style listings, tests).
 std::string to_db_text(const PvTable& t);
 
-} // namespace beamctl::ioc
+} // namespace beamctl::module

@@ -1,4 +1,4 @@
-#include "ioc/value_source.hpp"
+#include "module/value_source.hpp"
 
 #include "core/error.hpp"
 #include "motion/axis_variables.hpp"
@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <cstring>
 
-namespace beamctl::ioc {
+namespace beamctl::module {
 
 double ValueSource::read(uint64_t t_ns) const noexcept {
     switch (kind) {
@@ -92,4 +92,4 @@ ValueSource resolve_value(const registry::Registry& reg, motion::AxisGroup* axes
 }
 
 
-} // namespace beamctl::ioc
+} // namespace beamctl::module

@@ -12,7 +12,7 @@
 #include <cstdint>
 #include <string>
 
-namespace beamctl::ioc {
+namespace beamctl::module {
 
 // An engine value read as a double in the cycle: an axis variable, a process-data entry (integer
 // or REAL/LREAL), the engine clock [s], or a position-compare block's output.
@@ -30,4 +30,4 @@ struct ValueSource {
 // Resolves `name` (bus entry, axis variable, time); kind None with `why` when it cannot.
 ValueSource resolve_value(const registry::Registry& reg, motion::AxisGroup* axes, const std::string& name, std::string& why);
 
-} // namespace beamctl::ioc
+} // namespace beamctl::module

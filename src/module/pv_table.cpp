@@ -1,10 +1,10 @@
-#include "ioc/pv_table.hpp"
+#include "module/pv_table.hpp"
 
 #include "core/error.hpp"
 
 #include <sstream>
 
-namespace beamctl::ioc {
+namespace beamctl::module {
 
 bool is_output_type(std::string_view type) {
     for (std::string_view t : {"ao", "bo", "longout", "mbbo", "mbboDirect", "stringout", "int64out", "lso"})
@@ -79,4 +79,4 @@ std::string to_db_text(const PvTable& t) {
     return os.str();
 }
 
-} // namespace beamctl::ioc
+} // namespace beamctl::module

@@ -1,0 +1,23 @@
+#include "ioc/modules.hpp"
+
+#include "feedback/feedback_module.hpp"
+
+namespace beamctl::ioc {
+namespace {
+
+template <class M, auto Section>
+std::unique_ptr<module::Module> make(const config::IocConfig& cfg, module::BuildContext& ctx) {
+    const auto& s = cfg.*Section;
+    if (s.empty()) return nullptr;
+    return std::make_unique<M>(s, ctx);
+}
+
+const ModuleEntry kModules[] = {
+    {"feedback", make<feedback::FeedbackModule, &config::IocConfig::feedback>},
+};
+
+} // namespace
+
+std::span<const ModuleEntry> module_table() { return kModules; }
+
+} // namespace beamctl::ioc
