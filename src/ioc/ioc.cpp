@@ -348,7 +348,6 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     step([&] { memmaps_ = std::make_unique<IocMemMaps>(cfg_, catalog_, db_); });
     step([&] { plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_); });
     step([&] { flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get()); });
-    step([&] { quadem_ = std::make_unique<IocQuadEm>(cfg_, registry_, db_); }); // before feedback: its values are loop inputs
     module::BuildContext build{cfg_.prefix, cfg_.path, registry_, db_};
     for (const ModuleEntry& m : module_table())
         step([&] {
@@ -859,7 +858,6 @@ void Ioc::bring_up() {
                 [this](const std::string& name) { return flyscan_->plc_cell(name); });
     binding_cycle_ = 0;
     flyscan_->bind(*engine_, axes_->group(), buses, storages_->storages());
-    quadem_->bind(*engine_, axes_->group()); // before the feedback loops: they read its values in the same cycle
     module::BindContext bind{*engine_, registry_, axes_->group()};
     for (auto& m : modules_) m->bind(bind);
     binding_cycle_ = -1;
@@ -915,7 +913,6 @@ void Ioc::publish() {
     plcs_->publish();
     storages_->publish();
     flyscan_->publish();
-    quadem_->publish();
     for (auto& m : modules_) m->publish(EventLoop::now_s());
     area_->poll(EventLoop::now_s());
     detectors_->poll(); // mca records follow acquisitions started through the sum or StartAll

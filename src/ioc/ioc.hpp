@@ -20,7 +20,6 @@
 #include "ioc/axes.hpp"
 #include "ioc/detectors.hpp"
 #include "ioc/area_detector.hpp"
-#include "ioc/quadem.hpp"
 #include "ioc/flyscan.hpp"
 #include "ioc/kinematics.hpp"
 #include "ioc/memmaps.hpp"
@@ -28,6 +27,7 @@
 #include "ioc/plcs.hpp"
 #include "ioc/pvt.hpp"
 #include "ioc/storages.hpp"
+#include "detector/quadem_module.hpp"
 #include "feedback/feedback_module.hpp"
 #include "ethercat/sim/plant.hpp"
 #include "ethercat/sim/segment.hpp"
@@ -93,7 +93,7 @@ public:
         throw Error(SB() << "this IOC has no " << section << ": section");
     }
     IocDetectors& detectors() { return *detectors_; }
-    IocQuadEm& quadem() { return *quadem_; }
+    detector::QuadEmModule& quadem() { return module<detector::QuadEmModule>("detectors.quadem"); }
     IocAreaDetector& area_detectors() { return *area_; }
     automation::SmartControl* smart_control() { return smart_.get(); } // smart_control: (or none)
     automation::CompoundMotors* compound_motors() { return compound_.get(); } // compound_motors: (or none)
@@ -181,7 +181,6 @@ private:
     std::unique_ptr<IocPvt> pvt_; // profile moves of the axes with epics.motorRecord.pvt
     std::vector<std::unique_ptr<module::Module>> modules_; // the module table's, in its order
     std::unique_ptr<IocDetectors> detectors_; // simulated detectors (detectors:)
-    std::unique_ptr<IocQuadEm> quadem_;       // quad electrometers (detectors.quadem)
     std::unique_ptr<IocAreaDetector> area_;   // simulated cameras (detectors.area_detector)
     std::unique_ptr<automation::SmartControl> smart_; // the goniometer protocol (smart_control:)
     std::unique_ptr<automation::CompoundMotors> compound_; // virtual motors over motor records (compound_motors:)

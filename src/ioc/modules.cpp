@@ -1,5 +1,6 @@
 #include "ioc/modules.hpp"
 
+#include "detector/quadem_module.hpp"
 #include "feedback/feedback_module.hpp"
 
 namespace beamctl::ioc {
@@ -13,6 +14,8 @@ std::unique_ptr<module::Module> make(const config::IocConfig& cfg, module::Build
 }
 
 const ModuleEntry kModules[] = {
+    // before feedback: the electrometers' values are loop inputs, read in the same cycle
+    {"detectors.quadem", make<detector::QuadEmModule, &config::IocConfig::quadem>},
     {"feedback", make<feedback::FeedbackModule, &config::IocConfig::feedback>},
 };
 

@@ -1,40 +1,16 @@
-// Small helpers the IOC uses to generate records and to publish values into them (IOC loop).
+// The module helpers (module/pv_util.hpp) by their short names, for the IOC's own record code.
 #pragma once
 
-#include "pv/db_file.hpp"
-#include "pv/publish.hpp"
-
-#include <cstdint>
-#include <cstdio>
-#include <cstring>
-#include <string>
-#include <utility>
-#include <vector>
+#include "module/pv_util.hpp"
 
 namespace beamctl::ioc {
-
-// A generated record definition.
-inline pv::DbRecord record(const std::string& type, const std::string& name,
-                           const std::vector<std::pair<std::string, std::string>>& fields) {
-    return pv::generated_record(type, name, fields);
-}
-
-// The owner's writes into records (set_value, set_array, set_text, ...): pv/publish.hpp.
-using pv::get_text;
-using pv::get_value;
-using pv::set_array;
-using pv::set_array_raw;
-using pv::set_text;
-using pv::set_value;
-
-// An instance number as ecmccfg's PV names write it: "03" (PLC03-..., DS03-...).
-inline std::string two_digits(int id) {
-    char b[16];
-    std::snprintf(b, sizeof b, "%02d", id);
-    return b;
-}
-
-// A counter as a 32-bit LONG PV value: saturates instead of wrapping.
-inline double clamp_long(uint64_t v) { return double(v < 0x7FFFFFFFu ? v : 0x7FFFFFFFu); }
-
+using module::clamp_long;
+using module::get_text;
+using module::get_value;
+using module::record;
+using module::set_array;
+using module::set_array_raw;
+using module::set_text;
+using module::set_value;
+using module::two_digits;
 } // namespace beamctl::ioc

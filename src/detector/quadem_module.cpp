@@ -1,8 +1,8 @@
-#include "ioc/quadem.hpp"
+#include "detector/quadem_module.hpp"
 
 #include "core/error.hpp"
 #include "core/log.hpp"
-#include "ioc/pv_util.hpp"
+#include "module/pv_util.hpp"
 #include "pv/db_file.hpp"
 
 #include <cctype>
@@ -11,7 +11,12 @@
 #include <cstdio>
 #include <vector>
 
-namespace beamctl::ioc {
+namespace beamctl::detector {
+using module::get_value;
+using module::record;
+using module::set_array;
+using module::set_value;
+using module::clamp_long;
 namespace {
 
 log::Logger lg("quadem");
@@ -28,7 +33,7 @@ std::string lower(std::string s) {
 }
 
 // quadEM.template's averaged-value records, in the order of the 11 values.
-const char* const kAveNames[detector::kQuadEmValues] = {"Current1Ave", "Current2Ave", "Current3Ave", "Current4Ave", "SumXAve", "SumYAve",
+const char* const kAveNames[kQuadEmValues] = {"Current1Ave", "Current2Ave", "Current3Ave", "Current4Ave", "SumXAve", "SumYAve",
                                                         "SumAllAve",   "DiffXAve",    "DiffYAve",    "PositionXAve", "PositionYAve"};
 const char* const kStats[4] = {"MeanValue_RBV", "SigmaValue_RBV", "MinValue_RBV", "MaxValue_RBV"};
 
@@ -36,10 +41,10 @@ enum Mode { kContinuous = 0, kMultiple = 1, kSingle = 2 };
 
 } // namespace
 
-struct IocQuadEm::Unit {
+struct QuadEmModule::Unit {
     config::QuadEmEntry cfg;
     std::string p; // $(P)<name>:
-    std::unique_ptr<detector::QuadEm> qe;
+    std::unique_ptr<QuadEm> qe;
     module::ValueSource in[4];
     registry::BoundSignal ok[4]; // the inputs' buses' masterstatus (unbound: always good)
     // records
@@ -48,8 +53,8 @@ struct IocQuadEm::Unit {
                *sample_time = nullptr, *geometry = nullptr, *geometry_rbv = nullptr, *overflows = nullptr, *range = nullptr,
                *range_rbv = nullptr;
     pv::Record *cur_offset[4] = {}, *cur_scale[4] = {}, *pos_offset[2] = {}, *pos_scale[2] = {};
-    pv::Record* ave[detector::kQuadEmValues] = {};
-    pv::Record* stats[detector::kQuadEmValues][4] = {};
+    pv::Record* ave[kQuadEmValues] = {};
+    pv::Record* stats[kQuadEmValues][4] = {};
     bool acquiring = false;
     int acquired = 0;
     uint64_t seen_dropped = 0;
@@ -58,21 +63,21 @@ struct IocQuadEm::Unit {
                *ts_time_per_point = nullptr, *ts_time_per_point_rbv = nullptr, *ts_avg_time = nullptr, *ts_avg_time_rbv = nullptr,
                *ts_num_average = nullptr, *ts_elapsed = nullptr, *ts_mode = nullptr, *ts_mode_rbv = nullptr, *ts_timestamp = nullptr,
                *ts_time_axis = nullptr;
-    pv::Record* ts_series[detector::kQuadEmValues] = {};
+    pv::Record* ts_series[kQuadEmValues] = {};
     bool ts_on = false, ts_dirty = false;
     bool ts_circular = false;
     int ts_points = 1, ts_avg = 1;  // as started
     long ts_n = 0;                  // points taken (beyond ts_points in a circular buffer)
     int ts_acc_n = 0;
-    double ts_acc[detector::kQuadEmValues] = {};
-    std::vector<double> ts_data[detector::kQuadEmValues];
+    double ts_acc[kQuadEmValues] = {};
+    std::vector<double> ts_data[kQuadEmValues];
     double ts_t0 = 0, ts_last_read = 0;
 };
 
 // The Triggers stage's quadEM part: every electrometer takes one sample of its four currents.
-class IocQuadEm::Stage : public rt::Stage {
+class QuadEmModule::Stage : public rt::Stage {
 public:
-    explicit Stage(IocQuadEm& q) : q_(q) {}
+    explicit Stage(QuadEmModule& q) : q_(q) {}
     const char* name() const noexcept override { return "quadem"; }
     void run(const rt::CycleInfo& c) noexcept override {
         for (auto& up : q_.units_) {
@@ -88,49 +93,49 @@ public:
     }
 
 private:
-    IocQuadEm& q_;
+    QuadEmModule& q_;
 };
 
-IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db) : reg_(reg), db_(db) {
+QuadEmModule::QuadEmModule(std::vector<config::QuadEmEntry> section, module::BuildContext& ctx) : reg_(ctx.signals), db_(ctx.db) {
     pv::DbFile f;
-    for (const config::QuadEmEntry& e : cfg.quadem) {
+    for (const config::QuadEmEntry& e : section) {
         for (std::size_t i = 0; i < e.currents.size(); ++i) { // each exists (bind() then resolves them in the cycle)
             int bit = -1;
-            if (e.currents[i] != "time" && !reg.find_with_bit(e.currents[i], bit))
+            if (e.currents[i] != "time" && !reg_.find_with_bit(e.currents[i], bit))
                 throw Error(SB() << e.currents_where << ": quadem " << e.name << " current " << (i + 1) << ": no signal '" << e.currents[i]
                                  << "' in this IOC (`beamctl signals` lists them)");
         }
         auto u = std::make_unique<Unit>();
         u->cfg = e;
-        u->p = cfg.prefix + e.name + ":";
-        detector::QuadEmParams prm;
+        u->p = ctx.prefix + e.name + ":";
+        QuadEmParams prm;
         for (int i = 0; i < 4; ++i) prm.current_scale[i] = e.current_scale[i], prm.current_offset[i] = e.current_offset[i];
         for (int i = 0; i < 2; ++i) prm.position_scale[i] = e.position_scale[i], prm.position_offset[i] = e.position_offset[i];
-        prm.geometry = e.geometry == "Diamond" ? detector::QuadEmGeometry::Diamond
-                       : e.geometry == "SquareCC" ? detector::QuadEmGeometry::SquareCC
-                                                  : detector::QuadEmGeometry::Square;
+        prm.geometry = e.geometry == "Diamond" ? QuadEmGeometry::Diamond
+                       : e.geometry == "SquareCC" ? QuadEmGeometry::SquareCC
+                                                  : QuadEmGeometry::Square;
         prm.full_scale = e.ranges.empty() ? 0 : e.ranges[std::size_t(e.range)].full_scale;
-        u->qe = std::make_unique<detector::QuadEm>(prm);
+        u->qe = std::make_unique<QuadEm>(prm);
         // the cycle's values as engine signals, read through a binder onto the electrometer's cells
         const std::string owner = lower(e.name);
-        for (int k = 0; k < detector::kQuadEmValues; ++k) {
+        for (int k = 0; k < kQuadEmValues; ++k) {
             registry::Signal s;
-            s.name = owner + "." + lower(detector::kQuadEmValueNames[k]);
+            s.name = owner + "." + lower(kQuadEmValueNames[k]);
             s.type = "LREAL";
             s.direction = registry::Direction::Input;
             s.owner_kind = registry::OwnerKind::Engine;
             s.owner = "quadem " + e.name;
-            reg.declare(std::move(s));
+            reg_.declare(std::move(s));
         }
-        const detector::QuadEm* qe = u->qe.get();
-        reg.set_binder(owner + ".", [qe, owner](const registry::Signal& s, int bit, std::string& why) {
+        const QuadEm* qe = u->qe.get();
+        reg_.set_binder(owner + ".", [qe, owner](const registry::Signal& s, int bit, std::string& why) {
             registry::BoundSignal b;
             if (bit >= 0) {
                 why = s.name + " is a number, not bits";
                 return b;
             }
-            for (int k = 0; k < detector::kQuadEmValues; ++k)
-                if (s.name == owner + "." + lower(detector::kQuadEmValueNames[k])) {
+            for (int k = 0; k < kQuadEmValues; ++k)
+                if (s.name == owner + "." + lower(kQuadEmValueNames[k])) {
                     b.image = reinterpret_cast<uint8_t*>(const_cast<double*>(qe->values() + k));
                     b.bits = 64;
                     return b;
@@ -181,12 +186,12 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
             f.records.push_back(record("ao", p + "PositionScale" + n, {{"DESC", "Scale " + n}, {"PREC", "3"}, {"VAL", num(e.position_scale[i])}}));
         }
         f.records.push_back(record("longin", p + "RingOverflows", {{"DESC", "Readings the IOC did not take"}}));
-        for (int k = 0; k < detector::kQuadEmValues; ++k) {
-            const bool pos = k >= detector::kPosX;
+        for (int k = 0; k < kQuadEmValues; ++k) {
+            const bool pos = k >= kPosX;
             std::vector<std::pair<std::string, std::string>> flds = {{"PREC", prec}};
             if (pos) flds.push_back({"EGU", egu});
             f.records.push_back(record("ai", p + kAveNames[k], flds));
-            for (const char* st : kStats) f.records.push_back(record("ai", p + detector::kQuadEmValueNames[k] + ":" + st, flds));
+            for (const char* st : kStats) f.records.push_back(record("ai", p + kQuadEmValueNames[k] + ":" + st, flds));
         }
         // the time-series plugin (NDTimeSeries with R=<name>:TS:, NDTimeSeriesN with R=<name>:TS:<value>:)
         const std::string ts = p + "TS:", pts = std::to_string(e.ts_points);
@@ -206,9 +211,9 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
         f.records.push_back(record("mbbi", ts + "TSAcquireMode_RBV", ts_modes));
         f.records.push_back(record("waveform", ts + "TSTimestamp", {{"FTVL", "DOUBLE"}, {"NELM", pts}}));
         f.records.push_back(record("waveform", ts + "TSTimeAxis", {{"FTVL", "DOUBLE"}, {"NELM", pts}}));
-        for (int k = 0; k < detector::kQuadEmValues; ++k) {
-            const std::string q = ts + detector::kQuadEmValueNames[k] + ":";
-            f.records.push_back(record("stringout", q + "Name", {{"VAL", detector::kQuadEmValueNames[k]}}));
+        for (int k = 0; k < kQuadEmValues; ++k) {
+            const std::string q = ts + kQuadEmValueNames[k] + ":";
+            f.records.push_back(record("stringout", q + "Name", {{"VAL", kQuadEmValueNames[k]}}));
             f.records.push_back(record("waveform", q + "TimeSeries", {{"FTVL", "DOUBLE"}, {"NELM", pts}}));
         }
         units_.push_back(std::move(u));
@@ -246,9 +251,9 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
             u.pos_offset[i] = find(std::string("PositionOffset") + (i ? "Y" : "X"));
             u.pos_scale[i] = find(std::string("PositionScale") + (i ? "Y" : "X"));
         }
-        for (int k = 0; k < detector::kQuadEmValues; ++k) {
+        for (int k = 0; k < kQuadEmValues; ++k) {
             u.ave[k] = find(kAveNames[k]);
-            for (int s = 0; s < 4; ++s) u.stats[k][s] = find(std::string(detector::kQuadEmValueNames[k]) + ":" + kStats[s]);
+            for (int s = 0; s < 4; ++s) u.stats[k][s] = find(std::string(kQuadEmValueNames[k]) + ":" + kStats[s]);
         }
         u.ts_acquire = find("TS:TSAcquire");
         u.ts_acquiring = find("TS:TSAcquiring");
@@ -265,13 +270,13 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
         u.ts_mode_rbv = find("TS:TSAcquireMode_RBV");
         u.ts_timestamp = find("TS:TSTimestamp");
         u.ts_time_axis = find("TS:TSTimeAxis");
-        for (int k = 0; k < detector::kQuadEmValues; ++k) u.ts_series[k] = find(std::string("TS:") + detector::kQuadEmValueNames[k] + ":TimeSeries");
+        for (int k = 0; k < kQuadEmValues; ++k) u.ts_series[k] = find(std::string("TS:") + kQuadEmValueNames[k] + ":TimeSeries");
         for (pv::Record* r : {u.mode_rbv, u.num_acquire_rbv, u.num_acquired, u.avg_time_rbv, u.num_average, u.num_averaged, u.sample_time,
                               u.geometry_rbv, u.range_rbv, u.overflows, u.ts_acquiring, u.ts_current, u.ts_time_per_point, u.ts_time_per_point_rbv,
                               u.ts_avg_time_rbv, u.ts_num_average, u.ts_elapsed, u.ts_mode_rbv, u.ts_timestamp, u.ts_time_axis})
             r->val_read_only = true;
         for (pv::Record* r : u.ts_series) r->val_read_only = true;
-        for (int k = 0; k < detector::kQuadEmValues; ++k) {
+        for (int k = 0; k < kQuadEmValues; ++k) {
             u.ave[k]->val_read_only = true;
             for (pv::Record* r : u.stats[k]) r->val_read_only = true;
         }
@@ -342,16 +347,16 @@ IocQuadEm::IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::
     }
 }
 
-IocQuadEm::~IocQuadEm() = default;
+QuadEmModule::~QuadEmModule() = default;
 
-const detector::QuadEm& IocQuadEm::unit(std::size_t i) const { return *units_.at(i)->qe; }
+const QuadEm& QuadEmModule::unit(std::size_t i) const { return *units_.at(i)->qe; }
 
-void IocQuadEm::apply(Unit& u) {
-    detector::QuadEmParams p;
+void QuadEmModule::apply(Unit& u) {
+    QuadEmParams p;
     for (int i = 0; i < 4; ++i) p.current_offset[i] = get_value(*u.cur_offset[i]), p.current_scale[i] = get_value(*u.cur_scale[i]);
     for (int i = 0; i < 2; ++i) p.position_offset[i] = get_value(*u.pos_offset[i]), p.position_scale[i] = get_value(*u.pos_scale[i]);
     const int g = int(get_value(*u.geometry));
-    p.geometry = detector::QuadEmGeometry(g >= 0 && g <= 2 ? g : 1);
+    p.geometry = QuadEmGeometry(g >= 0 && g <= 2 ? g : 1);
     const std::size_t range = std::size_t(std::max(0.0, get_value(*u.range)));
     p.full_scale = range < u.cfg.ranges.size() ? u.cfg.ranges[range].full_scale : 0;
     // quadEM: NumAverage = int(AveragingTime / SampleTime + 0.5), at least 1
@@ -367,7 +372,7 @@ void IocQuadEm::apply(Unit& u) {
     set_value(db_, *u.range_rbv, double(range), false);
 }
 
-void IocQuadEm::set_acquire(Unit& u, bool on) {
+void QuadEmModule::set_acquire(Unit& u, bool on) {
     if (on && !u.acquiring) {
         u.acquired = 0;
         set_value(db_, *u.num_acquired, 0, false);
@@ -375,7 +380,7 @@ void IocQuadEm::set_acquire(Unit& u, bool on) {
     u.acquiring = on;
 }
 
-void IocQuadEm::ts_settings(Unit& u) {
+void QuadEmModule::ts_settings(Unit& u) {
     const double avg = get_value(*u.ts_avg_time);
     const int n = int(std::max(1.0, std::min(std::floor(avg / cycle_s_ + 0.5), 1e7))); // whole samples a point
     set_value(db_, *u.ts_num_average, n, false);
@@ -385,9 +390,9 @@ void IocQuadEm::ts_settings(Unit& u) {
     set_value(db_, *u.ts_mode_rbv, get_value(*u.ts_mode), false);
 }
 
-void IocQuadEm::ts_start(Unit& u) {
+void QuadEmModule::ts_start(Unit& u) {
     ts_settings(u);
-    detector::QuadEmSample s;
+    QuadEmSample s;
     while (u.qe->pop_sample(s)) {
     } // a previous run's leftovers
     u.ts_points = std::max(1, int(get_value(*u.ts_num_points)));
@@ -408,7 +413,7 @@ void IocQuadEm::ts_start(Unit& u) {
     u.qe->stream_samples(true);
 }
 
-void IocQuadEm::ts_stop(Unit& u) {
+void QuadEmModule::ts_stop(Unit& u) {
     u.qe->stream_samples(false);
     u.ts_on = false;
     ts_publish(u);
@@ -417,17 +422,17 @@ void IocQuadEm::ts_stop(Unit& u) {
 }
 
 // The samples the cycle queued: TSNumAverage of them a point.
-void IocQuadEm::ts_take(Unit& u) {
-    detector::QuadEmSample s;
+void QuadEmModule::ts_take(Unit& u) {
+    QuadEmSample s;
     bool stop = false;
     uint64_t last_cycle = 0;
     auto full = [&u] { return !u.ts_circular && u.ts_n >= u.ts_points; };
     while (u.ts_on && !full() && u.qe->pop_sample(s)) {
         last_cycle = s.cycle;
-        for (int k = 0; k < detector::kQuadEmValues; ++k) u.ts_acc[k] = (u.ts_acc_n ? u.ts_acc[k] : 0) + s.v[k];
+        for (int k = 0; k < kQuadEmValues; ++k) u.ts_acc[k] = (u.ts_acc_n ? u.ts_acc[k] : 0) + s.v[k];
         if (++u.ts_acc_n < u.ts_avg) continue;
         const std::size_t at = std::size_t(u.ts_n % u.ts_points);
-        for (int k = 0; k < detector::kQuadEmValues; ++k) u.ts_data[k][at] = u.ts_acc[k] / u.ts_acc_n;
+        for (int k = 0; k < kQuadEmValues; ++k) u.ts_data[k][at] = u.ts_acc[k] / u.ts_acc_n;
         u.ts_acc_n = 0;
         ++u.ts_n;
         u.ts_dirty = true;
@@ -451,12 +456,12 @@ void IocQuadEm::ts_take(Unit& u) {
 }
 
 // The points so far into the arrays, oldest first (a circular buffer's latest point is its last).
-void IocQuadEm::ts_publish(Unit& u) {
+void QuadEmModule::ts_publish(Unit& u) {
     if (!u.ts_dirty || u.ts_data[0].empty()) return;
     const std::size_t n = std::size_t(std::min<long>(u.ts_n, u.ts_points));
     const std::size_t first = u.ts_n > u.ts_points ? std::size_t(u.ts_n % u.ts_points) : 0;
     std::vector<double> v(n);
-    for (int k = 0; k < detector::kQuadEmValues; ++k) {
+    for (int k = 0; k < kQuadEmValues; ++k) {
         for (std::size_t i = 0; i < n; ++i) v[i] = u.ts_data[k][(first + i) % std::size_t(u.ts_points)];
         set_array(db_, *u.ts_series[k], v.data(), uint32_t(n));
     }
@@ -466,7 +471,9 @@ void IocQuadEm::ts_publish(Unit& u) {
     u.ts_dirty = false;
 }
 
-void IocQuadEm::bind(rt::Engine& engine, motion::AxisGroup* axes) {
+void QuadEmModule::bind(module::BindContext& ctx) {
+    rt::Engine& engine = ctx.cycle;
+    motion::AxisGroup* axes = ctx.axes;
     if (units_.empty()) return;
     cycle_s_ = double(engine.period_ns()) * 1e-9;
     for (auto& up : units_) {
@@ -487,10 +494,10 @@ void IocQuadEm::bind(rt::Engine& engine, motion::AxisGroup* axes) {
     engine.add_stage(rt::StageOrder::Triggers, *stage_);
 }
 
-void IocQuadEm::publish() {
+void QuadEmModule::publish(double) {
     for (auto& up : units_) {
         Unit& u = *up;
-        detector::QuadEmReading r;
+        QuadEmReading r;
         bool got = false;
         while (u.qe->pop(r)) {
             if (!u.acquiring) continue; // Acquire off: the readings are not taken
@@ -504,7 +511,7 @@ void IocQuadEm::publish() {
             }
         }
         if (got) {
-            for (int k = 0; k < detector::kQuadEmValues; ++k) {
+            for (int k = 0; k < kQuadEmValues; ++k) {
                 set_value(db_, *u.ave[k], r.mean[k], false);
                 set_value(db_, *u.stats[k][0], r.mean[k], false);
                 set_value(db_, *u.stats[k][1], r.sigma[k], false);
@@ -523,4 +530,4 @@ void IocQuadEm::publish() {
     }
 }
 
-} // namespace beamctl::ioc
+} // namespace beamctl::detector

@@ -1,4 +1,4 @@
-// Quad electrometers in an IOC (docs/detectors.md): each entry of `detectors.quadem` reads four
+// The quad-electrometer module (docs/detectors.md): each entry of `detectors.quadem` reads four
 // engine values (the diodes' currents: bus entries of analog inputs, as a current amplifier on an
 // EL3104 gives them) once per cycle, computes quadEM's 11 values (detector/quadem.hpp) and serves
 // quadEM's PVs under $(P)<name>: (quadEM.template's Acquire, AcquireMode, NumAcquire, NumAcquired,
@@ -17,6 +17,7 @@
 
 #include "config/ioc_config.hpp"
 #include "detector/quadem.hpp"
+#include "module/module.hpp"
 #include "module/value_source.hpp"
 #include "pv/database.hpp"
 #include "registry/registry.hpp"
@@ -26,24 +27,25 @@
 #include <string>
 #include <vector>
 
-namespace beamctl::ioc {
+namespace beamctl::detector {
 
-class IocQuadEm {
+class QuadEmModule : public module::Module {
 public:
     // Declares the signals, makes the records (loaded into `db`). Throws Error (file:line:col).
-    IocQuadEm(const config::IocConfig& cfg, registry::Registry& reg, pv::Database& db);
-    ~IocQuadEm();
-    IocQuadEm(const IocQuadEm&) = delete;
-    IocQuadEm& operator=(const IocQuadEm&) = delete;
+    QuadEmModule(std::vector<config::QuadEmEntry> section, module::BuildContext& ctx);
+    ~QuadEmModule() override;
+    QuadEmModule(const QuadEmModule&) = delete;
+    QuadEmModule& operator=(const QuadEmModule&) = delete;
 
     // Bring-up: resolves the currents in the cycle of `engine` and adds the stage (Triggers, before
     // the feedback loops: bind this first).
-    void bind(rt::Engine& engine, motion::AxisGroup* axes);
+    std::string_view name() const override { return "detectors.quadem"; }
+    void bind(module::BindContext& ctx) override;
     // IOC loop: the readings into the PVs.
-    void publish();
+    void publish(double now_s) override;
 
     std::size_t size() const { return units_.size(); }
-    const detector::QuadEm& unit(std::size_t i) const;
+    const QuadEm& unit(std::size_t i) const;
 
 private:
     struct Unit;
@@ -64,4 +66,4 @@ private:
     double cycle_s_ = 1e-3;
 };
 
-} // namespace beamctl::ioc
+} // namespace beamctl::detector
