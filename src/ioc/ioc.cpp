@@ -348,12 +348,11 @@ Ioc::Ioc(config::IocConfig cfg, rt::Clock& clock)
     step([&] { memmaps_ = std::make_unique<IocMemMaps>(cfg_, catalog_, db_); });
     step([&] { plcs_ = std::make_unique<IocPlcs>(cfg_, axis_configs, registry_, db_); });
     step([&] { flyscan_ = std::make_unique<IocFlyScan>(cfg_, registry_, db_, memmaps_.get()); });
-    module::BuildContext build{cfg_.prefix, cfg_.path, registry_, db_};
+    module::BuildContext build{cfg_.prefix, cfg_.path, registry_, db_, EventLoop::now_s};
     for (const ModuleEntry& m : module_table())
         step([&] {
             if (auto mod = m.make(cfg_, build)) modules_.push_back(std::move(mod));
         });
-    step([&] { detectors_ = std::make_unique<IocDetectors>(cfg_, db_, EventLoop::now_s); });
     step([&] { area_ = std::make_unique<IocAreaDetector>(cfg_, db_, EventLoop::now_s); });
     auto engine_clock = [this] { return double(clock_.now_ns()) * 1e-9; }; // automation's clock: virtual in tests
     if (cfg_.smart_control)
@@ -658,7 +657,8 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
         return nullptr;
     };
     std::string name = l.s().address;
-    for (auto& m : modules_) // an object of a module ("Fast Epid": a loop of feedback:)
+    // an object of a module ("Fast Epid": a loop of feedback:; an mca record, a DXP parameter "@mca1.PeakingTime")
+    for (auto& m : modules_)
         if (m->owns_device(r.type().name(), name)) {
             std::string reason;
             auto dev = m->make_device(module::DeviceRequest{r, name, f.dbf == pv::Dbf::OutLink}, reason);
@@ -666,20 +666,6 @@ pv::LinkDevice* Ioc::bind_device(pv::Record& r, const pv::FieldDesc& f, pv::Link
             devices_.push_back(std::move(dev));
             return devices_.back().get();
         }
-    if (r.type().name() == "mca") { // mca: detectors.mca
-        std::string reason;
-        auto dev = detectors_->make_device(name, reason);
-        if (!dev) return fail(reason);
-        devices_.push_back(std::move(dev));
-        return devices_.back().get();
-    }
-    if (detectors_->owns(name)) { // a DXP parameter or statistic: "@mca1.PeakingTime"
-        std::string reason;
-        auto dev = detectors_->make_device(name, reason);
-        if (!dev) return fail(reason);
-        devices_.push_back(std::move(dev));
-        return devices_.back().get();
-    }
     int bit = -1;
     const registry::Signal* sig = nullptr;
     std::string asyn_name, asyn_why;
@@ -858,9 +844,6 @@ void Ioc::bring_up() {
                 [this](const std::string& name) { return flyscan_->plc_cell(name); });
     binding_cycle_ = 0;
     flyscan_->bind(*engine_, axes_->group(), buses, storages_->storages());
-    module::BindContext bind{*engine_, registry_, axes_->group()};
-    for (auto& m : modules_) m->bind(bind);
-    binding_cycle_ = -1;
     // the cameras see the plant's beam of a simulated bus in this process (bus -1: the first with one)
     auto beam_of = [this](int bus) -> IocAreaDetector::BeamSource {
         for (std::size_t i = 0; i < buses_.size(); ++i) {
@@ -871,8 +854,10 @@ void Ioc::bring_up() {
         }
         return {};
     };
+    module::BindContext bind{*engine_, registry_, axes_->group(), beam_of};
+    for (auto& m : modules_) m->bind(bind);
+    binding_cycle_ = -1;
     area_->bind(beam_of);
-    detectors_->bind(beam_of); // the MCAs' samples see the beam through the slit
     db_.set_clock(EventLoop::now_s); // delays (calcout ODLY, seq DLYn) on the scan clock
     // Device support "beamctl" for records of the db: files ("@ec0.s3.entry[.bit]").
     db_.set_link_binder([this](pv::Record& r, const pv::FieldDesc& f, pv::Link& l, std::string* why) -> pv::LinkDevice* {
@@ -915,7 +900,6 @@ void Ioc::publish() {
     flyscan_->publish();
     for (auto& m : modules_) m->publish(EventLoop::now_s());
     area_->poll(EventLoop::now_s());
-    detectors_->poll(); // mca records follow acquisitions started through the sum or StartAll
     if (smart_) smart_->poll();
     if (compound_) compound_->poll();
     if (fsms_) fsms_->poll();

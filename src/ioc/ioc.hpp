@@ -18,7 +18,6 @@
 #include "ethercat/bus.hpp"
 #include "ethercat/catalog.hpp"
 #include "ioc/axes.hpp"
-#include "ioc/detectors.hpp"
 #include "ioc/area_detector.hpp"
 #include "ioc/flyscan.hpp"
 #include "ioc/kinematics.hpp"
@@ -27,6 +26,7 @@
 #include "ioc/plcs.hpp"
 #include "ioc/pvt.hpp"
 #include "ioc/storages.hpp"
+#include "detector/mca_module.hpp"
 #include "detector/quadem_module.hpp"
 #include "feedback/feedback_module.hpp"
 #include "ethercat/sim/plant.hpp"
@@ -92,7 +92,7 @@ public:
             if (auto* p = dynamic_cast<M*>(m.get())) return *p;
         throw Error(SB() << "this IOC has no " << section << ": section");
     }
-    IocDetectors& detectors() { return *detectors_; }
+    detector::McaModule& detectors() { return module<detector::McaModule>("detectors.mca"); }
     detector::QuadEmModule& quadem() { return module<detector::QuadEmModule>("detectors.quadem"); }
     IocAreaDetector& area_detectors() { return *area_; }
     automation::SmartControl* smart_control() { return smart_.get(); } // smart_control: (or none)
@@ -180,7 +180,6 @@ private:
     std::unique_ptr<IocKinematics> kinematics_;
     std::unique_ptr<IocPvt> pvt_; // profile moves of the axes with epics.motorRecord.pvt
     std::vector<std::unique_ptr<module::Module>> modules_; // the module table's, in its order
-    std::unique_ptr<IocDetectors> detectors_; // simulated detectors (detectors:)
     std::unique_ptr<IocAreaDetector> area_;   // simulated cameras (detectors.area_detector)
     std::unique_ptr<automation::SmartControl> smart_; // the goniometer protocol (smart_control:)
     std::unique_ptr<automation::CompoundMotors> compound_; // virtual motors over motor records (compound_motors:)

@@ -1,5 +1,6 @@
 #include "ioc/modules.hpp"
 
+#include "detector/mca_module.hpp"
 #include "detector/quadem_module.hpp"
 #include "feedback/feedback_module.hpp"
 
@@ -17,6 +18,8 @@ const ModuleEntry kModules[] = {
     // before feedback: the electrometers' values are loop inputs, read in the same cycle
     {"detectors.quadem", make<detector::QuadEmModule, &config::IocConfig::quadem>},
     {"feedback", make<feedback::FeedbackModule, &config::IocConfig::feedback>},
+    // simulated energy-dispersive detectors behind synApps' mca record; they see the plant's beam
+    {"detectors.mca", make<detector::McaModule, &config::IocConfig::mca>},
 };
 
 } // namespace

@@ -17,6 +17,7 @@
 #include "pv/link.hpp"
 #include "pv/record.hpp"
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -33,6 +34,9 @@ class Engine;
 namespace beamctl::motion {
 class AxisGroup;
 }
+namespace beamctl::ethercat::sim {
+struct BeamTally;
+}
 
 namespace beamctl::module {
 
@@ -42,6 +46,7 @@ struct BuildContext {
     std::string ioc_path;        // the IOC file (a section's relative paths are resolved against it)
     registry::Registry& signals; // declares signals (before the registry is frozen), claims outputs
     pv::Database& db;            // takes the records of the module's PV tables
+    std::function<double()> loop_clock; // the IOC loop's clock [s] (what its records' scans see)
 };
 
 // What a module binds to (bring-up, before the cycle starts).
@@ -49,6 +54,9 @@ struct BindContext {
     rt::Engine& cycle;                  // the IOC's cycle (cycle 0): its stages run there
     const registry::Registry& signals;  // binds names to image cells (frozen by now)
     motion::AxisGroup* axes;            // the axes' variables (ax<n>.enc.actpos, ...), or none
+    // The simulated beam of a bus in this process (bus -1: the first that has one); an empty
+    // function when there is none.
+    std::function<std::function<ethercat::sim::BeamTally()>(int bus)> beam_of;
 };
 
 // A record's device-support address that names one of the module's objects: `@<address>` in the

@@ -1,10 +1,11 @@
-// A multi-element energy-dispersive detector's PVs (src/ioc/detectors.cpp) on a database of their
+// A multi-element energy-dispersive detector's PVs (src/detector/mca_module.cpp) on a database of their
 // own, in virtual time: dxp's parameters reach the processor through their records and read back
 // (MaxEnergy moves CALS), dxpMED's PresetMode / PresetReal / EraseStart acquire every element and
 // the sum with a put-callback that completes when they are done, the statistics read back, and an
 // acquisition started through the sum or through one element is followed by the other records.
 #include "detector/mca_record.hpp"
-#include "ioc/detectors.hpp"
+#include "detector/mca_module.hpp"
+#include "registry/registry.hpp"
 
 #include <gtest/gtest.h>
 
@@ -20,7 +21,8 @@ struct Med {
     std::vector<std::unique_ptr<pv::LinkDevice>> devices; // outlive the records that use them
     pv::Database db;
     double now = 100; // the virtual clock [s]
-    std::unique_ptr<ioc::IocDetectors> det;
+    registry::Registry signals;
+    std::unique_ptr<detector::McaModule> det;
 
     Med() {
         detector::register_detector_records(pv::RecordTypes::global());
@@ -32,7 +34,8 @@ struct Med {
                                        "       lines: [{name: Fe Ka, energy: 6.404, rate: 5000, fwhm: 0.16}]}\n",
                                        "/cfg/ioc.yaml");
         db.set_clock([this] { return now; });
-        det = std::make_unique<ioc::IocDetectors>(cfg, db, [this] { return now; });
+        module::BuildContext ctx{cfg.prefix, cfg.path, signals, db, [this] { return now; }};
+        det = std::make_unique<detector::McaModule>(cfg.mca, ctx);
         db.set_link_binder([this](pv::Record& r, const pv::FieldDesc&, pv::Link& l, std::string* why) -> pv::LinkDevice* {
             const std::string a = l.s().address;
             if (r.type().name() != "mca" && !det->owns(a)) return nullptr;
@@ -69,7 +72,7 @@ struct Med {
     // what the IOC loop does every 10 ms
     void step() {
         db.scan_periodic(now);
-        det->poll();
+        det->publish(now);
         db.scan_io_intr();
     }
     void run(double s) {

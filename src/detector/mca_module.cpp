@@ -1,8 +1,8 @@
-#include "ioc/detectors.hpp"
+#include "detector/mca_module.hpp"
 
 #include "core/error.hpp"
 #include "core/log.hpp"
-#include "ioc/pv_util.hpp"
+#include "module/pv_util.hpp"
 #include "pv/db_file.hpp"
 
 #include <cmath>
@@ -10,7 +10,10 @@
 #include <functional>
 #include <map>
 
-namespace beamctl::ioc {
+namespace beamctl::detector {
+using module::get_value;
+using module::record;
+using module::set_value;
 namespace {
 
 log::Logger lg("detectors");
@@ -21,7 +24,6 @@ std::string num(double v) {
     return b;
 }
 
-using detector::DxpSettings;
 
 // The processor's parameters that shape the spectrum (dxpHighLevel.template's outputs): name,
 // member, units, precision, DRVL, DRVH.
@@ -68,11 +70,11 @@ std::vector<std::pair<std::string, std::string>> with(std::vector<std::pair<std:
 } // namespace
 
 // The record's handle on a detector (an element or the sum) the IOC owns.
-class IocDetectors::McaRef : public detector::McaDevice {
+class McaModule::McaRef : public McaDevice {
 public:
-    McaRef(detector::McaDevice& d, std::string name) : d_(d), name_(std::move(name)) {}
+    McaRef(McaDevice& d, std::string name) : d_(d), name_(std::move(name)) {}
     bool setup(const Setup& s) override { return d_.setup(s); }
-    bool supports(detector::McaMode m) const override { return d_.supports(m); }
+    bool supports(McaMode m) const override { return d_.supports(m); }
     bool start() override { return d_.start(); }
     bool stop() override { return d_.stop(); }
     bool erase() override { return d_.erase(); }
@@ -81,16 +83,16 @@ public:
     std::string describe() const override { return name_ + ": " + d_.describe(); }
 
 private:
-    detector::McaDevice& d_;
+    McaDevice& d_;
     std::string name_;
 };
 
 // A DXP output ("@mca1.PeakingTime"): the value into the processor's settings; a value the
 // processor refuses is logged and raises the record's LINK alarm (nothing changes).
-class IocDetectors::DxpOut : public pv::LinkDevice {
+class McaModule::DxpOut : public pv::LinkDevice {
 public:
     using Apply = std::function<void(DxpSettings&, double)>;
-    DxpOut(detector::SimMca& sim, std::string address, Apply apply, std::function<void()> after)
+    DxpOut(SimMca& sim, std::string address, Apply apply, std::function<void()> after)
         : sim_(sim), address_(std::move(address)), apply_(std::move(apply)), after_(std::move(after)) {}
     bool read(double&) override { return false; }
     bool write(double v) override {
@@ -107,14 +109,14 @@ public:
     std::string describe() const override { return "DXP parameter " + address_; }
 
 private:
-    detector::SimMca& sim_;
+    SimMca& sim_;
     std::string address_;
     Apply apply_;
     std::function<void()> after_;
 };
 
 // A DXP read-back or statistic ("@mca1.InputCountRate"), for SCAN I/O Intr.
-class IocDetectors::DxpIn : public pv::LinkDevice {
+class McaModule::DxpIn : public pv::LinkDevice {
 public:
     DxpIn(std::string address, std::function<double()> value) : address_(std::move(address)), value_(std::move(value)) {}
     bool read(double& v) override {
@@ -131,14 +133,15 @@ private:
     double last_ = NAN;
 };
 
-IocDetectors::IocDetectors(const config::IocConfig& cfg, pv::Database& db, std::function<double()> clock)
-    : db_(db), prefix_(cfg.prefix), entries_(cfg.mca) {
+McaModule::McaModule(std::vector<config::McaEntry> section, module::BuildContext& ctx)
+    : db_(ctx.db), prefix_(ctx.prefix), entries_(std::move(section)) {
+    const std::function<double()>& clock = ctx.loop_clock;
     pv::DbFile f;
     for (std::size_t k = 0; k < entries_.size(); ++k) {
         const config::McaEntry& e = entries_[k];
         Sum sum;
         for (int i = 0; i < e.elements; ++i) {
-            detector::SimMcaConfig c;
+            SimMcaConfig c;
             c.channels = e.channels;
             c.calo = e.offset;
             c.cals = e.slope;
@@ -157,29 +160,29 @@ IocDetectors::IocDetectors(const config::IocConfig& cfg, pv::Database& db, std::
             c.seed = 0x6D6361 + elements_.size();
             for (const auto& l : e.lines) c.lines.push_back({l.name, l.energy, l.rate, l.fwhm});
             sum.elements.push_back(elements_.size());
-            elements_.push_back(Element{e.element_name(i), std::make_unique<detector::SimMca>(c, clock), k, Watch{}});
+            elements_.push_back(Element{e.element_name(i), std::make_unique<SimMca>(c, clock), k, Watch{}});
         }
-        add_records(e, cfg.prefix, f);
+        add_records(e, ctx.prefix, f);
         if (e.elements > 1) {
-            std::vector<detector::McaDevice*> parts;
+            std::vector<McaDevice*> parts;
             for (std::size_t i : sum.elements) parts.push_back(elements_[i].sim.get());
             sum.name = e.sum_name();
-            sum.dev = std::make_unique<detector::McaSum>(parts, sum.name);
+            sum.dev = std::make_unique<McaSum>(parts, sum.name);
             sums_.push_back(std::move(sum));
-            add_med_records(e, cfg.prefix, f);
+            add_med_records(e, ctx.prefix, f);
         }
     }
-    if (!f.records.empty()) db.load(f);
+    if (!f.records.empty()) db_.load(f);
 }
 
-IocDetectors::~IocDetectors() = default;
+McaModule::~McaModule() = default;
 
 // mca.db's records for each element (and the sum), and each element's DXP records.
-void IocDetectors::add_records(const config::McaEntry& e, const std::string& prefix, pv::DbFile& f) {
+void McaModule::add_records(const config::McaEntry& e, const std::string& prefix, pv::DbFile& f) {
     std::vector<std::string> mcas;
     for (int i = 0; i < e.elements; ++i) mcas.push_back(e.element_name(i));
     if (e.elements > 1) mcas.push_back(e.sum_name());
-    const detector::SimMca& first = *elements_[elements_.size() - std::size_t(e.elements)].sim;
+    const SimMca& first = *elements_[elements_.size() - std::size_t(e.elements)].sim;
     for (const std::string& name : mcas) {
         const std::string m = prefix + name;
         const std::string n = std::to_string(e.channels);
@@ -204,7 +207,7 @@ void IocDetectors::add_records(const config::McaEntry& e, const std::string& pre
     // dxpHighLevel.template's records, for each element
     for (int i = 0; i < e.elements; ++i) {
         const std::string name = e.element_name(i), r = prefix + e.dxp_prefix(i);
-        const detector::SimMca& sim = *elements_[elements_.size() - std::size_t(e.elements) + std::size_t(i)].sim;
+        const SimMca& sim = *elements_[elements_.size() - std::size_t(e.elements) + std::size_t(i)].sim;
         auto rbv = [&](const std::string& type, const std::string& rec, std::vector<std::pair<std::string, std::string>> more) {
             f.records.push_back(record(type, r + rec, with({{"DTYP", type == "ai" ? "asynFloat64" : "asynInt32"}, {"SCAN", "I/O Intr"},
                                                             {"INP", "@" + name + "." + rec}},
@@ -246,7 +249,7 @@ void IocDetectors::add_records(const config::McaEntry& e, const std::string& pre
 
 // dxpMED.template's PVs of a multi-element detector, over the elements' records: commands and
 // presets fan out to every element and the sum; the state is the sum's.
-void IocDetectors::add_med_records(const config::McaEntry& e, const std::string& p, pv::DbFile& f) {
+void McaModule::add_med_records(const config::McaEntry& e, const std::string& p, pv::DbFile& f) {
     std::vector<std::string> mcas, dxps;
     for (int i = 0; i < e.elements; ++i) mcas.push_back(p + e.element_name(i)), dxps.push_back(p + e.dxp_prefix(i));
     mcas.push_back(p + e.sum_name());
@@ -304,7 +307,8 @@ void IocDetectors::add_med_records(const config::McaEntry& e, const std::string&
     f.records.push_back(record("ai", p + "IDeadTime", {{"INP", s + ".IDTIM CP MS"}, {"PREC", "2"}, {"EGU", "%"}}));
 }
 
-void IocDetectors::bind(const std::function<std::function<ethercat::sim::BeamTally()>(int bus)>& beam_of) {
+void McaModule::bind(module::BindContext& ctx) {
+    const auto& beam_of = ctx.beam_of;
     for (Element& el : elements_) {
         const config::McaEntry& e = entries_[el.entry];
         auto beam = beam_of ? beam_of(e.bus) : std::function<ethercat::sim::BeamTally()>{};
@@ -315,7 +319,7 @@ void IocDetectors::bind(const std::function<std::function<ethercat::sim::BeamTal
     }
 }
 
-bool IocDetectors::owns(std::string_view address) const {
+bool McaModule::owns(std::string_view address) const {
     const std::string_view head = address.substr(0, address.find('.'));
     for (const Element& el : elements_)
         if (el.name == head) return true;
@@ -324,7 +328,7 @@ bool IocDetectors::owns(std::string_view address) const {
     return false;
 }
 
-std::unique_ptr<pv::LinkDevice> IocDetectors::make_device(std::string_view address, std::string& why) {
+std::unique_ptr<pv::LinkDevice> McaModule::make_device(std::string_view address, std::string& why) {
     const std::size_t dot = address.find('.');
     const std::string head(address.substr(0, dot)), param(dot == std::string_view::npos ? "" : address.substr(dot + 1));
     for (Sum& s : sums_)
@@ -332,7 +336,7 @@ std::unique_ptr<pv::LinkDevice> IocDetectors::make_device(std::string_view addre
     for (std::size_t i = 0; i < elements_.size(); ++i) {
         Element& el = elements_[i];
         if (el.name != head) continue;
-        detector::SimMca& sim = *el.sim;
+        SimMca& sim = *el.sim;
         if (param.empty()) return std::make_unique<McaRef>(sim, el.name);
         const std::string a(address);
         for (const DxpParam& p : kDxpParams) {
@@ -359,7 +363,7 @@ std::unique_ptr<pv::LinkDevice> IocDetectors::make_device(std::string_view addre
             }
         }
         if (param == "PresetMode")
-            return std::make_unique<DxpOut>(sim, a, [](DxpSettings& d, double v) { d.preset_mode = detector::DxpPresetMode(int(v)); }, nullptr);
+            return std::make_unique<DxpOut>(sim, a, [](DxpSettings& d, double v) { d.preset_mode = DxpPresetMode(int(v)); }, nullptr);
         if (param == "PresetEvents")
             return std::make_unique<DxpOut>(sim, a, [](DxpSettings& d, double v) { d.preset_events = int64_t(v); }, nullptr);
         if (param == "PresetTriggers")
@@ -397,7 +401,7 @@ std::unique_ptr<pv::LinkDevice> IocDetectors::make_device(std::string_view addre
 // An acquisition the record did not start (the sum's, StartAll's, another element's): while it
 // runs, the record is processed so that it shows it (ACQG, its Status and Read scans, the spectrum
 // at the end); one already over is read.
-void IocDetectors::follow(Watch& w, const std::string& name, uint64_t starts, bool acquiring) {
+void McaModule::follow(Watch& w, const std::string& name, uint64_t starts, bool acquiring) {
     if (starts == w.starts) return;
     if (!w.record) {
         w.record = db_.find(prefix_ + name);
@@ -421,7 +425,7 @@ void IocDetectors::follow(Watch& w, const std::string& name, uint64_t starts, bo
     }
 }
 
-void IocDetectors::poll() {
+void McaModule::publish(double) {
     for (Element& el : elements_) follow(el.watch, el.name, el.sim->starts(), el.sim->acquiring());
     for (Sum& s : sums_) {
         uint64_t starts = 0;
@@ -431,4 +435,4 @@ void IocDetectors::poll() {
     }
 }
 
-} // namespace beamctl::ioc
+} // namespace beamctl::detector

@@ -1,4 +1,4 @@
-// Detectors in an IOC (docs/detectors.md): the simulated energy-dispersive detectors of
+// The MCA module (docs/detectors.md): the simulated energy-dispersive detectors of
 // `detectors.mca`, each element behind synApps' mca record $(P)<name> (DTYP asynMCA, INP
 // "@<name>") with the PVs of mca's mca.db around it: $(P)<name>Start, Stop, Erase, EraseStart
 // (acquisition commands), Read (reads the spectrum every second while acquiring) and Status (every
@@ -16,6 +16,7 @@
 #include "detector/mca_sum.hpp"
 #include "detector/sim_mca.hpp"
 #include "ethercat/sim/beam.hpp"
+#include "module/module.hpp"
 #include "pv/database.hpp"
 
 #include <memory>
@@ -23,28 +24,36 @@
 #include <string_view>
 #include <vector>
 
-namespace beamctl::ioc {
+namespace beamctl::detector {
 
-class IocDetectors {
+class McaModule : public module::Module {
 public:
-    // Makes the records (loaded into `db`) and the simulated detectors on `clock` [s].
-    IocDetectors(const config::IocConfig& cfg, pv::Database& db, std::function<double()> clock);
-    ~IocDetectors();
+    // Makes the records (loaded into `ctx.db`) and the simulated detectors on the IOC loop's clock.
+    McaModule(std::vector<config::McaEntry> section, module::BuildContext& ctx);
+    ~McaModule() override;
+    std::string_view name() const override { return "detectors.mca"; }
     // Whether a hardware address is one of the detectors' ("<element>" or "<element>.<Param>").
     bool owns(std::string_view address) const;
     // Device support of an mca record's INP "@<name>" or a DXP record's "@<name>.<Param>"; nullptr
     // with `why` if no detector has it.
     std::unique_ptr<pv::LinkDevice> make_device(std::string_view address, std::string& why);
+    // The contract's: an mca record, or a record at one of the detectors' addresses.
+    bool owns_device(std::string_view record_type, std::string_view address) const override {
+        return record_type == "mca" || owns(address);
+    }
+    std::unique_ptr<pv::LinkDevice> make_device(const module::DeviceRequest& rq, std::string& why) override {
+        return make_device(rq.address, why);
+    }
     // The beam each detector's sample sees: `beam_of(bus)` (bus -1: the first with one), or nullptr
     // (the configured rates as they are). The rates follow the beam's transmission through the
     // slit. Throws Error naming the entry whose bus has no beam.
-    void bind(const std::function<std::function<ethercat::sim::BeamTally()>(int bus)>& beam_of);
+    void bind(module::BindContext& ctx) override;
     // The IOC loop, every 10 ms after init_records: an mca record whose detector acquires without
     // the record knowing (started through the sum or another element) is processed, so that it
     // follows the acquisition (reads its status and, at the end, the spectrum).
-    void poll();
+    void publish(double now_s) override;
     std::size_t mcas() const { return elements_.size(); }
-    detector::SimMca& mca(std::size_t i) { return *elements_.at(i).sim; }
+    SimMca& mca(std::size_t i) { return *elements_.at(i).sim; }
 
 private:
     class McaRef;
@@ -58,13 +67,13 @@ private:
     };
     struct Element {
         std::string name;                      // the mca record after $(P)
-        std::unique_ptr<detector::SimMca> sim;
+        std::unique_ptr<SimMca> sim;
         std::size_t entry = 0;                 // in entries_
         Watch watch;
     };
     struct Sum {
         std::string name;
-        std::unique_ptr<detector::McaSum> dev;
+        std::unique_ptr<McaSum> dev;
         std::vector<std::size_t> elements;
         Watch watch;
     };
@@ -79,4 +88,4 @@ private:
     std::vector<Sum> sums_;
 };
 
-} // namespace beamctl::ioc
+} // namespace beamctl::detector
